@@ -1,0 +1,18 @@
+//! Gaussian diffusion over normalised 263-d features: the denoiser contract, the cosine
+//! schedule, DDIM sampling and inversion.
+
+use candle_core::{Result, Tensor};
+
+/// A network that predicts the clean sample x̂0 from a noisy one (MDM predicts x0, not ε).
+pub trait Denoiser {
+    /// - `x_t`: `[batch, frames, 263]`, normalised features at diffusion step `timesteps`;
+    /// - `timesteps`: `[batch]` u32 on the original 0..999 scale (also under respacing);
+    /// - `text`: `[batch, text_dim]` condition vectors; an all-zero row is the unconditional
+    ///   branch of classifier-free guidance (MDM replaces the text embedding by zeros).
+    ///
+    /// Returns x̂0, `[batch, frames, 263]`. Inference mode: no dropout.
+    fn predict_x0(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<Tensor>;
+
+    /// Width of the condition vectors.
+    fn text_dim(&self) -> usize;
+}

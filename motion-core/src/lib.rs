@@ -1,0 +1,40 @@
+//! Constrained human motion generation: the numerical core.
+//!
+//! Conventions for every module are stated once in [`skeleton`]: y up, metres, +x is the
+//! character's left, a canonical motion starts facing +z, 20 frames per second.
+
+pub mod diffusion;
+pub mod import;
+pub mod motion;
+pub mod representation;
+pub mod skeleton;
+pub mod testing;
+
+use skeleton::Joint;
+
+/// Errors about a motion given as joint positions.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MotionError {
+    /// Too few frames for the operation.
+    #[error("motion has {frames} frames; at least {min} are needed")]
+    TooShort {
+        /// Frames given.
+        frames: usize,
+        /// Frames needed.
+        min: usize,
+    },
+    /// A coordinate is NaN or infinite.
+    #[error("frame {frame}, joint {joint}: coordinate is not finite")]
+    NonFinite {
+        /// Frame index.
+        frame: usize,
+        /// The joint.
+        joint: Joint,
+    },
+    /// The hips and shoulders give no horizontal facing direction.
+    #[error("frame {frame}: hips and shoulders give no horizontal facing direction")]
+    NoFacing {
+        /// Frame index.
+        frame: usize,
+    },
+}

@@ -1,0 +1,50 @@
+//! Test utilities shared by the crate's tests and the workspace's end-to-end tests.
+
+use candle_core::{DType, Result, Tensor, Var};
+
+/// Checks the gradient of a scalar function against central finite differences.
+///
+/// `x` must be f64. Up to 24 coordinates spread over the tensor are perturbed by `eps`; each
+/// analytic partial derivative must match within `tol · max(1, |numeric|)`. A missing gradient
+/// is an error, never a silent pass (candle returns `None` for ops without a backward).
+pub fn finite_difference_check(
+    x: &Tensor,
+    f: impl Fn(&Tensor) -> Result<Tensor>,
+    eps: f64,
+    tol: f64,
+) -> Result<()> {
+    if x.dtype() != DType::F64 {
+        candle_core::bail!("finite_difference_check needs an f64 input, got {:?}", x.dtype());
+    }
+    let var = Var::from_tensor(x)?;
+    let y = f(var.as_tensor())?;
+    let grads = y.backward()?;
+    let grad = grads
+        .get(var.as_tensor())
+        .ok_or_else(|| candle_core::Error::Msg("no gradient reached the input".into()))?
+        .flatten_all()?
+        .to_vec1::<f64>()?;
+    let base = x.flatten_all()?.to_vec1::<f64>()?;
+    let n = base.len();
+    let picks = 24.min(n);
+    let mut max_abs_grad: f64 = 0.0;
+    for k in 0..picks {
+        let i = k * n / picks + (k * 7919) % (n / picks).max(1);
+        let i = i.min(n - 1);
+        let eval = |delta: f64| -> Result<f64> {
+            let mut v = base.clone();
+            v[i] += delta;
+            let t = Tensor::from_vec(v, x.shape(), x.device())?;
+            f(&t)?.to_dtype(DType::F64)?.to_scalar::<f64>()
+        };
+        let numeric = (eval(eps)? - eval(-eps)?) / (2.0 * eps);
+        max_abs_grad = max_abs_grad.max(grad[i].abs());
+        if (grad[i] - numeric).abs() > tol * numeric.abs().max(1.0) {
+            candle_core::bail!("gradient mismatch at flat index {i}: analytic {} vs numeric {numeric}", grad[i]);
+        }
+    }
+    if grad.iter().any(|g| !g.is_finite()) {
+        candle_core::bail!("non-finite gradient");
+    }
+    Ok(())
+}
