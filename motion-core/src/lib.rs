@@ -5,10 +5,13 @@
 
 pub mod diffusion;
 pub mod import;
+pub mod model;
 pub mod motion;
+pub mod nn;
 pub mod representation;
 pub mod skeleton;
 pub mod testing;
+pub mod text;
 
 use skeleton::Joint;
 

@@ -4,7 +4,9 @@
 //! so resampling to 20 fps and time-warping interpolate the source's own rotations rather than
 //! joint positions (bone lengths stay exact).
 
+pub mod bvh;
 pub mod deepmimic;
+pub mod humanml3d;
 
 use std::path::PathBuf;
 

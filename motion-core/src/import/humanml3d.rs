@@ -1,0 +1,1 @@
+//! HumanML3D dataset folders.

@@ -1,0 +1,1 @@
+//! The MDM trans_enc denoiser.

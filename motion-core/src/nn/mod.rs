@@ -1,0 +1,1 @@
+//! Differentiable neural-network building blocks (owned by the model work).

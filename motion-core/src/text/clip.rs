@@ -1,0 +1,1 @@
+//! CLIP ViT-B/32 text encoder for official MDM checkpoints.

@@ -1,0 +1,3 @@
+//! Text conditioning behind a small encoder seam.
+
+pub mod clip;
