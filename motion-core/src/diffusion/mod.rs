@@ -3,6 +3,33 @@
 
 use candle_core::{Result, Tensor};
 
+pub mod ddim;
+pub mod guidance;
+pub mod noise;
+pub mod schedule;
+#[cfg(test)]
+mod test_denoiser;
+
+pub use ddim::{respaced_timesteps, DdimProgress, DdimSampler};
+pub use guidance::Guidance;
+pub use schedule::NoiseSchedule;
+
+/// Errors configuring a noise schedule or a respaced sampler.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DiffusionError {
+    /// A schedule with zero timesteps.
+    #[error("a noise schedule needs at least one timestep")]
+    EmptySchedule,
+    /// No integer stride `s` gives `len(range(0, timesteps, s)) == steps` (MDM's "ddimN" rule).
+    #[error("cannot respace {timesteps} timesteps into exactly {steps} DDIM steps with an integer stride")]
+    NoStride {
+        /// Timesteps of the original schedule.
+        timesteps: usize,
+        /// Requested DDIM steps.
+        steps: usize,
+    },
+}
+
 /// A network that predicts the clean sample x̂0 from a noisy one (MDM predicts x0, not ε).
 pub trait Denoiser {
     /// - `x_t`: `[batch, frames, 263]`, normalised features at diffusion step `timesteps`;

@@ -12,7 +12,7 @@ use std::path::Path;
 use glam::{DQuat, DVec3};
 
 use super::{ImportError, ImportWarning, MocapClip};
-use crate::skeleton::{Joint, Pose, NUM_JOINTS};
+use crate::skeleton::{Pose, NUM_JOINTS};
 
 /// Values per frame.
 const FRAME_WIDTH: usize = 44;
@@ -429,7 +429,7 @@ pub(crate) fn synthetic_walk(frames: usize, turn_rate: f64) -> Vec<Pose> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::skeleton::bone_lengths;
+    use crate::skeleton::{bone_lengths, Joint};
 
     #[test]
     fn rest_pose_matches_the_reference_table() {
