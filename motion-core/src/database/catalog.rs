@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::import::bvh::{BvhClip, BvhOptions};
 use crate::import::deepmimic::DeepMimicClip;
 use crate::import::{ImportError, ImportWarning, MocapClip};
 
@@ -14,6 +15,8 @@ use crate::import::{ImportError, ImportWarning, MocapClip};
 pub enum SourceFormat {
     /// DeepMimic humanoid JSON clip.
     Deepmimic,
+    /// Biovision hierarchy file (units, up axis and rig detected).
+    Bvh,
 }
 
 /// One catalog entry.
@@ -81,6 +84,11 @@ impl Catalog {
             let clip: Box<dyn MocapClip> = match entry.format {
                 SourceFormat::Deepmimic => {
                     let (clip, w) = DeepMimicClip::read(&path)?;
+                    warnings.extend(w);
+                    Box::new(clip)
+                }
+                SourceFormat::Bvh => {
+                    let (clip, w) = BvhClip::read(&path, &BvhOptions::default())?;
                     warnings.extend(w);
                     Box::new(clip)
                 }

@@ -32,7 +32,8 @@ const fn dm(name: &'static str, parent: Option<usize>, offset: [f64; 3], slot: O
     DmJoint { name, parent, offset, slot }
 }
 
-/// The humanoid3d skeleton: URDF values × 0.25, identical to DeepMimic's `humanoid3d.txt`.
+/// The humanoid3d skeleton: URDF values × 0.25, identical to DeepMimic's `humanoid3d.txt`
+/// (a 1.62 m character; [`STATURE_SCALE`] brings it to SMPL size).
 const SKELETON: [DmJoint; DM_JOINTS] = [
     dm("root", None, [0.0, 0.0, 0.0], Some((4, 4))),
     dm("chest", Some(0), [0.0, 0.236151, 0.0], Some((8, 4))),
@@ -51,10 +52,19 @@ const SKELETON: [DmJoint; DM_JOINTS] = [
     dm("left_wrist", Some(13), [0.0, -0.258947, 0.0], None),
 ];
 
+/// Uniform scale from the DeepMimic humanoid (1.62 m) to the SMPL neutral body's stature
+/// (1.70 m), so heights in task programs mean what they mean for HumanML3D motions (a head
+/// above 1.5 m when standing, ProgMoGen's HSI tasks). Applied to every output position.
+pub const STATURE_SCALE: f64 = 1.70 / 1.62;
+
 /// The SMPL ball of the foot in the ankle frame (front-bottom of the foot box), m.
 const FOOT_BALL: [f64; 3] = [0.11, -0.045, 0.0];
 
-/// Each of our 22 joints as a point fixed in a DeepMimic joint frame (`reference/data.md` §6).
+/// Each of our 22 joints as a point fixed in a DeepMimic joint frame (`reference/data.md` §6),
+/// with one change: spine3 sits on the DeepMimic neck joint instead of 9 cm above the chest
+/// joint. Every bone must lie within one rigid DeepMimic body, and the spine3→neck bone crosses
+/// the DeepMimic neck joint; placing spine3 on that joint keeps all 21 bone lengths exact (the
+/// proposed mapping stretched spine3→neck by up to 5 mm when the head bends).
 const SMPL22_FROM_DM: [(usize, [f64; 3]); NUM_JOINTS] = [
     (0, [0.0, 0.0, 0.0]),     // pelvis
     (9, [0.0, 0.0, 0.0]),     // left_hip
@@ -65,7 +75,7 @@ const SMPL22_FROM_DM: [(usize, [f64; 3]); NUM_JOINTS] = [
     (1, [0.0, 0.0, 0.0]),     // spine2: the chest joint
     (11, [0.0, 0.0, 0.0]),    // left_ankle
     (5, [0.0, 0.0, 0.0]),     // right_ankle
-    (1, [0.0, 0.09, 0.0]),    // spine3
+    (2, [0.0, 0.0, 0.0]),     // spine3: the DeepMimic neck joint (see below)
     (11, FOOT_BALL),          // left_foot
     (5, FOOT_BALL),           // right_foot
     (2, [0.0, 0.06, 0.0]),    // neck
@@ -331,7 +341,7 @@ fn smpl22(key: &Keyframe) -> Pose {
         }
     }
     SMPL22_FROM_DM.map(|(j, local)| {
-        let v = pos[j] + rot[j] * DVec3::from_array(local);
+        let v = (pos[j] + rot[j] * DVec3::from_array(local)) * STATURE_SCALE;
         DVec3::new(-v.z, v.y, v.x)
     })
 }
@@ -433,7 +443,7 @@ mod tests {
 
     #[test]
     fn rest_pose_matches_the_reference_table() {
-        let p = rest_pose();
+        let p = rest_pose().map(|v| v / STATURE_SCALE);
         let at = |j: Joint| p[j.index()];
         assert!((at(Joint::LeftHip) - DVec3::new(0.084887, 0.0, 0.0)).length() < 1e-9);
         assert!((at(Joint::Head).y - 0.620045).abs() < 1e-6);
@@ -441,6 +451,7 @@ mod tests {
         assert!((at(Joint::LeftFoot) - DVec3::new(0.084887, -0.876416, 0.11)).length() < 1e-6);
         // Upper arm 0.275 m, forearm 0.259 m.
         let l = bone_lengths(&p);
+        assert!((at(Joint::Spine3).y - 0.460045).abs() < 1e-6);
         assert!((l[Joint::LeftElbow.index()] - 0.274788).abs() < 1e-9);
         assert!((l[Joint::LeftWrist.index()] - 0.258947).abs() < 1e-9);
     }

@@ -1,0 +1,396 @@
+//! [`BvhClip`]: a BVH file posed at any time on the canonical skeleton.
+
+use std::path::Path;
+
+use glam::DVec3;
+
+use super::{invalid, Bvh, BvhAnimation, LengthUnit, Rig, UpAxis, PLAUSIBLE_STATURE_M};
+use crate::import::{deepmimic, ImportError, ImportWarning, MocapClip};
+use crate::motion::retarget_bone_lengths;
+use crate::skeleton::{bone_lengths, Pose, NUM_JOINTS};
+
+/// How to read a BVH file into a [`BvhClip`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BvhOptions {
+    /// The file's length unit; `None` detects it from the rest height ([`LengthUnit::detect`]).
+    pub unit: Option<LengthUnit>,
+    /// The file's up axis (default Y).
+    pub up: UpAxis,
+    /// The joint naming; `None` takes the first of [`Rig::ALL`] whose joints are all present.
+    pub rig: Option<Rig>,
+}
+
+/// A BVH clip posed on the 22 joints: the source is posed by [`BvhAnimation`] (slerped rotations,
+/// lerped root), the rig map picks the 22 points, and bone lengths are retargeted to those of
+/// [`deepmimic::rest_pose`] with [`retarget_bone_lengths`] (bone directions kept, the root
+/// trajectory scaled by the leg-length ratio). Not cyclic.
+#[derive(Debug, Clone)]
+pub struct BvhClip {
+    name: String,
+    rig: Rig,
+    animation: BvhAnimation,
+    /// Per joint: the nodes it lies between and the fraction of the way (0 = at the first).
+    map: [(usize, usize, f64); NUM_JOINTS],
+    target: [f64; NUM_JOINTS],
+}
+
+impl BvhClip {
+    /// Reads and maps a file; the warnings include the BVH reader's.
+    pub fn read(path: &Path, options: &BvhOptions) -> Result<(Self, Vec<ImportWarning>), ImportError> {
+        let (bvh, mut warnings) = Bvh::read(path)?;
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let (clip, more) = Self::from_bvh(&name, &bvh, options, path)?;
+        warnings.extend(more);
+        Ok((clip, warnings))
+    }
+
+    /// Maps a parsed file; `path` is only used in messages. Fails when no rig's joints are all
+    /// present (the message lists what each rig lacks); warns when the rest skeleton is
+    /// implausibly tall or short in the chosen unit.
+    pub fn from_bvh(
+        name: &str,
+        bvh: &Bvh,
+        options: &BvhOptions,
+        path: &Path,
+    ) -> Result<(Self, Vec<ImportWarning>), ImportError> {
+        let root_line = bvh.joints().first().map_or(1, |j| j.line);
+        let rest_height = bvh.rest_height(options.up);
+        let unit = match options.unit {
+            Some(u) => u,
+            None => LengthUnit::detect(rest_height).ok_or_else(|| {
+                invalid(path, root_line, None, "cannot detect the unit of a skeleton with no height; give one")
+            })?,
+        };
+        let animation = BvhAnimation::new(bvh, unit, options.up, path)?;
+        let mut warnings = Vec::new();
+        let stature_m = rest_height * unit.metres();
+        if !(PLAUSIBLE_STATURE_M.0..=PLAUSIBLE_STATURE_M.1).contains(&stature_m) {
+            warnings.push(ImportWarning {
+                path: path.into(),
+                message: format!("the rest skeleton is {stature_m:.2} m tall in {unit:?}; check the unit"),
+            });
+        }
+        let (rig, map) = match options.rig {
+            Some(rig) => rig.resolve(bvh).map(|m| (rig, m)).map_err(|missing| {
+                invalid(path, root_line, None, format!("not a {} rig: missing {}", rig.name(), missing.join(", ")))
+            })?,
+            None => {
+                let mut misses = Vec::new();
+                let mut found = None;
+                for rig in Rig::ALL {
+                    match rig.resolve(bvh) {
+                        Ok(map) => {
+                            found = Some((rig, map));
+                            break;
+                        }
+                        Err(missing) => misses.push(format!("{} lacks {}", rig.name(), missing.join(", "))),
+                    }
+                }
+                found.ok_or_else(|| {
+                    invalid(
+                        path,
+                        root_line,
+                        None,
+                        format!("no known rig matches the joint names: {}", misses.join("; ")),
+                    )
+                })?
+            }
+        };
+        let target = bone_lengths(&deepmimic::rest_pose());
+        Ok((Self { name: name.to_owned(), rig, animation, map, target }, warnings))
+    }
+
+    /// The file stem.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The rig whose joint map is used.
+    pub fn rig(&self) -> Rig {
+        self.rig
+    }
+
+    /// The source motion (frames, frame time, unit, every node's positions).
+    pub fn animation(&self) -> &BvhAnimation {
+        &self.animation
+    }
+
+    /// Source frame rate, frames per second (1 / Frame Time).
+    pub fn fps(&self) -> f64 {
+        1.0 / self.animation.frame_time_s()
+    }
+
+    /// The 22 points picked from node positions (source bone lengths).
+    fn map_to_joints(&self, positions: &[DVec3]) -> Pose {
+        self.map.map(|(a, b, t)| match (positions.get(a), positions.get(b)) {
+            (Some(p), Some(q)) => p.lerp(*q, t),
+            _ => DVec3::ZERO,
+        })
+    }
+
+    /// The 22 joints at `t_s` with the source's own bone lengths (metres, our axes).
+    pub fn mapped_pose_at(&self, t_s: f64) -> Pose {
+        self.map_to_joints(&self.animation.positions_at(t_s))
+    }
+
+    /// The source's rest skeleton (OFFSETs only) mapped to the 22 joints.
+    pub fn mapped_rest_pose(&self) -> Pose {
+        self.map_to_joints(&self.animation.rest_positions())
+    }
+}
+
+impl MocapClip for BvhClip {
+    fn duration_s(&self) -> f64 {
+        self.animation.duration_s()
+    }
+
+    fn is_cyclic(&self) -> bool {
+        false
+    }
+
+    fn pose_at(&self, t_s: f64) -> Pose {
+        let pose = self.mapped_pose_at(t_s);
+        retarget_bone_lengths(&[pose], &self.target).into_iter().next().unwrap_or(pose)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DQuat;
+
+    use super::*;
+    use crate::import::bvh::tests::TINY;
+    use crate::import::resample;
+    use crate::motion::bone_length_spread;
+    use crate::skeleton::Joint;
+
+    const CMU: [&str; 2] = ["cmu_01_01_20fps.bvh", "cmu_01_03_20fps.bvh"];
+    const ALL: [&str; 3] = ["cmu_01_01_20fps.bvh", "cmu_01_03_20fps.bvh", "boxing_toes_20fps.bvh"];
+
+    fn clip(name: &str) -> BvhClip {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/cmu").join(name);
+        let (clip, warnings) = BvhClip::read(&path, &BvhOptions::default()).unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        clip
+    }
+
+    fn at(p: &Pose, j: Joint) -> DVec3 {
+        p[j.index()]
+    }
+
+    /// Height of the lowest ankle or foot joint, m.
+    fn lowest_foot(p: &Pose) -> f64 {
+        [Joint::LeftAnkle, Joint::RightAnkle, Joint::LeftFoot, Joint::RightFoot]
+            .map(|j| at(p, j).y)
+            .into_iter()
+            .fold(f64::MAX, f64::min)
+    }
+
+    #[test]
+    fn fixtures_have_the_right_frames_rate_rig_and_unit() {
+        for (name, frames, rig, unit) in [
+            ("cmu_01_01_20fps.bvh", 459, Rig::Cmu, LengthUnit::CmuAsf),
+            ("cmu_01_03_20fps.bvh", 752, Rig::Cmu, LengthUnit::CmuAsf),
+            ("boxing_toes_20fps.bvh", 614, Rig::HipsAbChest, LengthUnit::Centimetres),
+        ] {
+            let c = clip(name);
+            assert_eq!((c.animation().frames(), c.rig(), c.animation().unit()), (frames, rig, unit), "{name}");
+            assert!((c.fps() - 20.0).abs() < 1e-9);
+            assert!((c.duration_s() - (frames - 1) as f64 * 0.05).abs() < 1e-9);
+            assert!(!c.is_cyclic());
+            assert_eq!(resample(&c, 1.0, None).len(), frames);
+        }
+    }
+
+    #[test]
+    fn cmu_first_frame_is_a_human_sized_t_pose_on_the_floor() {
+        for name in CMU {
+            let c = clip(name);
+            let (src, out) = (c.mapped_pose_at(0.0), c.pose_at(0.0));
+            // Subject 01 is small: the head joint is 1.40 m above the lowest foot joint in the
+            // source, 1.54 m on the canonical skeleton.
+            let src_head = at(&src, Joint::Head).y - lowest_foot(&src);
+            let out_head = at(&out, Joint::Head).y - lowest_foot(&out);
+            assert!((1.3..1.9).contains(&src_head), "{name}: source head {src_head}");
+            assert!((1.4..1.9).contains(&out_head), "{name}: head {out_head}");
+            assert!((0.0..0.08).contains(&lowest_foot(&src)), "{name}: source feet at {}", lowest_foot(&src));
+            assert!((0.0..0.12).contains(&lowest_foot(&out)), "{name}: feet at {}", lowest_foot(&out));
+            for side in [[Joint::LeftShoulder, Joint::LeftWrist], [Joint::RightShoulder, Joint::RightWrist]] {
+                let arm = at(&out, side[1]) - at(&out, side[0]);
+                assert!(arm.y.abs() < 0.1 && arm.length() > 0.5, "{name}: not a T-pose: {arm}");
+            }
+        }
+    }
+
+    #[test]
+    fn feet_stay_near_the_floor_and_bones_keep_their_canonical_lengths() {
+        let target = bone_lengths(&deepmimic::rest_pose());
+        for name in ALL {
+            let c = clip(name);
+            let poses = resample(&c, 1.0, None);
+            assert!(bone_length_spread(&poses) < 1e-3, "{name}");
+            for (j, len) in bone_lengths(&poses[0]).iter().enumerate() {
+                assert!((len - target[j]).abs() < 1e-9);
+            }
+            let src_floor =
+                (0..poses.len()).map(|k| lowest_foot(&c.mapped_pose_at(k as f64 * 0.05))).fold(f64::MAX, f64::min);
+            assert!((-0.02..0.06).contains(&src_floor), "{name}: lowest foot joint {src_floor}");
+        }
+    }
+
+    /// Horizontal direction the feet point (ankles to balls), independent of left/right labels.
+    fn toes_forward(p: &Pose) -> DVec3 {
+        let d = at(p, Joint::LeftFoot) - at(p, Joint::LeftAnkle) + at(p, Joint::RightFoot) - at(p, Joint::RightAnkle);
+        DVec3::new(d.x, 0.0, d.z)
+    }
+
+    #[test]
+    fn left_is_plus_x_when_the_toes_face_plus_z() {
+        for name in ALL {
+            let c = clip(name);
+            let poses = resample(&c, 1.0, None);
+            let (mut frames, mut left_ok, mut facing_ok) = (0, 0, 0);
+            for p in &poses {
+                let fwd = toes_forward(p);
+                if fwd.length() < 0.05 {
+                    continue;
+                }
+                frames += 1;
+                // Turn about y so the toes face +z; then left joints must have larger x.
+                let turn = DQuat::from_rotation_y(-fwd.x.atan2(fwd.z));
+                let x = |j: Joint| (turn * at(p, j)).x;
+                if x(Joint::LeftHip) > x(Joint::RightHip) && x(Joint::LeftShoulder) > x(Joint::RightShoulder) {
+                    left_ok += 1;
+                }
+                // HumanML3D's facing (up × (right − left)) agrees with the toes.
+                let across = at(p, Joint::RightHip) - at(p, Joint::LeftHip) + at(p, Joint::RightShoulder)
+                    - at(p, Joint::LeftShoulder);
+                if DVec3::Y.cross(across).dot(fwd) > 0.0 {
+                    facing_ok += 1;
+                }
+            }
+            println!("{name}: {frames} frames, left {left_ok}, facing {facing_ok}");
+            assert!(left_ok as f64 >= 0.95 * frames as f64 && facing_ok as f64 >= 0.95 * frames as f64, "{name}");
+            let t_pose = c.pose_at(0.0);
+            assert!(toes_forward(&t_pose).length() > 0.05);
+        }
+    }
+
+    #[test]
+    fn mapped_rest_skeletons_have_smpl_like_torsos() {
+        let canon = deepmimic::rest_pose();
+        let torso = [
+            Joint::Spine1,
+            Joint::Spine2,
+            Joint::Spine3,
+            Joint::Neck,
+            Joint::Head,
+            Joint::LeftCollar,
+            Joint::RightCollar,
+        ];
+        for name in ALL {
+            let rest = clip(name).mapped_rest_pose();
+            for j in torso.into_iter().chain([Joint::LeftShoulder, Joint::RightShoulder]) {
+                let Some(p) = j.parent() else { continue };
+                let dir = |q: &Pose| (at(q, j) - at(q, p)).normalize();
+                let angle = dir(&rest).dot(dir(&canon)).clamp(-1.0, 1.0).acos().to_degrees();
+                assert!(angle < 25.0, "{name}: {p}->{j} is {angle:.0} deg off");
+            }
+        }
+    }
+
+    /// A T-posed Mixamo-named skeleton in centimetres, with one frame.
+    fn mixamo_bvh() -> String {
+        let nodes: [(&str, usize, [f64; 3]); 22] = [
+            ("Hips", usize::MAX, [0.0, 100.0, 0.0]),
+            ("Spine", 0, [0.0, 10.0, 0.0]),
+            ("Spine1", 1, [0.0, 12.0, 0.0]),
+            ("Spine2", 2, [0.0, 13.0, 0.0]),
+            ("Neck", 3, [0.0, 15.0, 0.0]),
+            ("Head", 4, [0.0, 10.0, 2.0]),
+            ("LeftShoulder", 3, [6.0, 11.0, 0.0]),
+            ("LeftArm", 6, [12.0, 0.0, 0.0]),
+            ("LeftForeArm", 7, [27.0, 0.0, 0.0]),
+            ("LeftHand", 8, [26.0, 0.0, 0.0]),
+            ("RightShoulder", 3, [-6.0, 11.0, 0.0]),
+            ("RightArm", 10, [-12.0, 0.0, 0.0]),
+            ("RightForeArm", 11, [-27.0, 0.0, 0.0]),
+            ("RightHand", 12, [-26.0, 0.0, 0.0]),
+            ("LeftUpLeg", 0, [9.0, -6.0, 0.0]),
+            ("LeftLeg", 14, [0.0, -42.0, 0.0]),
+            ("LeftFoot", 15, [0.0, -42.0, 0.0]),
+            ("LeftToeBase", 16, [0.0, -8.0, 12.0]),
+            ("RightUpLeg", 0, [-9.0, -6.0, 0.0]),
+            ("RightLeg", 18, [0.0, -42.0, 0.0]),
+            ("RightFoot", 19, [0.0, -42.0, 0.0]),
+            ("RightToeBase", 20, [0.0, -8.0, 12.0]),
+        ];
+        fn write(nodes: &[(&str, usize, [f64; 3])], i: usize, out: &mut String) {
+            let (name, parent, [x, y, z]) = nodes[i];
+            let (kind, channels) = if parent == usize::MAX {
+                ("ROOT", "6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
+            } else {
+                ("JOINT", "3 Zrotation Xrotation Yrotation")
+            };
+            out.push_str(&format!("{kind} mixamorig:{name}\n{{\nOFFSET {x} {y} {z}\nCHANNELS {channels}\n"));
+            let children: Vec<usize> = (0..nodes.len()).filter(|c| nodes[*c].1 == i).collect();
+            if children.is_empty() {
+                out.push_str("End Site\n{\nOFFSET 0 5 0\n}\n");
+            }
+            for c in children {
+                write(nodes, c, out);
+            }
+            out.push_str("}\n");
+        }
+        let mut text = String::from("HIERARCHY\n");
+        write(&nodes, 0, &mut text);
+        text + &format!("MOTION\nFrames: 1\nFrame Time: 0.0333333\n0 100 0 {}\n", vec!["0"; 3 + 21 * 3].join(" "))
+    }
+
+    #[test]
+    fn mixamo_names_are_detected_and_mapped() {
+        let (bvh, _) = Bvh::parse(&mixamo_bvh(), Path::new("mixamo.bvh")).unwrap();
+        let (c, warnings) = BvhClip::from_bvh("mixamo", &bvh, &BvhOptions::default(), Path::new("mixamo.bvh")).unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!((c.rig(), c.animation().unit()), (Rig::Mixamo, LengthUnit::Centimetres));
+        let p = c.mapped_pose_at(0.0);
+        assert!((at(&p, Joint::Pelvis) - DVec3::new(0.0, 1.0, 0.0)).length() < 1e-9);
+        assert!((at(&p, Joint::LeftCollar) - DVec3::new(0.06, 1.46, 0.0)).length() < 1e-9);
+        assert!((at(&p, Joint::RightWrist) - DVec3::new(-0.71, 1.46, 0.0)).length() < 1e-9);
+        assert!((at(&p, Joint::LeftFoot) - DVec3::new(0.09, 0.02, 0.12)).length() < 1e-9);
+        let out = c.pose_at(0.0);
+        assert!(bone_lengths(&out)
+            .iter()
+            .zip(bone_lengths(&deepmimic::rest_pose()))
+            .all(|(a, b)| (a - b).abs() < 1e-9));
+    }
+
+    #[test]
+    fn unmappable_rigs_list_what_is_missing() {
+        let (bvh, _) = Bvh::parse(TINY, Path::new("tiny.bvh")).unwrap();
+        let options = BvhOptions { unit: Some(LengthUnit::Metres), ..BvhOptions::default() };
+        let e = BvhClip::from_bvh("tiny", &bvh, &options, Path::new("tiny.bvh")).unwrap_err().to_string();
+        assert!(e.contains("tiny.bvh: line 2: no known rig"), "{e}");
+        assert!(
+            e.contains("CMU (cgspeed) lacks LeftUpLeg") && e.contains("Mixamo lacks") && e.contains("LeftToes"),
+            "{e}"
+        );
+        assert!(!e.contains("lacks Hips"), "{e}");
+        let (mixamo, _) = Bvh::parse(&mixamo_bvh(), Path::new("m.bvh")).unwrap();
+        let forced = BvhOptions { rig: Some(Rig::Cmu), ..BvhOptions::default() };
+        let e = BvhClip::from_bvh("m", &mixamo, &forced, Path::new("m.bvh")).unwrap_err().to_string();
+        assert!(e.contains("not a CMU (cgspeed) rig: missing LowerBack, Neck1"), "{e}");
+        // The TINY skeleton is flat: its unit cannot be detected.
+        let e = BvhClip::from_bvh("tiny", &bvh, &BvhOptions::default(), Path::new("tiny.bvh")).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("cannot detect the unit"), "{e}");
+    }
+
+    #[test]
+    fn implausible_statures_are_reported() {
+        let (bvh, _) = Bvh::parse(&mixamo_bvh(), Path::new("m.bvh")).unwrap();
+        let options = BvhOptions { unit: Some(LengthUnit::Metres), ..BvhOptions::default() };
+        let (_, warnings) = BvhClip::from_bvh("m", &bvh, &options, Path::new("m.bvh")).unwrap();
+        assert_eq!(warnings.len(), 1);
+        assert!(warnings[0].message.contains("check the unit"));
+    }
+}

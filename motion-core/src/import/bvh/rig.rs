@@ -1,0 +1,150 @@
+//! Joint maps from common BVH rigs to the 22 joints.
+
+use super::Bvh;
+use crate::skeleton::NUM_JOINTS;
+use Source::{At, Between};
+
+/// Where one of our joints sits on a source rig.
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    /// At a source joint.
+    At(&'static str),
+    /// A fraction of the way from the first joint to the second (its descendant).
+    Between(&'static str, &'static str, f64),
+}
+
+/// A family of joint names that [`BvhClip`](super::BvhClip) can map to the 22 joints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rig {
+    /// CMU mocap in the cgspeed BVH conversion: Hips, LHipJoint, LeftUpLeg, LeftLeg, LeftFoot,
+    /// LeftToeBase, LowerBack, Spine, Spine1, Neck, Neck1, Head, LeftShoulder, LeftArm,
+    /// LeftForeArm, LeftHand, fingers; right side likewise.
+    Cmu,
+    /// Mixamo (`mixamorig:` prefix optional): Hips, Spine, Spine1, Spine2, Neck, Head,
+    /// LeftShoulder, LeftArm, LeftForeArm, LeftHand, LeftUpLeg, LeftLeg, LeftFoot, LeftToeBase.
+    Mixamo,
+    /// Joint-named limbs on a Hips/Ab/Chest spine, as in assimp's Boxing_Toes.bvh: Hips, Ab,
+    /// Chest, Neck, Head, LeftCollar, LeftShoulder, LeftElbow, LeftWrist, LeftHip, LeftKnee,
+    /// LeftAnkle, LeftToes.
+    HipsAbChest,
+}
+
+impl Rig {
+    /// Every rig, in detection order.
+    pub const ALL: [Rig; 3] = [Rig::Cmu, Rig::Mixamo, Rig::HipsAbChest];
+
+    /// Display name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Rig::Cmu => "CMU (cgspeed)",
+            Rig::Mixamo => "Mixamo",
+            Rig::HipsAbChest => "Hips/Ab/Chest",
+        }
+    }
+
+    /// Our joints in [`Joint`](crate::skeleton::Joint) order, placed where the SMPL joint sits relative to the rig's.
+    /// Spine points are spread like SMPL's (spine1 ≈ 23 %, spine2 ≈ 49 %, spine3 ≈ 60 % of the
+    /// way from pelvis to neck), and collars sit 35-40 % of the way out along the clavicle bone
+    /// where a rig's clavicle starts on the mid-line.
+    fn sources(self) -> [Source; NUM_JOINTS] {
+        match self {
+            // cgspeed's torso is short (Hips → Spine 0.115 m, → Spine1 0.23 m where neck and
+            // clavicles start, shoulders 0.30 m, Neck1 0.33 m, Head 0.43 m), hence the fractions.
+            Rig::Cmu => [
+                At("Hips"),
+                At("LeftUpLeg"),
+                At("RightUpLeg"),
+                Between("LowerBack", "Spine", 0.66),
+                At("LeftLeg"),
+                At("RightLeg"),
+                Between("Spine", "Spine1", 0.42),
+                At("LeftFoot"),
+                At("RightFoot"),
+                Between("Spine", "Spine1", 0.74),
+                At("LeftToeBase"),
+                At("RightToeBase"),
+                At("Neck1"),
+                Between("LeftShoulder", "LeftArm", 0.4),
+                Between("RightShoulder", "RightArm", 0.4),
+                At("Head"),
+                At("LeftArm"),
+                At("RightArm"),
+                At("LeftForeArm"),
+                At("RightForeArm"),
+                At("LeftHand"),
+                At("RightHand"),
+            ],
+            Rig::Mixamo => [
+                At("Hips"),
+                At("LeftUpLeg"),
+                At("RightUpLeg"),
+                At("Spine"),
+                At("LeftLeg"),
+                At("RightLeg"),
+                At("Spine1"),
+                At("LeftFoot"),
+                At("RightFoot"),
+                At("Spine2"),
+                At("LeftToeBase"),
+                At("RightToeBase"),
+                At("Neck"),
+                At("LeftShoulder"),
+                At("RightShoulder"),
+                At("Head"),
+                At("LeftArm"),
+                At("RightArm"),
+                At("LeftForeArm"),
+                At("RightForeArm"),
+                At("LeftHand"),
+                At("RightHand"),
+            ],
+            // Ab 0.08 m above Hips, Chest 0.31 m, Neck (and both collars) 0.53 m, Head 0.64 m.
+            Rig::HipsAbChest => [
+                At("Hips"),
+                At("LeftHip"),
+                At("RightHip"),
+                Between("Ab", "Chest", 0.2),
+                At("LeftKnee"),
+                At("RightKnee"),
+                Between("Ab", "Chest", 0.75),
+                At("LeftAnkle"),
+                At("RightAnkle"),
+                At("Chest"),
+                At("LeftToes"),
+                At("RightToes"),
+                At("Neck"),
+                Between("LeftCollar", "LeftShoulder", 0.4),
+                Between("RightCollar", "RightShoulder", 0.4),
+                At("Head"),
+                At("LeftShoulder"),
+                At("RightShoulder"),
+                At("LeftElbow"),
+                At("RightElbow"),
+                At("LeftWrist"),
+                At("RightWrist"),
+            ],
+        }
+    }
+
+    /// Resolves the map on a file's joints: per joint `(from, to, fraction)`, or the names missing.
+    pub(super) fn resolve(self, bvh: &Bvh) -> Result<[(usize, usize, f64); NUM_JOINTS], Vec<&'static str>> {
+        let mut missing = Vec::new();
+        let mut find = |name: &'static str| {
+            bvh.joint_index(name).unwrap_or_else(|| {
+                if !missing.contains(&name) {
+                    missing.push(name);
+                }
+                0
+            })
+        };
+        let map = self.sources().map(|s| match s {
+            At(a) => (find(a), find(a), 0.0),
+            Between(a, b, t) => (find(a), find(b), t),
+        });
+        if missing.is_empty() {
+            Ok(map)
+        } else {
+            Err(missing)
+        }
+    }
+}
