@@ -21,6 +21,21 @@ enum Command {
     /// Motion data: import mocap, build the training/retrieval database.
     #[command(subcommand)]
     Data(commands::data::DataCommand),
+    /// Train the motion prior on a database (resumable; progress and loss on stderr).
+    Train(commands::train::TrainArgs),
+    /// Unconstrained motions from the prior for a text prompt (npy + PNG strip).
+    Sample(commands::sample::SampleArgs),
+    /// Reports: `prior` compares unconstrained samples with the training data per label.
+    #[command(subcommand)]
+    Report(ReportCommand),
+}
+
+#[derive(Debug, Subcommand)]
+enum ReportCommand {
+    /// Foot skate, acceleration, bone lengths, penetration, memorisation per label.
+    Prior(commands::report::ReportArgs),
+    /// Plot a training loss curve from `mogen train --loss-csv`.
+    Loss(commands::report::LossArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -32,5 +47,9 @@ fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Data(cmd) => commands::data::run(cmd),
+        Command::Train(args) => commands::train::run(args),
+        Command::Sample(args) => commands::sample::run(args),
+        Command::Report(ReportCommand::Prior(args)) => commands::report::run(args),
+        Command::Report(ReportCommand::Loss(args)) => commands::report::run_loss(args),
     }
 }

@@ -19,3 +19,8 @@ pub fn default_catalog() -> PathBuf {
 pub fn default_database() -> PathBuf {
     PathBuf::from("out").join("database.safetensors")
 }
+
+/// The shipped trained prior.
+pub fn default_prior() -> PathBuf {
+    fixtures_dir().join("model").join("prior.safetensors")
+}

@@ -6,13 +6,19 @@
 pub mod database;
 pub mod diffusion;
 pub mod import;
+pub mod metrics;
 pub mod model;
 pub mod motion;
 pub mod nn;
+pub mod prior;
+pub mod quality;
+pub mod render;
 pub mod representation;
 pub mod skeleton;
+mod tensor_file;
 pub mod testing;
 pub mod text;
+pub mod training;
 
 use skeleton::Joint;
 

@@ -21,6 +21,7 @@ use crate::import::{resample, MocapClip};
 use crate::motion::mirror;
 use crate::representation::{extract_features, FeatureFrame, MeanStd, NormalizationError, FEATURE_DIM};
 use crate::skeleton::{Pose, FPS};
+use crate::tensor_file::write_safetensors;
 use crate::MotionError;
 use catalog::SourceClip;
 
@@ -254,7 +255,6 @@ impl MotionDatabase {
     /// Writes the database as one safetensors file: tensors `features` `[N, 263]`, `mean`,
     /// `std` (f32) and the index as JSON in the header metadata under `index`.
     pub fn save(&self, path: &Path) -> Result<(), DatabaseError> {
-        let io = |source| DatabaseError::Io { path: path.into(), source };
         let format = |message: String| DatabaseError::Format { path: path.into(), message };
         let index = Index {
             format_version: FORMAT_VERSION,
@@ -263,26 +263,15 @@ impl MotionDatabase {
             sequences: self.sequences.clone(),
             windows: self.windows.clone(),
         };
-        let to_vec = |t: &Tensor| t.to_vec1::<f32>().map_err(|e| format(e.to_string()));
-        let mean = to_vec(self.mean_std.mean())?;
-        let std = to_vec(self.mean_std.std())?;
-        let bytes = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-        let (fb, mb, sb) = (bytes(&self.features), bytes(&mean), bytes(&std));
-        fn view(shape: Vec<usize>, data: &[u8]) -> Result<safetensors::tensor::TensorView<'_>, String> {
-            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape, data).map_err(|e| e.to_string())
-        }
+        let features = Tensor::from_slice(&self.features, (self.total_frames(), FEATURE_DIM), &Device::Cpu)
+            .map_err(|e| format(e.to_string()))?;
         let tensors = vec![
-            ("features".to_owned(), view(vec![self.total_frames(), FEATURE_DIM], &fb).map_err(format)?),
-            ("mean".to_owned(), view(vec![FEATURE_DIM], &mb).map_err(format)?),
-            ("std".to_owned(), view(vec![FEATURE_DIM], &sb).map_err(format)?),
+            ("features".to_owned(), features),
+            ("mean".to_owned(), self.mean_std.mean().clone()),
+            ("std".to_owned(), self.mean_std.std().clone()),
         ];
         let json = serde_json::to_string(&index).map_err(|e| format(e.to_string()))?;
-        let metadata = HashMap::from([("index".to_owned(), json)]);
-        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-            std::fs::create_dir_all(parent).map_err(io)?;
-        }
-        let data = safetensors::tensor::serialize(tensors, Some(metadata)).map_err(|e| format(e.to_string()))?;
-        std::fs::write(path, data).map_err(io)
+        write_safetensors(path, &tensors, HashMap::from([("index".to_owned(), json)])).map_err(format)
     }
 
     /// Reads a database written by [`MotionDatabase::save`], checking its consistency.

@@ -1,1 +1,215 @@
-//! The MDM trans_enc denoiser.
+//! The MDM `trans_enc` denoiser (Tevet et al., "Human Motion Diffusion Model", ICLR 2023),
+//! with the official checkpoint's parameter names (anchors §1.3, §1.6).
+//!
+//! Layout here is `[batch, frames, 263]` (MDM uses `[batch, 263, 1, frames]`). Two paths:
+//! - [`Denoiser::predict_x0`]: frozen weights, fused custom ops whose backward returns only
+//!   the input gradient (sampling and the DNO loop);
+//! - [`Mdm::forward_train`] / [`Mdm::forward_eval`]: primitive candle ops, so weights held
+//!   as `Var`s get gradients; the former applies dropout as PyTorch's training mode.
+
+pub mod bench;
+mod config;
+mod fused_layer;
+mod init;
+mod layer;
+#[cfg(test)]
+mod tests;
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use candle_core::{bail, DType, Device, Result, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use rand::rngs::StdRng;
+use rand::{RngCore, SeedableRng};
+
+pub use config::MdmConfig;
+use init::SeededInit;
+use layer::{Dropout, EncoderLayer, ParamLoader};
+
+use crate::diffusion::Denoiser;
+use crate::nn::Linear;
+
+/// Rows of MDM's sinusoidal table (`PositionalEncoding(max_len=5000)`).
+pub const MAX_LEN: usize = 5000;
+
+/// MDM's sinusoidal table `[max_len, d]`: `pe[p, 2i] = sin(p·e^(−2i·ln(10000)/d))`,
+/// `pe[p, 2i+1] = cos(..)`, computed in f32 step by step as PyTorch does (so it matches the
+/// checkpoint's `sequence_pos_encoder.pe` buffer).
+pub fn sinusoidal_table(max_len: usize, d: usize, device: &Device) -> Result<Tensor> {
+    let rate = (-(10000f64).ln() / d as f64) as f32;
+    let div: Vec<f32> = (0..d / 2).map(|i| ((2 * i) as f32 * rate).exp()).collect();
+    let mut pe = vec![0f32; max_len * d];
+    for (pos, row) in pe.chunks_exact_mut(d.max(1)).enumerate() {
+        for (i, &dv) in div.iter().enumerate() {
+            let arg = pos as f32 * dv;
+            row[2 * i] = arg.sin();
+            row[2 * i + 1] = arg.cos();
+        }
+    }
+    Tensor::from_vec(pe, (max_len, d), device)
+}
+
+/// MDM with the text condition given as a vector (CLIP is run elsewhere).
+#[derive(Debug, Clone)]
+pub struct Mdm {
+    cfg: MdmConfig,
+    /// `input_process.poseEmbedding`: 263 → d.
+    input_process: Linear,
+    /// `embed_timestep.time_embed.0` and `.2` (SiLU between).
+    time_embed: (Linear, Linear),
+    /// `embed_text`: text_dim → d.
+    embed_text: Linear,
+    /// `seqTransEncoder.layers.{i}`.
+    layers: Vec<EncoderLayer>,
+    /// `output_process.poseFinal`: d → 263.
+    output_process: Linear,
+    /// Recomputed sinusoidal table `[MAX_LEN, d]` in the model dtype (not a parameter).
+    pe: Tensor,
+    params: Vec<(String, Tensor)>,
+}
+
+impl Mdm {
+    /// Builds the model from `vb` with the official names (`input_process.poseEmbedding.weight`,
+    /// `seqTransEncoder.layers.0.self_attn.in_proj_weight`, ...). The positional buffers
+    /// (`*.pe`) are recomputed: absent is fine, present is ignored. A `VarMap`-backed builder
+    /// creates missing parameters with PyTorch's default init (unseeded: see [`Self::init_seeded`]).
+    pub fn new(cfg: MdmConfig, vb: VarBuilder) -> Result<Self> {
+        cfg.validate()?;
+        let d = cfg.latent_dim;
+        let mut params = Vec::new();
+        let mut loader = ParamLoader { named: &mut params };
+        let input_process = loader.linear(&vb.pp("input_process").pp("poseEmbedding"), cfg.input_feats, d)?;
+        let te = vb.pp("embed_timestep").pp("time_embed");
+        let time_embed = (loader.linear(&te.pp("0"), d, d)?, loader.linear(&te.pp("2"), d, d)?);
+        let embed_text = loader.linear(&vb.pp("embed_text"), cfg.text_dim, d)?;
+        let layers = (0..cfg.num_layers)
+            .map(|i| EncoderLayer::new(&vb.pp("seqTransEncoder").pp("layers").pp(i), &cfg, &mut loader))
+            .collect::<Result<Vec<_>>>()?;
+        let output_process = loader.linear(&vb.pp("output_process").pp("poseFinal"), d, cfg.input_feats)?;
+        let pe = sinusoidal_table(MAX_LEN, d, vb.device())?.to_dtype(vb.dtype())?;
+        Ok(Self { cfg, input_process, time_embed, embed_text, layers, output_process, pe, params })
+    }
+
+    /// Loads a safetensors checkpoint by name (e.g. one converted from `model000475000.pt`).
+    pub fn load(cfg: MdmConfig, path: impl AsRef<Path>, dtype: DType, device: &Device) -> Result<Self> {
+        let tensors = candle_core::safetensors::load(path, device)?;
+        Self::new(cfg, VarBuilder::from_tensors(tensors, dtype, device))
+    }
+
+    /// A trainable model: parameters missing from `varmap` are created as `Var`s with
+    /// PyTorch's default init drawn from `StdRng::seed_from_u64(seed)`; existing ones are used.
+    pub fn init_seeded(cfg: MdmConfig, varmap: &VarMap, dtype: DType, device: &Device, seed: u64) -> Result<Self> {
+        let backend = SeededInit::new(varmap.clone(), StdRng::seed_from_u64(seed));
+        Self::new(cfg, VarBuilder::from_backend(Box::new(backend), dtype, device.clone()))
+    }
+
+    /// A frozen model with seeded random weights (plain tensors, no `Var`s): tests, benchmarks.
+    pub fn random(cfg: MdmConfig, dtype: DType, device: &Device, seed: u64) -> Result<Self> {
+        let trained = Self::init_seeded(cfg.clone(), &VarMap::new(), dtype, device, seed)?;
+        let tensors = trained.params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
+        Self::new(cfg, VarBuilder::from_tensors(tensors, dtype, device))
+    }
+
+    /// The sizes.
+    pub fn config(&self) -> &MdmConfig {
+        &self.cfg
+    }
+
+    /// Every parameter with its checkpoint name, in construction order.
+    pub fn named_parameters(&self) -> &[(String, Tensor)] {
+        &self.params
+    }
+
+    /// Writes the parameters to a safetensors file by their official names (no `pe` buffers).
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
+        let map: HashMap<String, Tensor> = self.params.iter().cloned().collect();
+        candle_core::safetensors::save(&map, path)
+    }
+
+    /// Training forward pass with dropout `cfg.dropout` (masks from `rng`) at MDM's places:
+    /// after adding the positional encoding and inside every encoder layer.
+    ///
+    /// `x_t [batch, frames, 263]`, `timesteps [batch]` (u32, 0..999), `text [batch, text_dim]`
+    /// (all-zero rows = unconditional; masking the condition is the trainer's job).
+    /// Returns x̂0 `[batch, frames, 263]`. Primitive ops: gradients reach every `Var`.
+    pub fn forward_train(
+        &self,
+        x_t: &Tensor,
+        timesteps: &Tensor,
+        text: &Tensor,
+        rng: &mut dyn RngCore,
+    ) -> Result<Tensor> {
+        self.forward_primitive(x_t, timesteps, text, &mut Dropout { p: self.cfg.dropout, rng: Some(rng) })
+    }
+
+    /// [`Self::forward_train`] in eval mode (no dropout); same shapes. Agrees with
+    /// [`Denoiser::predict_x0`] but records weight gradients (slow in the DNO loop).
+    pub fn forward_eval(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<Tensor> {
+        self.forward_primitive(x_t, timesteps, text, &mut Dropout { p: 0.0, rng: None })
+    }
+
+    fn forward_primitive(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor, drop: &mut Dropout) -> Result<Tensor> {
+        let frames = self.check_inputs(x_t, timesteps, text)?;
+        let (te0, te2) = &self.time_embed;
+        let t_emb = te2.forward(&te0.forward(&self.pe.index_select(timesteps, 0)?)?.silu()?)?;
+        let cond = (t_emb + self.embed_text.forward(text)?)?;
+        let mut h = drop.apply(&self.tokens(&cond, &self.input_process.forward(x_t)?, frames)?)?;
+        for layer in &self.layers {
+            h = layer.forward(&h, drop)?;
+        }
+        self.output_process.forward(&h.narrow(1, 1, frames)?)
+    }
+
+    /// The frozen-weight path behind [`Denoiser::predict_x0`].
+    fn forward_frozen(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<Tensor> {
+        let frames = self.check_inputs(x_t, timesteps, text)?;
+        let (te0, te2) = &self.time_embed;
+        let t_emb = te2.forward_frozen(&te0.forward_frozen(&self.pe.index_select(timesteps, 0)?)?.silu()?)?;
+        let cond = (t_emb + self.embed_text.forward_frozen(text)?)?;
+        let mut h = self.tokens(&cond, &self.input_process.forward_frozen(x_t)?, frames)?;
+        for layer in &self.layers {
+            h = layer.forward_frozen(&h)?;
+        }
+        self.output_process.forward_frozen(&h.narrow(1, 1, frames)?)
+    }
+
+    /// `[cond; frames] + pe[0..=frames]`: `cond [batch, d]`, `x [batch, frames, d]` →
+    /// `[batch, frames + 1, d]` (the condition token gets `pe[0]`, as in MDM).
+    fn tokens(&self, cond: &Tensor, x: &Tensor, frames: usize) -> Result<Tensor> {
+        Tensor::cat(&[&cond.unsqueeze(1)?, x], 1)?.broadcast_add(&self.pe.narrow(0, 0, frames + 1)?)
+    }
+
+    /// Checks shapes and dtypes; returns the number of frames.
+    fn check_inputs(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<usize> {
+        let (batch, frames, feats) = x_t.dims3()?;
+        if feats != self.cfg.input_feats {
+            bail!("x_t has {feats} features per frame, the model {}", self.cfg.input_feats);
+        }
+        if frames + 1 > MAX_LEN {
+            bail!("{frames} frames exceed the positional table ({MAX_LEN} tokens)");
+        }
+        if timesteps.dims1()? != batch {
+            bail!("timesteps {:?} do not match batch {batch}", timesteps.shape());
+        }
+        if text.dims2()? != (batch, self.cfg.text_dim) {
+            bail!("text {:?} must be [{batch}, {}]", text.shape(), self.cfg.text_dim);
+        }
+        let dtype = self.pe.dtype();
+        if x_t.dtype() != dtype || text.dtype() != dtype {
+            bail!("inputs are {:?}/{:?}, the model {dtype:?}", x_t.dtype(), text.dtype());
+        }
+        Ok(frames)
+    }
+}
+
+impl Denoiser for Mdm {
+    /// Frozen-weight forward (no dropout); gradients flow to `x_t` (and `text`) only.
+    fn predict_x0(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<Tensor> {
+        self.forward_frozen(x_t, timesteps, text)
+    }
+
+    fn text_dim(&self) -> usize {
+        self.cfg.text_dim
+    }
+}

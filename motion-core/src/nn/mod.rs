@@ -1,1 +1,59 @@
-//! Differentiable neural-network building blocks (owned by the model work).
+//! Differentiable neural-network building blocks.
+//!
+//! Every layer has two paths:
+//! - `forward`: primitive candle ops, so weights held as `Var`s get gradients (training);
+//! - `forward_frozen` (and [`ops::softmax`], [`ops::gelu_erf`]): custom ops with hand-written
+//!   backward passes that return only the input gradient. This is the path of the frozen
+//!   prior inside diffusion-noise optimisation, where the only variable is the noise.
+//!
+//! The custom ops have CPU kernels (f32, f64); on other devices they fall back to the
+//! primitive path, so a CUDA build works unchanged and can gain kernels later. Never use
+//! candle's fused `LayerNorm`, `ops::layer_norm` or `softmax_last_dim` in a differentiable
+//! path: they have no backward and drop gradients silently.
+
+mod dropout;
+pub(crate) mod kernels;
+mod layer_norm;
+mod linear;
+pub mod ops;
+
+pub use dropout::dropout;
+pub use layer_norm::{LayerNorm, LAYER_NORM_EPS};
+pub use linear::Linear;
+
+#[cfg(test)]
+pub(crate) mod testing {
+    use candle_core::{Device, Result, Tensor};
+    use rand::{rngs::StdRng, SeedableRng};
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// Seeded standard-normal f64 tensor.
+    pub fn randn(shape: &[usize], seed: u64, dev: &Device) -> Result<Tensor> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let n = shape.iter().product();
+        let v: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+        Tensor::from_vec(v, shape, dev)
+    }
+
+    /// Largest absolute element-wise difference.
+    pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> Result<f64> {
+        (a.to_dtype(candle_core::DType::F64)? - b.to_dtype(candle_core::DType::F64)?)?
+            .abs()?
+            .flatten_all()?
+            .max(0)?
+            .to_scalar::<f64>()
+    }
+
+    /// One `#[test]` per `case(dev: &Device) -> Result<()>` in the parent module, on the CPU.
+    macro_rules! cpu_tests {
+        ($($case:ident),* $(,)?) => {
+            $(
+                #[test]
+                fn $case() -> candle_core::Result<()> {
+                    super::$case(&candle_core::Device::Cpu)
+                }
+            )*
+        };
+    }
+    pub(crate) use cpu_tests;
+}

@@ -294,7 +294,10 @@ mod tests {
                 let Some(p) = j.parent() else { continue };
                 let dir = |q: &Pose| (at(q, j) - at(q, p)).normalize();
                 let angle = dir(&rest).dot(dir(&canon)).clamp(-1.0, 1.0).acos().to_degrees();
-                assert!(angle < 25.0, "{name}: {p}->{j} is {angle:.0} deg off");
+                // Clavicles differ most between rigs (Boxing_Toes' start at its neck joint, above
+                // the canonical spine3), so collars get a wider tolerance.
+                let limit = if matches!(j, Joint::LeftCollar | Joint::RightCollar) { 40.0 } else { 25.0 };
+                assert!(angle < limit, "{name}: {p}->{j} is {angle:.0} deg off");
             }
         }
     }

@@ -43,9 +43,10 @@ impl Rig {
     }
 
     /// Our joints in [`Joint`](crate::skeleton::Joint) order, placed where the SMPL joint sits relative to the rig's.
-    /// Spine points are spread like SMPL's (spine1 ≈ 23 %, spine2 ≈ 49 %, spine3 ≈ 60 % of the
-    /// way from pelvis to neck), and collars sit 35-40 % of the way out along the clavicle bone
-    /// where a rig's clavicle starts on the mid-line.
+    /// Spine points are spread like SMPL's (spine1 ≈ 23 %, spine2 ≈ 49 % of the way from pelvis
+    /// to neck); spine3 sits at the base of the neck, where the canonical (DeepMimic) skeleton
+    /// has it, and collars sit 35-40 % of the way out along the clavicle bone where a rig's
+    /// clavicle starts on the mid-line.
     fn sources(self) -> [Source; NUM_JOINTS] {
         match self {
             // cgspeed's torso is short (Hips → Spine 0.115 m, → Spine1 0.23 m where neck and
@@ -60,7 +61,7 @@ impl Rig {
                 Between("Spine", "Spine1", 0.42),
                 At("LeftFoot"),
                 At("RightFoot"),
-                Between("Spine", "Spine1", 0.74),
+                Between("Spine1", "Neck1", 0.4),
                 At("LeftToeBase"),
                 At("RightToeBase"),
                 At("Neck1"),
@@ -84,7 +85,7 @@ impl Rig {
                 At("Spine1"),
                 At("LeftFoot"),
                 At("RightFoot"),
-                At("Spine2"),
+                Between("Spine2", "Neck", 0.8),
                 At("LeftToeBase"),
                 At("RightToeBase"),
                 At("Neck"),
@@ -109,7 +110,7 @@ impl Rig {
                 Between("Ab", "Chest", 0.75),
                 At("LeftAnkle"),
                 At("RightAnkle"),
-                At("Chest"),
+                Between("Chest", "Neck", 0.92),
                 At("LeftToes"),
                 At("RightToes"),
                 At("Neck"),

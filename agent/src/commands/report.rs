@@ -1,0 +1,131 @@
+//! `mogen report prior`: the prior quality report.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use motion_core::database::MotionDatabase;
+use motion_core::prior::Prior;
+use motion_core::quality::{quality_report, QualityConfig};
+use motion_core::render::{motion_strip, StripRow};
+
+use crate::paths;
+
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// Trained prior file.
+    #[arg(long, default_value_os_t = paths::default_prior())]
+    prior: PathBuf,
+    /// Database the prior was trained on.
+    #[arg(long, default_value_os_t = paths::default_database())]
+    database: PathBuf,
+    /// Samples per label.
+    #[arg(long, default_value_t = QualityConfig::default().samples_per_label)]
+    samples: usize,
+    /// Frames per sample.
+    #[arg(long, default_value_t = QualityConfig::default().frames)]
+    frames: usize,
+    /// DDIM steps.
+    #[arg(long, default_value_t = QualityConfig::default().ddim_steps)]
+    steps: usize,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output folder (report.json, report.md, samples.png).
+    #[arg(long, short, default_value = "out/report")]
+    out: PathBuf,
+}
+
+pub fn run(args: ReportArgs) -> anyhow::Result<()> {
+    let device = candle_core::Device::Cpu;
+    let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
+    let db = MotionDatabase::load(&args.database)
+        .with_context(|| format!("reading {} (build it with `mogen data build`)", args.database.display()))?;
+    let config = QualityConfig { samples_per_label: args.samples, frames: args.frames, ddim_steps: args.steps, seed: args.seed, ..QualityConfig::default() };
+    let header = "| label | skate gen / data | max acc gen / data (m/frame²) | bone range gen (m) | penetration gen / data (m) | head y gen / data (m) | nearest train (m) | data spacing (m) | diversity (m) |";
+    let mut lines = vec![header.to_owned(), "|---|---|---|---|---|---|---|---|---|".to_owned()];
+    println!("{header}");
+    let rows = quality_report(&prior, &db, &config, &device, |r| {
+        let line = format!(
+            "| {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.3} / {:.3} | {:.2} / {:.2} | {:.3} | {:.3} | {:.3} |",
+            r.label,
+            r.samples.foot_skate_ratio,
+            r.training.foot_skate_ratio,
+            r.samples.max_acceleration,
+            r.training.max_acceleration,
+            r.samples.bone_length_range_m,
+            r.samples.ground_penetration_m,
+            r.training.ground_penetration_m,
+            r.samples.head_height_m,
+            r.training.head_height_m,
+            r.nearest_training_m,
+            r.training_spacing_m,
+            r.sample_diversity_m
+        );
+        println!("{line}");
+        lines.push(line);
+    })?;
+    std::fs::create_dir_all(&args.out)?;
+    std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
+    std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&rows)?)?;
+    let strip_labels = ["a person walks forward", "a person runs forward", "a person crawls forward on the ground", "a person jumps forward", "a person does a cartwheel to the left"];
+    let mut motions = Vec::new();
+    for (i, label) in strip_labels.iter().enumerate() {
+        for seed in 0..2u64 {
+            let x = prior.sample(label, args.frames, 1, 1000 + 10 * i as u64 + seed, args.steps, Default::default(), &device)?;
+            motions.push((format!("{label} (seed {})", 1000 + 10 * i as u64 + seed), motion_core::quality::joints_of(&prior, &x)?.remove(0)));
+        }
+    }
+    let strip: Vec<StripRow<'_>> = motions.iter().map(|(l, p)| StripRow { label: l.clone(), poses: p }).collect();
+    motion_strip(&strip, 8, &args.out.join("samples.png"))?;
+    println!("wrote {}/{{report.md,report.json,samples.png}}", args.out.display());
+    Ok(())
+}
+
+#[derive(Debug, Args)]
+pub struct LossArgs {
+    /// Loss CSV written by `mogen train --loss-csv` (step,loss,lr,frames,seconds).
+    #[arg(long, default_value = "out/train/loss.csv")]
+    csv: PathBuf,
+    /// Output PNG.
+    #[arg(long, short, default_value = "out/train/loss.png")]
+    out: PathBuf,
+}
+
+/// Plots a training loss curve (raw and a 100-step moving average, log scale).
+pub fn run_loss(args: LossArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&args.csv).with_context(|| format!("reading {}", args.csv.display()))?;
+    let mut raw = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let mut f = line.split(',');
+        let (Some(step), Some(loss)) = (f.next(), f.next()) else {
+            anyhow::bail!("{}: line {}: expected step,loss,...", args.csv.display(), i + 1);
+        };
+        let step: f64 = step.parse().with_context(|| format!("{}: line {}: step", args.csv.display(), i + 1))?;
+        let loss: f64 = loss.parse().with_context(|| format!("{}: line {}: loss", args.csv.display(), i + 1))?;
+        raw.push((step, loss));
+    }
+    anyhow::ensure!(!raw.is_empty(), "{}: no loss rows", args.csv.display());
+    let window = 100usize;
+    let smooth: Vec<(f64, f64)> = (0..raw.len())
+        .map(|i| {
+            let lo = i.saturating_sub(window - 1);
+            let s = &raw[lo..=i];
+            (raw[i].0, s.iter().map(|p| p.1).sum::<f64>() / s.len() as f64)
+        })
+        .collect();
+    motion_core::render::line_plot(
+        "TRAINING LOSS (X0 MSE, NORMALISED FEATURES)",
+        "STEP",
+        "LOSS (LOG SCALE)",
+        &[
+            motion_core::render::Series { name: "per step", points: &raw, rgb: (180, 180, 220) },
+            motion_core::render::Series { name: "100-step mean", points: &smooth, rgb: (200, 40, 40) },
+        ],
+        true,
+        &args.out,
+    )?;
+    let last = smooth.last().map_or(f64::NAN, |p| p.1);
+    println!("wrote {} ({} steps, final 100-step mean loss {last:.4})", args.out.display(), raw.len());
+    Ok(())
+}

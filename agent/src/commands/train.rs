@@ -1,0 +1,128 @@
+//! `mogen train`: train the motion prior on a database.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use motion_core::database::MotionDatabase;
+use motion_core::model::MdmConfig;
+use motion_core::training::{TrainConfig, Trainer};
+
+use crate::paths;
+
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Database built by `mogen data build`.
+    #[arg(long, default_value_os_t = paths::default_database())]
+    database: PathBuf,
+    /// Where the trained prior (EMA weights, vocabulary, Mean/Std) is written.
+    #[arg(long, short, default_value = "out/prior.safetensors")]
+    out: PathBuf,
+    /// Resumable checkpoint file (written every --checkpoint-every steps; resumed if present).
+    #[arg(long, default_value = "out/train_checkpoint.safetensors")]
+    checkpoint: PathBuf,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = TrainConfig::default().steps)]
+    steps: usize,
+    /// Windows per batch.
+    #[arg(long, default_value_t = TrainConfig::default().batch_size)]
+    batch_size: usize,
+    /// Peak learning rate.
+    #[arg(long, default_value_t = TrainConfig::default().lr)]
+    lr: f64,
+    /// Longest crop in frames (20 fps).
+    #[arg(long, default_value_t = TrainConfig::default().max_frames)]
+    max_frames: usize,
+    /// Steps between checkpoints.
+    #[arg(long, default_value_t = TrainConfig::default().checkpoint_every)]
+    checkpoint_every: usize,
+    /// Seed of initialisation, batches, noise and dropout.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Model width d (tokens), feed-forward width and layers; defaults: the shipped small size.
+    #[arg(long)]
+    latent_dim: Option<usize>,
+    #[arg(long)]
+    ff_size: Option<usize>,
+    #[arg(long)]
+    layers: Option<usize>,
+    /// Write the loss of every step as CSV (step,loss,lr,frames,seconds).
+    #[arg(long)]
+    loss_csv: Option<PathBuf>,
+}
+
+pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    let db = MotionDatabase::load(&args.database)
+        .with_context(|| format!("reading {} (build it with `mogen data build`)", args.database.display()))?;
+    let small = MdmConfig::small();
+    let model = MdmConfig {
+        latent_dim: args.latent_dim.unwrap_or(small.latent_dim),
+        ff_size: args.ff_size.unwrap_or(small.ff_size),
+        num_layers: args.layers.unwrap_or(small.num_layers),
+        ..small
+    };
+    let config = TrainConfig {
+        steps: args.steps,
+        batch_size: args.batch_size,
+        lr: args.lr,
+        max_frames: args.max_frames,
+        checkpoint_every: args.checkpoint_every,
+        seed: args.seed,
+        ..TrainConfig::default()
+    };
+    let device = candle_core::Device::Cpu;
+    let mut trainer = Trainer::new(&db, model, config.clone(), &device).context("setting up training")?;
+    if args.checkpoint.exists() {
+        let state = trainer.resume(&args.checkpoint).context("resuming from the checkpoint")?;
+        eprintln!("resumed {} at step {}", args.checkpoint.display(), state.step);
+    }
+    eprintln!(
+        "training {} parameters on {} windows ({} labels), {} steps of batch {}",
+        trainer.model_config().parameter_count(),
+        db.windows().len(),
+        db.labels().len(),
+        config.steps,
+        config.batch_size
+    );
+    let bar = ProgressBar::new(config.steps as u64).with_position(trainer.step() as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut csv = match &args.loss_csv {
+        Some(p) => {
+            let exists = p.exists();
+            let mut f = std::fs::OpenOptions::new().create(true).append(true).open(p)
+                .with_context(|| format!("opening {}", p.display()))?;
+            if !exists {
+                use std::io::Write;
+                writeln!(f, "step,loss,lr,frames,seconds")?;
+            }
+            Some(f)
+        }
+        None => None,
+    };
+    let start = Instant::now();
+    let mut smoothed: Option<f64> = None;
+    trainer.run(Some(&args.checkpoint), |r| {
+        let s = smoothed.map_or(r.loss, |s| 0.98 * s + 0.02 * r.loss);
+        smoothed = Some(s);
+        bar.set_position(r.step as u64);
+        bar.set_message(format!("loss {s:.4} lr {:.1e} T={}", r.lr, r.frames));
+        if !bar.is_hidden() || r.step % 100 == 0 {
+            if bar.is_hidden() {
+                eprintln!("step {}/{} loss {s:.4} lr {:.1e} ({:.0} s)", r.step, r.steps, r.lr, start.elapsed().as_secs_f64());
+            }
+        }
+        if let Some(f) = csv.as_mut() {
+            use std::io::Write;
+            let _ = writeln!(f, "{},{},{},{},{:.2}", r.step, r.loss, r.lr, r.frames, start.elapsed().as_secs_f64());
+        }
+    })?;
+    bar.finish();
+    trainer.save_prior(&args.out, db.mean_std()).context("writing the prior")?;
+    println!("wrote {} after {:.0} s", args.out.display(), start.elapsed().as_secs_f64());
+    Ok(())
+}

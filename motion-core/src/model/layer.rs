@@ -1,0 +1,151 @@
+//! PyTorch's `nn.TransformerEncoderLayer(d, heads, ff, dropout, activation="gelu")`, post-LN,
+//! with its parameter names, and the loader helpers that record every parameter by name.
+
+use candle_core::{Result, Shape, Tensor, D};
+use candle_nn::{Init, VarBuilder};
+use rand::RngCore;
+
+use super::fused_layer::{FusedEncoderLayer, LayerWeights};
+use super::MdmConfig;
+use crate::nn::{self, LayerNorm, Linear, LAYER_NORM_EPS};
+
+/// Parameters fetched from a [`VarBuilder`], each recorded with its full checkpoint name.
+pub(crate) struct ParamLoader<'a> {
+    pub named: &'a mut Vec<(String, Tensor)>,
+}
+
+impl ParamLoader<'_> {
+    pub fn get(&mut self, vb: &VarBuilder, shape: impl Into<Shape>, name: &str, init: Init) -> Result<Tensor> {
+        let t = vb.get_with_hints(shape, name, init)?;
+        let prefix = vb.prefix();
+        let full = if prefix.is_empty() { name.to_string() } else { format!("{prefix}.{name}") };
+        self.named.push((full, t.clone()));
+        Ok(t)
+    }
+
+    /// `nn.Linear(in_dim, out_dim)` with PyTorch's default init, U(±1/√in) for weight and bias.
+    pub fn linear(&mut self, vb: &VarBuilder, in_dim: usize, out_dim: usize) -> Result<Linear> {
+        let bound = 1.0 / (in_dim as f64).sqrt();
+        let init = Init::Uniform { lo: -bound, up: bound };
+        let w = self.get(vb, (out_dim, in_dim), "weight", init)?;
+        let b = self.get(vb, out_dim, "bias", init)?;
+        Linear::new(w, Some(b))
+    }
+
+    /// `nn.LayerNorm(d)`: weight 1, bias 0, eps 1e-5.
+    pub fn layer_norm(&mut self, vb: &VarBuilder, d: usize) -> Result<LayerNorm> {
+        let w = self.get(vb, d, "weight", Init::Const(1.0))?;
+        let b = self.get(vb, d, "bias", Init::Const(0.0))?;
+        LayerNorm::new(w, b, LAYER_NORM_EPS)
+    }
+}
+
+/// Dropout state of one training forward pass: probability and mask RNG (`None`: eval mode).
+pub(crate) struct Dropout<'a> {
+    pub p: f64,
+    pub rng: Option<&'a mut dyn RngCore>,
+}
+
+impl Dropout<'_> {
+    pub fn apply(&mut self, x: &Tensor) -> Result<Tensor> {
+        match self.rng.as_deref_mut() {
+            Some(rng) if self.p > 0.0 => nn::dropout(x, self.p, rng),
+            _ => Ok(x.clone()),
+        }
+    }
+}
+
+/// One post-LN encoder layer: `h1 = LN1(h + MHA(h))`, `out = LN2(h1 + W2·GELU(W1·h1 + b1) + b2)`.
+#[derive(Debug, Clone)]
+pub(crate) struct EncoderLayer {
+    /// `self_attn.in_proj_{weight,bias}`: q, k, v stacked, `[3d, d]`.
+    in_proj: Linear,
+    out_proj: Linear,
+    linear1: Linear,
+    linear2: Linear,
+    norm1: LayerNorm,
+    norm2: LayerNorm,
+    num_heads: usize,
+}
+
+impl EncoderLayer {
+    /// Loads `{vb}.self_attn.*`, `linear1`, `linear2`, `norm1`, `norm2`.
+    pub fn new(vb: &VarBuilder, cfg: &MdmConfig, loader: &mut ParamLoader) -> Result<Self> {
+        let d = cfg.latent_dim;
+        let attn = vb.pp("self_attn");
+        // MultiheadAttention._reset_parameters: xavier_uniform in_proj, zero biases.
+        let xavier = (6.0 / (d + 3 * d) as f64).sqrt();
+        let in_w = loader.get(&attn, (3 * d, d), "in_proj_weight", Init::Uniform { lo: -xavier, up: xavier })?;
+        let in_b = loader.get(&attn, 3 * d, "in_proj_bias", Init::Const(0.0))?;
+        let out_vb = attn.pp("out_proj");
+        let bound = 1.0 / (d as f64).sqrt();
+        let out_w = loader.get(&out_vb, (d, d), "weight", Init::Uniform { lo: -bound, up: bound })?;
+        let out_b = loader.get(&out_vb, d, "bias", Init::Const(0.0))?;
+        Ok(Self {
+            in_proj: Linear::new(in_w, Some(in_b))?,
+            out_proj: Linear::new(out_w, Some(out_b))?,
+            linear1: loader.linear(&vb.pp("linear1"), d, cfg.ff_size)?,
+            linear2: loader.linear(&vb.pp("linear2"), cfg.ff_size, d)?,
+            norm1: loader.layer_norm(&vb.pp("norm1"), d)?,
+            norm2: loader.layer_norm(&vb.pp("norm2"), d)?,
+            num_heads: cfg.num_heads,
+        })
+    }
+
+    /// Primitive-op path, `[batch, tokens, d] → [batch, tokens, d]`; weight gradients flow.
+    /// Dropout as PyTorch in training mode: on the attention probabilities, after attention,
+    /// after the GELU and after the second linear.
+    pub fn forward(&self, h: &Tensor, drop: &mut Dropout) -> Result<Tensor> {
+        let a = self.attention(h, drop)?;
+        let a = drop.apply(&a)?;
+        let h1 = self.norm1.forward(&(h + a)?)?;
+        let f = drop.apply(&nn::ops::gelu_erf(&self.linear1.forward(&h1)?)?)?;
+        let f = drop.apply(&self.linear2.forward(&f)?)?;
+        self.norm2.forward(&(h1 + f)?)
+    }
+
+    fn attention(&self, h: &Tensor, drop: &mut Dropout) -> Result<Tensor> {
+        let (b, s, d) = h.dims3()?;
+        let heads = self.num_heads;
+        let hd = d / heads;
+        let qkv = self.in_proj.forward(h)?;
+        let split = |part: usize| -> Result<Tensor> {
+            qkv.narrow(2, part * d, d)?.reshape((b, s, heads, hd))?.transpose(1, 2)?.contiguous()
+        };
+        let q = (split(0)? * (1.0 / (hd as f64).sqrt()))?;
+        let (k, v) = (split(1)?, split(2)?);
+        let probs = nn::ops::softmax(&q.matmul(&k.t()?)?)?;
+        let probs = drop.apply(&probs)?;
+        let ctx = probs.matmul(&v)?.transpose(1, 2)?.reshape((b, s, d))?;
+        self.out_proj.forward(&ctx)
+    }
+
+    /// Frozen-weight path, `[batch, tokens, d] → [batch, tokens, d]`: one fused custom op on
+    /// the CPU (input gradient only), the primitive path without dropout elsewhere.
+    pub fn forward_frozen(&self, h: &Tensor) -> Result<Tensor> {
+        if !nn::ops::has_cpu_kernel(h) {
+            return self.forward(h, &mut Dropout { p: 0.0, rng: None });
+        }
+        h.contiguous()?.apply_op1(FusedEncoderLayer::new(self.frozen_weights()?, self.num_heads, self.norm1.eps()))
+    }
+
+    fn frozen_weights(&self) -> Result<LayerWeights> {
+        let bias = |l: &Linear| -> Result<Tensor> {
+            l.bias().map(Tensor::detach).ok_or_else(|| candle_core::Error::Msg("encoder linear without bias".into()))
+        };
+        Ok(LayerWeights {
+            in_proj_weight: self.in_proj.weight().detach(),
+            in_proj_bias: bias(&self.in_proj)?,
+            out_proj_weight: self.out_proj.weight().detach(),
+            out_proj_bias: bias(&self.out_proj)?,
+            linear1_weight: self.linear1.weight().detach(),
+            linear1_bias: bias(&self.linear1)?,
+            linear2_weight: self.linear2.weight().detach(),
+            linear2_bias: bias(&self.linear2)?,
+            norm1_weight: self.norm1.weight().detach(),
+            norm1_bias: self.norm1.bias().detach(),
+            norm2_weight: self.norm2.weight().detach(),
+            norm2_bias: self.norm2.bias().detach(),
+        })
+    }
+}

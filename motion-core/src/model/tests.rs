@@ -1,0 +1,247 @@
+//! Model tests: checkpoint parity with PyTorch, gradients, names, training mode.
+
+use std::collections::{BTreeSet, HashMap};
+use std::path::PathBuf;
+
+use candle_core::{DType, Device, IndexOp, Result, Tensor, Var};
+use candle_nn::{VarBuilder, VarMap};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+
+use super::*;
+use crate::nn::testing::{max_abs_diff, randn};
+use crate::testing::finite_difference_check;
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fixtures/parity").join(name)
+}
+
+/// The configuration of `fixtures/parity/make_mdm_parity.py`.
+fn parity_config() -> MdmConfig {
+    MdmConfig { latent_dim: 48, ff_size: 96, num_layers: 2, num_heads: 4, ..MdmConfig::official() }
+}
+
+/// A tiny f64 model for finite differences.
+fn tiny_config() -> MdmConfig {
+    MdmConfig { input_feats: 7, latent_dim: 8, ff_size: 12, num_layers: 2, num_heads: 2, text_dim: 5, dropout: 0.1 }
+}
+
+struct Inputs {
+    x: Tensor,
+    t: Tensor,
+    text: Tensor,
+}
+
+fn tiny_inputs(cfg: &MdmConfig, dev: &Device) -> Result<Inputs> {
+    let x = randn(&[2, 5, cfg.input_feats], 50, dev)?;
+    let t = Tensor::new(&[999u32, 3], dev)?;
+    let text =
+        Tensor::cat(&[randn(&[1, cfg.text_dim], 51, dev)?, Tensor::zeros((1, cfg.text_dim), DType::F64, dev)?], 0)?;
+    Ok(Inputs { x, t, text })
+}
+
+fn parity_model(cfg: MdmConfig, dev: &Device) -> Result<(Mdm, HashMap<String, Tensor>)> {
+    let model = Mdm::load(cfg, fixture("mdm_tiny.safetensors"), DType::F32, dev)?;
+    let io = candle_core::safetensors::load(fixture("mdm_tiny_io.safetensors"), dev)?;
+    Ok((model, io))
+}
+
+fn io<'a>(io: &'a HashMap<String, Tensor>, name: &str) -> &'a Tensor {
+    io.get(name).unwrap_or_else(|| panic!("{name} missing from mdm_tiny_io.safetensors"))
+}
+
+fn checkpoint_parity(dev: &Device) -> Result<()> {
+    let (model, io_map) = parity_model(parity_config(), dev)?;
+    let (x, text, want) = (io(&io_map, "x"), io(&io_map, "text"), io(&io_map, "out"));
+    let t = io(&io_map, "timesteps").to_dtype(DType::U32)?;
+    let frozen = model.predict_x0(x, &t, text)?;
+    let err = max_abs_diff(&frozen, want)?;
+    println!("parity max abs error, frozen path: {err:.3e}");
+    assert!(err < 1e-4, "frozen path differs from PyTorch by {err}");
+
+    let eval = model.forward_eval(x, &t, text)?;
+    let err = max_abs_diff(&eval, want)?;
+    println!("parity max abs error, primitive path: {err:.3e}");
+    assert!(err < 1e-4, "primitive path differs from PyTorch by {err}");
+
+    // Training path with dropout off is the same function.
+    let no_dropout = parity_model(MdmConfig { dropout: 0.0, ..parity_config() }, dev)?.0;
+    let train = no_dropout.forward_train(x, &t, text, &mut StdRng::seed_from_u64(0))?;
+    assert!(max_abs_diff(&train, want)? < 1e-4);
+    Ok(())
+}
+
+fn checkpoint_gradient_parity(dev: &Device) -> Result<()> {
+    let (model, io_map) = parity_model(parity_config(), dev)?;
+    let (x, text, want) = (io(&io_map, "x"), io(&io_map, "text"), io(&io_map, "grad_x"));
+    let t = io(&io_map, "timesteps").to_dtype(DType::U32)?;
+    let scale = want.abs()?.flatten_all()?.max(0)?.to_scalar::<f32>()? as f64;
+    let z = Var::from_tensor(x)?;
+    for (name, out) in [
+        ("frozen", model.predict_x0(z.as_tensor(), &t, text)?),
+        ("primitive", model.forward_eval(z.as_tensor(), &t, text)?),
+    ] {
+        let loss = out.sqr()?.mean_all()?;
+        let want_loss = io(&io_map, "loss").to_vec1::<f32>()?[0];
+        assert!((loss.to_scalar::<f32>()? - want_loss).abs() < 1e-5);
+        let grads = loss.backward()?;
+        let g = grads.get(z.as_tensor()).expect("no gradient for x");
+        let err = max_abs_diff(g, want)?;
+        println!("grad_x max abs error, {name} path: {err:.3e} (max |grad| {scale:.3e})");
+        assert!(err < 1e-4 * scale.max(1e-3), "{name} gradient differs from PyTorch by {err}");
+    }
+    Ok(())
+}
+
+fn loads_by_official_names(dev: &Device) -> Result<()> {
+    let ckpt = candle_core::safetensors::load(fixture("mdm_tiny.safetensors"), dev)?;
+    let model = Mdm::load(parity_config(), fixture("mdm_tiny.safetensors"), DType::F32, dev)?;
+    let ours: BTreeSet<&str> = model.named_parameters().iter().map(|(n, _)| n.as_str()).collect();
+    let theirs: BTreeSet<&str> = ckpt.keys().map(String::as_str).filter(|k| !k.ends_with(".pe")).collect();
+    assert_eq!(ours, theirs);
+    assert_eq!(ckpt.len(), theirs.len() + 2, "both aliased pe buffers are in the checkpoint");
+    let count: usize = model.named_parameters().iter().map(|(_, t)| t.elem_count()).sum();
+    assert_eq!(count, parity_config().parameter_count());
+
+    // Without the pe buffers the checkpoint still loads.
+    let no_pe: HashMap<String, Tensor> = ckpt.clone().into_iter().filter(|(k, _)| !k.ends_with(".pe")).collect();
+    Mdm::new(parity_config(), VarBuilder::from_tensors(no_pe, DType::F32, dev))?;
+    // A missing parameter is an error.
+    let mut missing = ckpt.clone();
+    missing.remove("seqTransEncoder.layers.1.norm2.bias");
+    assert!(Mdm::new(parity_config(), VarBuilder::from_tensors(missing, DType::F32, dev)).is_err());
+    Ok(())
+}
+
+fn positional_table_matches_checkpoint_buffer(dev: &Device) -> Result<()> {
+    let ckpt = candle_core::safetensors::load(fixture("mdm_tiny.safetensors"), dev)?;
+    let theirs = ckpt.get("sequence_pos_encoder.pe").expect("pe buffer").squeeze(1)?;
+    let rows = theirs.dim(0)?;
+    let ours = sinusoidal_table(MAX_LEN, parity_config().latent_dim, dev)?.narrow(0, 0, rows)?;
+    let err = max_abs_diff(&ours, &theirs)?;
+    assert!(err < 1e-6, "pe table differs by {err}");
+    Ok(())
+}
+
+fn save_and_reload_round_trip(dev: &Device) -> Result<()> {
+    let cfg = tiny_config();
+    let model = Mdm::random(cfg.clone(), DType::F64, dev, 5)?;
+    let dir = tempfile::tempdir().map_err(candle_core::Error::wrap)?;
+    let path = dir.path().join("tiny.safetensors");
+    model.save(&path)?;
+    let back = Mdm::load(cfg.clone(), &path, DType::F64, dev)?;
+    let inp = tiny_inputs(&cfg, dev)?;
+    let a = model.predict_x0(&inp.x, &inp.t, &inp.text)?;
+    let b = back.predict_x0(&inp.x, &inp.t, &inp.text)?;
+    assert_eq!(max_abs_diff(&a, &b)?, 0.0);
+    Ok(())
+}
+
+fn frozen_and_primitive_paths_agree(dev: &Device) -> Result<()> {
+    let cfg = tiny_config();
+    let model = Mdm::random(cfg.clone(), DType::F64, dev, 6)?;
+    let inp = tiny_inputs(&cfg, dev)?;
+    let frozen = model.predict_x0(&inp.x, &inp.t, &inp.text)?;
+    let eval = model.forward_eval(&inp.x, &inp.t, &inp.text)?;
+    assert!(max_abs_diff(&frozen, &eval)? < 1e-12);
+    assert_eq!(frozen.dims(), inp.x.dims());
+    Ok(())
+}
+
+fn loss(out: &Tensor, w: &Tensor) -> Result<Tensor> {
+    out.mul(w)?.sum_all()? + out.sqr()?.mean_all()?
+}
+
+fn gradients_match_finite_differences(dev: &Device) -> Result<()> {
+    let cfg = tiny_config();
+    let model = Mdm::random(cfg.clone(), DType::F64, dev, 7)?;
+    let inp = tiny_inputs(&cfg, dev)?;
+    let w = randn(inp.x.dims(), 52, dev)?;
+    finite_difference_check(&inp.x, |x| loss(&model.predict_x0(x, &inp.t, &inp.text)?, &w), 1e-5, 1e-6)?;
+    finite_difference_check(&inp.x, |x| loss(&model.forward_eval(x, &inp.t, &inp.text)?, &w), 1e-5, 1e-6)
+}
+
+fn frozen_gradient_equals_primitive_gradient(dev: &Device) -> Result<()> {
+    let cfg = tiny_config();
+    let model = Mdm::random(cfg.clone(), DType::F64, dev, 8)?;
+    let inp = tiny_inputs(&cfg, dev)?;
+    let w = randn(inp.x.dims(), 53, dev)?;
+    let z = Var::from_tensor(&inp.x)?;
+    let g_frozen = loss(&model.predict_x0(z.as_tensor(), &inp.t, &inp.text)?, &w)?.backward()?;
+    let g_frozen = g_frozen.get(z.as_tensor()).expect("no frozen gradient").clone();
+    let g_prim = loss(&model.forward_eval(z.as_tensor(), &inp.t, &inp.text)?, &w)?.backward()?;
+    let g_prim = g_prim.get(z.as_tensor()).expect("no primitive gradient").clone();
+    // Not bit-equal: candle's gelu_erf backward rounds 1/sqrt(2π) to 0.398942 (1e-6 relative).
+    let scale = g_prim.abs()?.flatten_all()?.max(0)?.to_scalar::<f64>()?;
+    assert!(max_abs_diff(&g_frozen, &g_prim)? < 1e-6 * scale);
+    let norm = g_frozen.sqr()?.sum_all()?.to_scalar::<f64>()?;
+    assert!(norm.is_finite() && norm > 0.0);
+    // Each sample's gradient is its own: the batch does not mix.
+    assert!(g_frozen.i(1)?.abs()?.sum_all()?.to_scalar::<f64>()? > 0.0);
+    Ok(())
+}
+
+fn fused_layer_gradient_matches_finite_differences(dev: &Device) -> Result<()> {
+    // Sharper check of the fused op alone: one layer, larger width, f64.
+    let cfg = MdmConfig { latent_dim: 12, ff_size: 20, num_layers: 1, num_heads: 3, ..tiny_config() };
+    let model = Mdm::random(cfg.clone(), DType::F64, dev, 9)?;
+    let layer = &model.layers[0];
+    let h = randn(&[2, 4, 12], 54, dev)?;
+    let w = randn(&[2, 4, 12], 55, dev)?;
+    finite_difference_check(&h, |h| layer.forward_frozen(h)?.mul(&w)?.sum_all(), 1e-6, 1e-7)
+}
+
+fn training_mode_has_seeded_dropout_and_weight_gradients(dev: &Device) -> Result<()> {
+    let cfg = MdmConfig { dropout: 0.3, ..tiny_config() };
+    let varmap = VarMap::new();
+    let model = Mdm::init_seeded(cfg.clone(), &varmap, DType::F64, dev, 1)?;
+    let again = Mdm::init_seeded(cfg.clone(), &VarMap::new(), DType::F64, dev, 1)?;
+    for ((n, a), (_, b)) in model.named_parameters().iter().zip(again.named_parameters()) {
+        assert_eq!(max_abs_diff(a, b)?, 0.0, "{n} init is not seeded");
+    }
+    assert_eq!(varmap.all_vars().len(), model.named_parameters().len());
+
+    let inp = tiny_inputs(&cfg, dev)?;
+    let a = model.forward_train(&inp.x, &inp.t, &inp.text, &mut StdRng::seed_from_u64(2))?;
+    let b = model.forward_train(&inp.x, &inp.t, &inp.text, &mut StdRng::seed_from_u64(2))?;
+    let c = model.forward_train(&inp.x, &inp.t, &inp.text, &mut StdRng::seed_from_u64(3))?;
+    assert_eq!(max_abs_diff(&a, &b)?, 0.0);
+    assert!(max_abs_diff(&a, &c)? > 1e-6);
+
+    let grads = a.sqr()?.mean_all()?.backward()?;
+    for (name, t) in model.named_parameters() {
+        let g = grads.get(t).unwrap_or_else(|| panic!("no gradient for {name}"));
+        assert!(g.sqr()?.sum_all()?.to_scalar::<f64>()?.is_finite());
+    }
+    // The frozen path gives no weight gradients.
+    let grads = model.predict_x0(&inp.x, &inp.t, &inp.text)?.sqr()?.mean_all()?;
+    assert!(grads.backward()?.get(&model.named_parameters()[0].1).is_none());
+    Ok(())
+}
+
+fn bad_inputs_are_errors(dev: &Device) -> Result<()> {
+    let cfg = tiny_config();
+    let model = Mdm::random(cfg.clone(), DType::F64, dev, 10)?;
+    let inp = tiny_inputs(&cfg, dev)?;
+    assert!(model.predict_x0(&inp.x.narrow(2, 0, 6)?, &inp.t, &inp.text).is_err());
+    assert!(model.predict_x0(&inp.x, &inp.t.narrow(0, 0, 1)?, &inp.text).is_err());
+    assert!(model.predict_x0(&inp.x, &inp.t, &inp.text.narrow(1, 0, 4)?).is_err());
+    assert!(model.predict_x0(&inp.x.to_dtype(DType::F32)?, &inp.t, &inp.text).is_err());
+    Ok(())
+}
+
+mod cpu {
+    crate::nn::testing::cpu_tests!(
+        checkpoint_parity,
+        checkpoint_gradient_parity,
+        loads_by_official_names,
+        positional_table_matches_checkpoint_buffer,
+        save_and_reload_round_trip,
+        frozen_and_primitive_paths_agree,
+        gradients_match_finite_differences,
+        frozen_gradient_equals_primitive_gradient,
+        fused_layer_gradient_matches_finite_differences,
+        training_mode_has_seeded_dropout_and_weight_gradients,
+        bad_inputs_are_errors,
+    );
+}

@@ -1,0 +1,174 @@
+//! The motion prior as shipped: the MDM denoiser, its text encoder and the normalisation
+//! statistics of its training data, in one safetensors file.
+//!
+//! File layout: the denoiser's tensors under their official MDM names, `normalization.mean`
+//! and `normalization.std` (`[263]`), and header metadata `mdm_config` (JSON of
+//! [`MdmConfig`]) and `vocabulary` (JSON of [`VocabularyEncoder`]).
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::VarBuilder;
+
+use crate::diffusion::noise::gaussian;
+use crate::diffusion::{DdimSampler, Guidance, NoiseSchedule};
+use crate::model::{Mdm, MdmConfig};
+use crate::tensor_file::write_safetensors;
+use crate::representation::{recover_from_ric, MeanStd, NormalizationError};
+use crate::text::vocabulary::VocabularyEncoder;
+use crate::text::TextEncoder;
+
+const MEAN_KEY: &str = "normalization.mean";
+const STD_KEY: &str = "normalization.std";
+
+/// Errors loading or saving a prior.
+#[derive(Debug, thiserror::Error)]
+pub enum PriorError {
+    /// File system error.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A malformed or incomplete prior file.
+    #[error("{path}: {message}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// Bad normalisation statistics.
+    #[error("{path}: {source}")]
+    Normalization {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        source: NormalizationError,
+    },
+}
+
+/// A trained denoiser with everything needed to use it.
+#[derive(Debug, Clone)]
+pub struct Prior {
+    /// The denoiser (frozen weights).
+    pub mdm: Mdm,
+    /// The text encoder it was trained with.
+    pub encoder: VocabularyEncoder,
+    /// Normalisation of its features.
+    pub mean_std: MeanStd,
+}
+
+impl Prior {
+    /// Loads a prior file onto `device`.
+    pub fn load(path: &Path, device: &Device) -> Result<Self, PriorError> {
+        let format = |message: String| PriorError::Format { path: path.into(), message };
+        let bytes = std::fs::read(path).map_err(|source| PriorError::Io { path: path.into(), source })?;
+        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| format(format!("not a safetensors file: {e}")))?;
+        let meta = meta.metadata().clone().unwrap_or_default();
+        let get = |key: &str| meta.get(key).ok_or_else(|| format(format!("no `{key}` in the header metadata")));
+        let cfg: MdmConfig =
+            serde_json::from_str(get("mdm_config")?).map_err(|e| format(format!("bad mdm_config: {e}")))?;
+        let encoder: VocabularyEncoder =
+            serde_json::from_str(get("vocabulary")?).map_err(|e| format(format!("bad vocabulary: {e}")))?;
+        if TextEncoder::dim(&encoder) != cfg.text_dim {
+            return Err(format(format!("vocabulary has {} words, the model expects {}", encoder.words().len(), cfg.text_dim)));
+        }
+        let tensors = candle_core::safetensors::load_buffer(&bytes, device).map_err(|e| format(e.to_string()))?;
+        let stat = |key: &str| -> Result<Vec<f32>, PriorError> {
+            tensors
+                .get(key)
+                .ok_or_else(|| format(format!("missing tensor `{key}`")))?
+                .to_dtype(DType::F32)
+                .and_then(|t| t.to_vec1::<f32>())
+                .map_err(|e| format(format!("tensor `{key}`: {e}")))
+        };
+        let mean_std = MeanStd::from_vecs(stat(MEAN_KEY)?, stat(STD_KEY)?, device)
+            .map_err(|source| PriorError::Normalization { path: path.into(), source })?;
+        let mdm = Mdm::new(cfg, VarBuilder::from_tensors(tensors, DType::F32, device)).map_err(|e| format(e.to_string()))?;
+        Ok(Self { mdm, encoder, mean_std })
+    }
+
+    /// Writes the prior as one safetensors file.
+    pub fn save(&self, path: &Path) -> Result<(), PriorError> {
+        Self::write(path, self.mdm.named_parameters(), self.mdm.config(), &self.encoder, &self.mean_std)
+    }
+
+    /// Writes a prior from named denoiser tensors (e.g. EMA weights during training).
+    pub fn write(
+        path: &Path,
+        params: &[(String, Tensor)],
+        cfg: &MdmConfig,
+        encoder: &VocabularyEncoder,
+        mean_std: &MeanStd,
+    ) -> Result<(), PriorError> {
+        let format = |message: String| PriorError::Format { path: path.into(), message };
+        let mut tensors: Vec<(String, Tensor)> = params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
+        tensors.push((MEAN_KEY.into(), mean_std.mean().clone()));
+        tensors.push((STD_KEY.into(), mean_std.std().clone()));
+        let metadata = HashMap::from([
+            ("mdm_config".to_owned(), serde_json::to_string(cfg).map_err(|e| format(e.to_string()))?),
+            ("vocabulary".to_owned(), serde_json::to_string(encoder).map_err(|e| format(e.to_string()))?),
+        ]);
+        write_safetensors(path, &tensors, metadata).map_err(format)
+    }
+
+    /// Condition vectors of prompts, `[prompts.len(), text_dim]`.
+    pub fn encode_text(&self, prompts: &[&str], device: &Device) -> candle_core::Result<Tensor> {
+        self.encoder.encode(prompts, device)
+    }
+
+    /// Unconstrained samples: `batch` motions of `frames` frames for `prompt`, from seeded start
+    /// noise through DDIM with `steps` steps and classifier-free guidance `guidance`. Returns
+    /// normalised features `[batch, frames, 263]`.
+    pub fn sample(
+        &self,
+        prompt: &str,
+        frames: usize,
+        batch: usize,
+        seed: u64,
+        steps: usize,
+        guidance: Guidance,
+        device: &Device,
+    ) -> Result<Tensor, PriorError> {
+        let fail = |e: String| PriorError::Format { path: PathBuf::from("<sampling>"), message: e };
+        let sampler = DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(|e| fail(e.to_string()))?;
+        let text = self.encode_text(&vec![prompt; batch], device).map_err(|e| fail(e.to_string()))?;
+        let guidance = guidance.for_text(&text).map_err(|e| fail(e.to_string()))?;
+        let x_t = gaussian((batch, frames, crate::representation::FEATURE_DIM), seed, device).map_err(|e| fail(e.to_string()))?;
+        sampler.sample(&self.mdm, &x_t, &text, guidance).map_err(|e| fail(e.to_string()))
+    }
+
+    /// Joint positions `[batch, frames, 22, 3]` of normalised features `[batch, frames, 263]`.
+    pub fn to_joints(&self, normalized: &Tensor) -> candle_core::Result<Tensor> {
+        recover_from_ric(&self.mean_std.denormalize(normalized)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn saves_and_loads_with_metadata_and_names_missing_parts() {
+        let encoder = VocabularyEncoder::from_labels(["a person walks", "a person runs"]);
+        let cfg = MdmConfig { latent_dim: 16, ff_size: 32, num_layers: 1, num_heads: 2, text_dim: encoder.words().len(), ..MdmConfig::small() };
+        let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
+        let mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
+        let prior = Prior { mdm, encoder, mean_std };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("prior.safetensors");
+        prior.save(&path).unwrap();
+        let back = Prior::load(&path, &Device::Cpu).unwrap();
+        assert_eq!(back.encoder, prior.encoder);
+        assert_eq!(back.mdm.config(), prior.mdm.config());
+        assert_eq!(back.mean_std.std().to_vec1::<f32>().unwrap()[5], 2.0);
+
+        std::fs::write(&path, b"not a prior").unwrap();
+        assert!(Prior::load(&path, &Device::Cpu).unwrap_err().to_string().contains("prior.safetensors"));
+        assert!(Prior::load(&dir.path().join("missing.safetensors"), &Device::Cpu).is_err());
+    }
+}

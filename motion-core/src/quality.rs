@@ -1,0 +1,212 @@
+//! The prior quality report: unconstrained samples per label against the training data, on
+//! the motion metrics, plus a memorisation check (nearest training window).
+
+use candle_core::{Device, Tensor};
+use serde::Serialize;
+
+use crate::database::MotionDatabase;
+use crate::diffusion::Guidance;
+use crate::metrics::{bone_length_range, foot_skate_ratio, ground_penetration, max_acceleration};
+use crate::prior::{Prior, PriorError};
+use crate::representation::{recover_from_ric, RIC};
+use crate::skeleton::{Joint, Pose, NUM_JOINTS};
+
+/// Means of the metrics over a set of motions.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct MetricMeans {
+    /// Foot skate ratio.
+    pub foot_skate_ratio: f64,
+    /// Max acceleration, m/frame².
+    pub max_acceleration: f64,
+    /// Largest bone-length range within a motion, m.
+    pub bone_length_range_m: f64,
+    /// Deepest ground penetration, m.
+    pub ground_penetration_m: f64,
+    /// Mean head height, m.
+    pub head_height_m: f64,
+    /// Motions measured.
+    pub count: usize,
+}
+
+impl MetricMeans {
+    /// Means over motions.
+    pub fn of(motions: &[Vec<Pose>]) -> Self {
+        let n = motions.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&[Pose]) -> f64| motions.iter().map(|m| f(m)).sum::<f64>() / n;
+        Self {
+            foot_skate_ratio: mean(&foot_skate_ratio),
+            max_acceleration: mean(&max_acceleration),
+            bone_length_range_m: mean(&bone_length_range),
+            ground_penetration_m: mean(&ground_penetration),
+            head_height_m: mean(&|m: &[Pose]| {
+                m.iter().map(|p| p[Joint::Head.index()].y).sum::<f64>() / m.len().max(1) as f64
+            }),
+            count: motions.len(),
+        }
+    }
+}
+
+/// One label's row of the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct LabelQuality {
+    /// The label (also the prompt).
+    pub label: String,
+    /// Generated samples.
+    pub samples: MetricMeans,
+    /// Training windows of the label (cropped to the same length).
+    pub training: MetricMeans,
+    /// Mean over samples of the RMS joint distance (root-relative, heading-free) to the nearest
+    /// training crop of any label, m. Near 0 would mean copying.
+    pub nearest_training_m: f64,
+    /// The same distance from each training crop to the nearest crop of another sequence, m:
+    /// the spacing of the data itself, for scale.
+    pub training_spacing_m: f64,
+    /// RMS joint distance between the label's samples, m: how different seeds are.
+    pub sample_diversity_m: f64,
+}
+
+/// Settings of the report.
+#[derive(Debug, Clone)]
+pub struct QualityConfig {
+    /// Samples per label (default 32).
+    pub samples_per_label: usize,
+    /// Frames per sample (default 120, 6 s).
+    pub frames: usize,
+    /// DDIM steps (default 50).
+    pub ddim_steps: usize,
+    /// Guidance scale (default 2.5).
+    pub guidance: f64,
+    /// Seed of the first label's noise; label i uses seed + i.
+    pub seed: u64,
+}
+
+impl Default for QualityConfig {
+    fn default() -> Self {
+        Self { samples_per_label: 32, frames: 120, ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0 }
+    }
+}
+
+/// Joint positions of normalised features `[batch, frames, 263]` as per-sample pose lists.
+pub fn joints_of(prior: &Prior, normalized: &Tensor) -> candle_core::Result<Vec<Vec<Pose>>> {
+    let joints = prior.to_joints(normalized)?;
+    tensor_to_poses(&joints)
+}
+
+/// `[batch, frames, 22, 3]` → per-sample pose lists.
+pub fn tensor_to_poses(joints: &Tensor) -> candle_core::Result<Vec<Vec<Pose>>> {
+    let (b, t, _, _) = joints.dims4()?;
+    let flat = joints.reshape((b, t, NUM_JOINTS * 3))?.to_dtype(candle_core::DType::F32)?.to_vec3::<f32>()?;
+    Ok(flat
+        .iter()
+        .map(|m| {
+            m.iter()
+                .map(|row| {
+                    std::array::from_fn(|j| {
+                        glam::DVec3::new(f64::from(row[3 * j]), f64::from(row[3 * j + 1]), f64::from(row[3 * j + 2]))
+                    })
+                })
+                .collect()
+        })
+        .collect())
+}
+
+/// Runs the report over every label of the database; `on_label` is called after each.
+pub fn quality_report(
+    prior: &Prior,
+    db: &MotionDatabase,
+    config: &QualityConfig,
+    device: &Device,
+    mut on_label: impl FnMut(&LabelQuality),
+) -> Result<Vec<LabelQuality>, PriorError> {
+    let fail = |e: candle_core::Error| PriorError::Format { path: "<quality report>".into(), message: e.to_string() };
+    let t = config.frames;
+    // Every training window long enough, cropped to its first `t` frames.
+    let crops: Vec<(usize, String, Tensor)> = db
+        .windows()
+        .iter()
+        .filter(|w| w.frames >= t)
+        .map(|w| Ok((w.sequence, db.label(w).to_owned(), db.window_tensor(w, device)?.narrow(0, 0, t)?)))
+        .collect::<candle_core::Result<_>>()
+        .map_err(fail)?;
+    let train_desc = descriptors(&crops.iter().map(|c| c.2.clone()).collect::<Vec<_>>()).map_err(fail)?;
+    let mut rows = Vec::new();
+    for (i, label) in db.labels().iter().enumerate() {
+        let x = prior.sample(label, t, config.samples_per_label, config.seed + i as u64, config.ddim_steps, Guidance { scale: config.guidance }, device)?;
+        let raw = prior.mean_std.denormalize(&x).map_err(fail)?;
+        let samples = tensor_to_poses(&recover_from_ric(&raw).map_err(fail)?).map_err(fail)?;
+        let sample_desc = descriptors(&raw.chunk(raw.dim(0).map_err(fail)?, 0).map_err(fail)?.iter().map(|s| s.squeeze(0)).collect::<candle_core::Result<Vec<_>>>().map_err(fail)?).map_err(fail)?;
+        let own: Vec<usize> = crops.iter().enumerate().filter(|(_, c)| &c.1 == label).map(|(k, _)| k).collect();
+        let own_crops: Vec<Tensor> = own.iter().map(|k| crops[*k].2.unsqueeze(0)).collect::<candle_core::Result<_>>().map_err(fail)?;
+        let training = if own_crops.is_empty() {
+            MetricMeans::default()
+        } else {
+            let stacked = Tensor::cat(&own_crops, 0).map_err(fail)?;
+            MetricMeans::of(&tensor_to_poses(&recover_from_ric(&stacked).map_err(fail)?).map_err(fail)?)
+        };
+        let nearest = nearest_distances(&sample_desc, &train_desc, |_, _| true).map_err(fail)?;
+        let spacing = if own.is_empty() {
+            f64::NAN
+        } else {
+            let own_desc = train_desc.index_select(&Tensor::from_vec(own.iter().map(|k| *k as u32).collect::<Vec<_>>(), own.len(), device).map_err(fail)?, 0).map_err(fail)?;
+            nearest_distances(&own_desc, &train_desc, |a, b| crops[own[a]].0 != crops[b].0).map_err(fail)?
+        };
+        let diversity = mean_pairwise(&sample_desc).map_err(fail)?;
+        let row = LabelQuality {
+            label: label.clone(),
+            samples: MetricMeans::of(&samples),
+            training,
+            nearest_training_m: nearest,
+            training_spacing_m: spacing,
+            sample_diversity_m: diversity,
+        };
+        on_label(&row);
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// Heading-free pose descriptors `[n, frames·63]`: the root-relative joint positions (ric) of
+/// raw features `[frames, 263]` each.
+fn descriptors(raw: &[Tensor]) -> candle_core::Result<Tensor> {
+    let rows = raw.iter().map(|x| x.narrow(1, RIC.start, RIC.len())?.flatten_all()).collect::<candle_core::Result<Vec<_>>>()?;
+    Tensor::stack(&rows, 0)
+}
+
+/// Mean over rows of `a` of the RMS per-joint distance to the nearest row of `b` allowed by
+/// `allowed(i, j)`.
+fn nearest_distances(a: &Tensor, b: &Tensor, allowed: impl Fn(usize, usize) -> bool) -> candle_core::Result<f64> {
+    let d2 = pairwise_sq(a, b)?.to_vec2::<f32>()?;
+    let joints_frames = (a.dim(1)? / 3) as f64;
+    let mut total = 0.0;
+    let mut n = 0;
+    for (i, row) in d2.iter().enumerate() {
+        let best = row.iter().enumerate().filter(|(j, _)| allowed(i, *j)).map(|(_, d)| f64::from(*d)).fold(f64::INFINITY, f64::min);
+        if best.is_finite() {
+            total += (best.max(0.0) / joints_frames).sqrt();
+            n += 1;
+        }
+    }
+    Ok(if n == 0 { f64::NAN } else { total / n as f64 })
+}
+
+fn mean_pairwise(a: &Tensor) -> candle_core::Result<f64> {
+    let d2 = pairwise_sq(a, a)?.to_vec2::<f32>()?;
+    let joints_frames = (a.dim(1)? / 3) as f64;
+    let n = d2.len();
+    let mut total = 0.0;
+    for (i, row) in d2.iter().enumerate() {
+        for (j, d) in row.iter().enumerate() {
+            if i != j {
+                total += (f64::from(*d).max(0.0) / joints_frames).sqrt();
+            }
+        }
+    }
+    Ok(if n < 2 { 0.0 } else { total / (n * (n - 1)) as f64 })
+}
+
+/// Squared Euclidean distances `[a_rows, b_rows]`.
+fn pairwise_sq(a: &Tensor, b: &Tensor) -> candle_core::Result<Tensor> {
+    let a2 = a.sqr()?.sum_keepdim(1)?;
+    let b2 = b.sqr()?.sum_keepdim(1)?.t()?;
+    a2.broadcast_add(&b2)?.broadcast_sub(&(a.matmul(&b.t()?)? * 2.0)?)
+}

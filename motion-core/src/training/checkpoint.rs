@@ -1,0 +1,69 @@
+//! Resumable training checkpoints: weights, EMA weights, optimiser moments and the step, in one
+//! safetensors file (`model.*`, `ema.*`, `adam_m.*`, `adam_v.*`; metadata `step`, `train_config`,
+//! `mdm_config`).
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use candle_core::Tensor;
+
+use crate::tensor_file::write_safetensors;
+
+use super::{TrainError, Trainer};
+
+/// Summary of a checkpoint, for display.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TrainState {
+    /// Steps done.
+    pub step: usize,
+}
+
+impl Trainer {
+    /// Writes a checkpoint (atomically: a temporary file renamed into place).
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), TrainError> {
+        let err = |message: String| TrainError::Checkpoint { path: path.into(), message };
+        let (m, v) = self.optimizer.moments();
+        let mut tensors: Vec<(String, Tensor)> = Vec::with_capacity(4 * self.vars.len());
+        for (i, (name, var)) in self.vars.iter().enumerate() {
+            tensors.push((format!("model.{name}"), var.as_tensor().clone()));
+            tensors.push((format!("ema.{name}"), self.ema[i].clone()));
+            tensors.push((format!("adam_m.{name}"), m[i].clone()));
+            tensors.push((format!("adam_v.{name}"), v[i].clone()));
+        }
+        let metadata = HashMap::from([
+            ("step".to_owned(), self.step.to_string()),
+            ("train_config".to_owned(), serde_json::to_string(&self.config).map_err(|e| err(e.to_string()))?),
+            ("mdm_config".to_owned(), serde_json::to_string(&self.model_config).map_err(|e| err(e.to_string()))?),
+        ]);
+        let tmp = path.with_extension("tmp");
+        write_safetensors(&tmp, &tensors, metadata).map_err(err)?;
+        std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))
+    }
+
+    /// Restores weights, EMA, optimiser state and step from a checkpoint of the same model.
+    pub fn resume(&mut self, path: &Path) -> Result<TrainState, TrainError> {
+        let err = |message: String| TrainError::Checkpoint { path: path.into(), message };
+        let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
+        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| err(e.to_string()))?;
+        let meta = meta.metadata().clone().unwrap_or_default();
+        let step: usize = meta.get("step").and_then(|s| s.parse().ok()).ok_or_else(|| err("no step in metadata".into()))?;
+        let saved_cfg = meta.get("mdm_config").ok_or_else(|| err("no mdm_config in metadata".into()))?;
+        if serde_json::to_string(&self.model_config).map_err(|e| err(e.to_string()))? != *saved_cfg {
+            return Err(err(format!("model sizes differ: checkpoint {saved_cfg}")));
+        }
+        let tensors = candle_core::safetensors::load_buffer(&bytes, &self.device).map_err(|e| err(e.to_string()))?;
+        let get = |prefix: &str, name: &str| {
+            tensors.get(&format!("{prefix}.{name}")).cloned().ok_or_else(|| err(format!("missing `{prefix}.{name}`")))
+        };
+        let (mut m, mut v) = (Vec::new(), Vec::new());
+        for (i, (name, var)) in self.vars.iter().enumerate() {
+            var.set(&get("model", name)?)?;
+            self.ema[i] = get("ema", name)?;
+            m.push(get("adam_m", name)?);
+            v.push(get("adam_v", name)?);
+        }
+        self.optimizer.restore(m, v, step)?;
+        self.step = step;
+        Ok(TrainState { step })
+    }
+}

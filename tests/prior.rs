@@ -1,0 +1,87 @@
+//! The shipped prior (`fixtures/model/prior.safetensors`): determinism, inversion, and the
+//! quality of unconstrained walks against the training walks.
+
+use candle_core::{Device, Tensor};
+use e2e_tests::fixtures;
+use motion_core::database::catalog::Catalog;
+use motion_core::database::{DatabaseConfig, MotionDatabase};
+use motion_core::diffusion::{DdimSampler, Guidance, NoiseSchedule};
+use motion_core::metrics::foot_skate_ratio;
+use motion_core::prior::Prior;
+use motion_core::quality::{joints_of, tensor_to_poses};
+use motion_core::representation::recover_from_ric;
+use motion_core::skeleton::Joint;
+
+const WALK: &str = "a person walks forward";
+
+fn prior() -> Prior {
+    Prior::load(&fixtures().join("model/prior.safetensors"), &Device::Cpu).unwrap()
+}
+
+fn database() -> MotionDatabase {
+    let (sources, _) = Catalog::read(&fixtures().join("mocap/catalog.json")).unwrap().load().unwrap();
+    let walks: Vec<_> = sources.into_iter().filter(|s| s.label == WALK).collect();
+    MotionDatabase::build(&walks, &DatabaseConfig { speeds: vec![1.0], mirror: false, ..DatabaseConfig::default() }).unwrap()
+}
+
+#[test]
+fn the_same_seed_gives_the_same_motion() {
+    let p = prior();
+    let a = p.sample(WALK, 60, 2, 7, 10, Guidance::default(), &Device::Cpu).unwrap();
+    let b = p.sample(WALK, 60, 2, 7, 10, Guidance::default(), &Device::Cpu).unwrap();
+    let c = p.sample(WALK, 60, 2, 8, 10, Guidance::default(), &Device::Cpu).unwrap();
+    let diff = |x: &Tensor, y: &Tensor| (x - y).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+    assert_eq!(diff(&a, &b), 0.0);
+    assert!(diff(&a, &c) > 0.1);
+}
+
+#[test]
+fn ddim_inversion_then_sampling_reproduces_a_database_window() {
+    let p = prior();
+    let db = database();
+    let window = db.windows()[0];
+    let raw = db.window_tensor(&window, &Device::Cpu).unwrap().narrow(0, 0, 120).unwrap().unsqueeze(0).unwrap();
+    let x0 = p.mean_std.normalize(&raw).unwrap();
+    let text = p.encode_text(&[WALK], &Device::Cpu).unwrap();
+    let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 100).unwrap();
+    let z = sampler.invert(&p.mdm, &x0, &text, Guidance::none()).unwrap();
+    let back = sampler.sample(&p.mdm, &z, &text, Guidance::none()).unwrap();
+    let original = recover_from_ric(&raw).unwrap();
+    let rebuilt = p.to_joints(&back).unwrap();
+    let err = (original - rebuilt).unwrap().sqr().unwrap().sum_keepdim(3).unwrap().sqrt().unwrap().mean_all().unwrap();
+    let err = err.to_scalar::<f32>().unwrap();
+    println!("mean joint error after ddim100 inversion and sampling: {err:.4} m");
+    assert!(err <= 0.05, "mean joint error {err} m");
+}
+
+#[test]
+fn walks_skate_little_stand_tall_and_differ_across_seeds() {
+    let p = prior();
+    let x = p.sample(WALK, 120, 8, 0, 50, Guidance::default(), &Device::Cpu).unwrap();
+    let samples = joints_of(&p, &x).unwrap();
+    let db = database();
+    let crops: Vec<Tensor> = db
+        .windows()
+        .iter()
+        .filter(|w| w.frames >= 120)
+        .map(|w| db.window_tensor(w, &Device::Cpu).unwrap().narrow(0, 0, 120).unwrap())
+        .collect();
+    let data = tensor_to_poses(&recover_from_ric(&Tensor::stack(&crops, 0).unwrap()).unwrap()).unwrap();
+    let mean = |v: &[Vec<motion_core::skeleton::Pose>], f: &dyn Fn(&[motion_core::skeleton::Pose]) -> f64| {
+        v.iter().map(|m| f(m)).sum::<f64>() / v.len() as f64
+    };
+    let skate_gen = mean(&samples, &foot_skate_ratio);
+    let skate_data = mean(&data, &foot_skate_ratio);
+    println!("foot skate ratio: samples {skate_gen:.4}, training walks {skate_data:.4}");
+    assert!(skate_gen <= 1.5 * skate_data.max(0.01), "samples skate {skate_gen}, data {skate_data}");
+    for m in &samples {
+        for pose in m {
+            let h = pose[Joint::Head.index()].y;
+            assert!((1.4..=1.8).contains(&h), "head at {h} m");
+        }
+    }
+    // Different seeds give visibly different motions: pelvis paths differ by decimetres.
+    let end = |m: &Vec<motion_core::skeleton::Pose>| m[m.len() - 1][0];
+    let spread = samples.iter().map(|m| (end(m) - end(&samples[0])).length()).fold(0.0, f64::max);
+    assert!(spread > 0.1, "all samples end within {spread} m of each other");
+}
