@@ -28,6 +28,15 @@ enum Command {
     /// Reports: `prior` compares unconstrained samples with the training data per label.
     #[command(subcommand)]
     Report(ReportCommand),
+    /// Benchmarks: `prior` times the denoiser, sampling and the DNO step.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchCommand {
+    /// Denoiser forward, ddim sampling, unrolled DNO step at batch 1 and 8; peak memory.
+    Prior(commands::bench::BenchArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -51,5 +60,6 @@ fn main() -> anyhow::Result<()> {
         Command::Sample(args) => commands::sample::run(args),
         Command::Report(ReportCommand::Prior(args)) => commands::report::run(args),
         Command::Report(ReportCommand::Loss(args)) => commands::report::run_loss(args),
+        Command::Bench(BenchCommand::Prior(args)) => commands::bench::run(args),
     }
 }

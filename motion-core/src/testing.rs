@@ -4,6 +4,9 @@ use candle_core::{DType, Result, Tensor, Var};
 
 /// Checks the gradient of a scalar function against central finite differences.
 ///
+/// Fails when no gradient reaches `x`, when it is not finite, when it is zero at every checked
+/// coordinate, or when a checked coordinate disagrees.
+///
 /// `x` must be f64. Up to 24 coordinates spread over the tensor are perturbed by `eps`; each
 /// analytic partial derivative must match within `tol · max(1, |numeric|)`. A missing gradient
 /// is an error, never a silent pass (candle returns `None` for ops without a backward).
@@ -45,6 +48,9 @@ pub fn finite_difference_check(
     }
     if grad.iter().any(|g| !g.is_finite()) {
         candle_core::bail!("non-finite gradient");
+    }
+    if max_abs_grad == 0.0 {
+        candle_core::bail!("the gradient is zero at every checked coordinate");
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! One module per subcommand group.
 
+pub mod bench;
 pub mod data;
-pub mod train;
 pub mod report;
 pub mod sample;
+pub mod train;

@@ -1,7 +1,7 @@
 //! PyTorch's `nn.TransformerEncoderLayer(d, heads, ff, dropout, activation="gelu")`, post-LN,
 //! with its parameter names, and the loader helpers that record every parameter by name.
 
-use candle_core::{Result, Shape, Tensor, D};
+use candle_core::{Result, Shape, Tensor};
 use candle_nn::{Init, VarBuilder};
 use rand::RngCore;
 
@@ -92,9 +92,11 @@ impl EncoderLayer {
         })
     }
 
-    /// Primitive-op path, `[batch, tokens, d] → [batch, tokens, d]`; weight gradients flow.
-    /// Dropout as PyTorch in training mode: on the attention probabilities, after attention,
-    /// after the GELU and after the second linear.
+    /// Training path, `[batch, tokens, d] → [batch, tokens, d]`: every op with weights is a
+    /// primitive candle op, so weight gradients flow; softmax and GELU (no weights) are the
+    /// fused [`nn::ops`] kernels, which give the same input gradient at a quarter of the
+    /// memory traffic. Dropout as PyTorch in training mode: on the attention probabilities,
+    /// after attention, after the GELU and after the second linear.
     pub fn forward(&self, h: &Tensor, drop: &mut Dropout) -> Result<Tensor> {
         let a = self.attention(h, drop)?;
         let a = drop.apply(&a)?;

@@ -4,8 +4,9 @@
 //! Layout here is `[batch, frames, 263]` (MDM uses `[batch, 263, 1, frames]`). Two paths:
 //! - [`Denoiser::predict_x0`]: frozen weights, fused custom ops whose backward returns only
 //!   the input gradient (sampling and the DNO loop);
-//! - [`Mdm::forward_train`] / [`Mdm::forward_eval`]: primitive candle ops, so weights held
-//!   as `Var`s get gradients; the former applies dropout as PyTorch's training mode.
+//! - [`Mdm::forward_train`] / [`Mdm::forward_eval`]: primitive candle ops for everything with
+//!   weights, so weights held as `Var`s get gradients; the former applies dropout as
+//!   PyTorch's training mode.
 
 pub mod bench;
 mod config;
