@@ -95,7 +95,8 @@ pub struct LossArgs {
 /// Plots a training loss curve (raw and a 100-step moving average, log scale).
 pub fn run_loss(args: LossArgs) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(&args.csv).with_context(|| format!("reading {}", args.csv.display()))?;
-    let mut raw = Vec::new();
+    // A resumed run appends: the last row of a step wins.
+    let mut by_step = std::collections::BTreeMap::new();
     for (i, line) in text.lines().enumerate().skip(1) {
         let mut f = line.split(',');
         let (Some(step), Some(loss)) = (f.next(), f.next()) else {
@@ -103,8 +104,9 @@ pub fn run_loss(args: LossArgs) -> anyhow::Result<()> {
         };
         let step: f64 = step.parse().with_context(|| format!("{}: line {}: step", args.csv.display(), i + 1))?;
         let loss: f64 = loss.parse().with_context(|| format!("{}: line {}: loss", args.csv.display(), i + 1))?;
-        raw.push((step, loss));
+        by_step.insert(step as u64, loss);
     }
+    let raw: Vec<(f64, f64)> = by_step.into_iter().map(|(s, l)| (s as f64, l)).collect();
     anyhow::ensure!(!raw.is_empty(), "{}: no loss rows", args.csv.display());
     let window = 100usize;
     let smooth: Vec<(f64, f64)> = (0..raw.len())

@@ -38,7 +38,7 @@ impl AdamW {
             *m = ((&*m * BETA1)? + (g * (1.0 - BETA1))?)?;
             *v = ((&*v * BETA2)? + (g.sqr()? * (1.0 - BETA2))?)?;
             let update = ((&*m / bc1)? / ((&*v / bc2)?.sqrt()? + EPS)?)?;
-            let decayed = (var.as_tensor() * (1.0 - lr * self.weight_decay))?;
+            let decayed = (var.as_tensor().detach() * (1.0 - lr * self.weight_decay))?;
             var.set(&(decayed - (update * lr)?)?)?;
         }
         Ok(())

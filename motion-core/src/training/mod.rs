@@ -160,7 +160,7 @@ impl Trainer {
         let varmap = VarMap::new();
         let model = Mdm::init_seeded(model_config.clone(), &varmap, DType::F32, device, config.seed)?;
         let vars = named_vars(&varmap, &model)?;
-        let ema = vars.iter().map(|(_, v)| v.as_tensor().copy()).collect::<candle_core::Result<Vec<_>>>()?;
+        let ema = vars.iter().map(|(_, v)| Ok(v.as_tensor().copy()?.detach())).collect::<candle_core::Result<Vec<_>>>()?;
         let optimizer = AdamW::new(vars.iter().map(|(_, v)| v.clone()).collect(), config.weight_decay)?;
         let sampler = BatchSampler::new(db, &encoder, &config, device)?;
         Ok(Self {
@@ -231,7 +231,9 @@ impl Trainer {
         self.optimizer.step(&grads, lr)?;
         let d = self.config.ema_decay;
         for (ema, (_, var)) in self.ema.iter_mut().zip(&self.vars) {
-            *ema = ((&*ema * d)? + (var.as_tensor() * (1.0 - d))?)?;
+            // Detached: an EMA computed from a Var would otherwise chain every past step's
+            // graph and grow without bound.
+            *ema = ((&*ema * d)? + (var.as_tensor().detach() * (1.0 - d))?)?;
         }
         self.step += 1;
         Ok(StepReport { step: self.step, steps: self.config.steps, loss: loss_value, lr, frames })
@@ -261,6 +263,47 @@ fn named_vars(varmap: &VarMap, model: &Mdm) -> Result<Vec<(String, Var)>, TrainE
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::database::catalog::Catalog;
+    use crate::database::DatabaseConfig;
+
+    fn tiny_run() -> (MotionDatabase, MdmConfig, TrainConfig) {
+        let catalog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/catalog.json");
+        let (sources, _) = Catalog::read(&catalog).unwrap().load().unwrap();
+        let sources: Vec<_> = sources.into_iter().filter(|s| s.name.contains("walk") || s.name.contains("run")).take(2).collect();
+        let db = MotionDatabase::build(&sources, &DatabaseConfig { speeds: vec![1.0], mirror: false, loop_seconds: 3.0, ..DatabaseConfig::default() }).unwrap();
+        let model = MdmConfig { latent_dim: 16, ff_size: 32, num_layers: 1, num_heads: 2, ..MdmConfig::small() };
+        let train = TrainConfig { steps: 4, batch_size: 2, max_frames: 40, warmup_steps: 2, checkpoint_every: 2, ..TrainConfig::default() };
+        (db, model, train)
+    }
+
+    #[test]
+    fn a_resumed_run_matches_an_uninterrupted_one_and_keeps_no_graph() {
+        let (db, model, train) = tiny_run();
+        let dev = Device::Cpu;
+        let mut straight = Trainer::new(&db, model.clone(), train.clone(), &dev).unwrap();
+        straight.run(None, |_| {}).unwrap();
+
+        let dir = tempfile::tempdir().unwrap();
+        let ckpt = dir.path().join("ckpt.safetensors");
+        let mut first = Trainer::new(&db, model.clone(), TrainConfig { steps: 2, ..train.clone() }, &dev).unwrap();
+        first.run(Some(&ckpt), |_| {}).unwrap();
+        let mut resumed = Trainer::new(&db, model, train, &dev).unwrap();
+        assert_eq!(resumed.resume(&ckpt).unwrap().step, 2);
+        let mut losses = Vec::new();
+        resumed.run(None, |r| losses.push(r.loss)).unwrap();
+        assert_eq!(losses.len(), 2);
+        for ((a, b), (ea, eb)) in straight.vars.iter().zip(&resumed.vars).zip(straight.ema.iter().zip(&resumed.ema)) {
+            let d = (a.1.as_tensor() - b.1.as_tensor()).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+            assert!(d < 1e-6, "{}: weights differ by {d}", a.0);
+            let d = (ea - eb).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+            assert!(d < 1e-6, "{}: EMA differs by {d}", a.0);
+            // The EMA must not hold an autograd graph (it would chain every step's graph).
+            assert!(!ea.track_op(), "{}: EMA tensor tracks a graph", a.0);
+        }
+        let prior_path = dir.path().join("prior.safetensors");
+        resumed.save_prior(&prior_path, db.mean_std()).unwrap();
+        assert!(Prior::load(&prior_path, &dev).is_ok());
+    }
 
     #[test]
     fn learning_rate_warms_up_then_decays_to_a_tenth() {
