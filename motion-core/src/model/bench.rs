@@ -196,7 +196,10 @@ mod tests {
             }
             if std::env::var("MDM_BENCH_TRAIN").is_ok() {
                 let train = bench_train_step(&cfg, 32, BENCH_FRAMES, reps)?;
-                println!("{{\"config\": {}, \"train_step_b32_t100_s\": {train}}}", serde_json::to_string(&cfg).expect("json"));
+                println!(
+                    "{{\"config\": {}, \"train_step_b32_t100_s\": {train}}}",
+                    serde_json::to_string(&cfg).expect("json")
+                );
             }
         }
         Ok(())
@@ -210,4 +213,3 @@ mod tests {
         Ok(())
     }
 }
-

@@ -36,9 +36,13 @@ impl MdmConfig {
         }
     }
 
-    /// The CPU-sized prior trained here: the largest size whose DNO step (K=10 denoiser
-    /// passes, 100 frames, batch 1, forward and backward) stays well under 0.15 s on two
-    /// cores (measurements in `model::bench`).
+    /// The CPU-sized prior trained here (d=128, ff=256, 4 layers, 0.70 M parameters).
+    ///
+    /// Measured with `model::bench` on the shared 2-core box (frozen path, K=10, 100 frames,
+    /// forward + backward): 0.05–0.08 s per DNO step at batch 1 and 0.09–0.12 s at batch 2
+    /// (classifier-free guidance); a training step (batch 32 × 100 frames) takes 0.45–0.52 s.
+    /// d=192/ff=384 also meets 0.15 s at batch 1 (0.085–0.12 s) but not with guidance
+    /// (0.16–0.19 s) and trains 1.6× slower; d=256/ff=512 needs 0.15–0.20 s at batch 1.
     pub fn small() -> Self {
         Self { latent_dim: 128, ff_size: 256, num_layers: 4, ..Self::official() }
     }

@@ -240,6 +240,18 @@ impl MatView {
         Self { rows: self.cols, cols: self.rows, strides: [self.strides[0], self.strides[2], self.strides[1]], ..self }
     }
 
+    /// One past the last element the view touches.
+    fn end(&self) -> usize {
+        if self.batch == 0 || self.rows == 0 || self.cols == 0 {
+            return self.offset;
+        }
+        self.offset
+            + (self.batch - 1) * self.strides[0]
+            + (self.rows - 1) * self.strides[1]
+            + (self.cols - 1) * self.strides[2]
+            + 1
+    }
+
     fn layout(&self) -> Layout {
         Layout::new(Shape::from((self.batch, self.rows, self.cols)), self.strides.to_vec(), self.offset)
     }
@@ -251,6 +263,12 @@ impl MatView {
 pub(crate) fn matmul(a: &CpuStorage, av: MatView, b: &CpuStorage, bv: MatView) -> Result<CpuStorage> {
     if av.cols != bv.rows || av.batch != bv.batch {
         bail!("matmul views do not match: {av:?} · {bv:?}");
+    }
+    // candle's gemm call trusts the layouts; never hand it a view past the buffer.
+    let len =
+        |s: &CpuStorage| -> Result<usize> { dispatch_real!(s.dtype(), T => Ok(T::cpu_storage_as_slice(s)?.len())) };
+    if av.end() > len(a)? || bv.end() > len(b)? {
+        bail!("matmul view outside its buffer: {av:?} · {bv:?}");
     }
     a.matmul(b, (av.batch, av.rows, bv.cols, av.cols), &av.layout(), &bv.layout())
 }
