@@ -5,12 +5,14 @@
 
 pub mod database;
 pub mod diffusion;
+pub mod dno;
 pub mod import;
 pub mod metrics;
 pub mod model;
 pub mod motion;
 pub mod nn;
 pub mod prior;
+pub mod program;
 pub mod quality;
 pub mod render;
 pub mod representation;

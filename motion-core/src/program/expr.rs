@@ -1,0 +1,330 @@
+//! Constraint expressions: atomic constraints and ProgMoGen's logical operators (ProgMoGen §3.2–3.3)
+//! plus RG-DNO's counting constraints (RG-DNO supp. D, eqs. 15–16).
+//!
+//! Every expression evaluates to a non-negative error per sample, shape `[B]`, from joints
+//! `[B, T, 22, 3]` (and, for [`Expr::StayNearInitial`], the unoptimised initial motion). A leaf
+//! computes an error per selected frame (and point) and reduces it with its [`Reduce`]. Bounds such
+//! as `target`, `min`, `max`, `threshold` are in the unit of their quantity ([`Quantity::unit`]).
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use super::quantity::{Axes, Condition, FrameRef, FrameSelection, Quantity, Reduce};
+use super::scene::{Body, Primitive};
+use super::serde_util::{tag_first_deserialize, JointName, NonEmpty};
+use crate::skeleton::Joint;
+
+/// A constraint expression; JSON objects tagged by `op`.
+#[derive(Debug, Clone, PartialEq, Serialize, JsonSchema)]
+#[serde(tag = "op", rename_all = "snake_case")]
+pub enum Expr {
+    /// "=": per frame `Σ_c (q_c − target_c)²` (ProgMoGen `equal`/`equal_sum`), or `Σ_c |q_c − target_c|`
+    /// with `metric: absolute` (`equal_L1`).
+    Equal(Equal),
+    /// "<": per frame `Σ_c relu(q_c − max)` (ProgMoGen `less_than`, `max(E − margin, 0)`).
+    LessThan(LessThan),
+    /// ">": per frame `Σ_c relu(min − q_c)` (ProgMoGen `greater_than`, `max(margin − E, 0)`).
+    GreaterThan(GreaterThan),
+    /// AND: the sum of the arguments' errors (ProgMoGen `E1 + E2`).
+    And(Args),
+    /// OR: the minimum of the arguments' errors per sample (ProgMoGen `min(E1, E2)`).
+    Or(Args),
+    /// NOT as a hinge on the complement: `relu(margin − E(arg))`. Zero once the argument's error is
+    /// at least `margin` (the argument is violated by that much). ProgMoGen writes NOT as `−E`,
+    /// which is unbounded below and would swamp the sum; the hinge keeps every error ≥ 0.
+    Not(Not),
+    /// Counting (RG-DNO eqs. 15–16): `(n − target_count)²` with `n` a soft count of extrema.
+    Count(Count),
+    /// Body points against a scene primitive: the primitive's per-point error, reduced over the
+    /// selected frames and the points.
+    Scene(SceneConstraint),
+    /// Bone direction (ProgMoGen `loss_directional`): per frame `‖u − d/‖d‖‖²` with `u` the unit
+    /// vector from the joint's parent to the joint (its norm detached).
+    BoneDirection(BoneDirection),
+    /// Feet planted at given frames: per foot and frame `relu(y − max_height_m)² +
+    /// relu(speed − max_speed_m_per_s)²` (speed term only when given), averaged (RG-DNO
+    /// `loss_foot_both_ends`, `loss_ground_contact`).
+    FootContact(FootContact),
+    /// Limbs kept away from the torso: per pair and frame `relu(min_distance_m − ‖a − b‖)`
+    /// (RG-DNO `loss_self_collision`, ProgMoGen HSI-5's wrist–pelvis term).
+    SelfCollision(SelfCollision),
+    /// The centre of mass projected on the ground lies inside the support region, the convex hull
+    /// (x, z) of the supporting feet's ankle and foot joints shrunk by `margin_m`: per frame
+    /// `relu(signed_distance_outside + margin_m)²` (ProgMoGen §3.2 "centre-of-mass constraint").
+    ComInSupport(ComInSupport),
+    /// Regulariser: per frame `Σ_c (q_c − q_c^initial)²` summed over the quantities, with
+    /// `q^initial` measured on the unoptimised first sample (ProgMoGen's `equal(sample, sample_0)`
+    /// terms, here in joint space rather than feature space).
+    StayNearInitial(StayNearInitial),
+}
+
+tag_first_deserialize!(Expr, "op", {
+    Equal(Equal) = "equal",
+    LessThan(LessThan) = "less_than",
+    GreaterThan(GreaterThan) = "greater_than",
+    And(Args) = "and",
+    Or(Args) = "or",
+    Not(Not) = "not",
+    Count(Count) = "count",
+    Scene(SceneConstraint) = "scene",
+    BoneDirection(BoneDirection) = "bone_direction",
+    FootContact(FootContact) = "foot_contact",
+    SelfCollision(SelfCollision) = "self_collision",
+    ComInSupport(ComInSupport) = "com_in_support",
+    StayNearInitial(StayNearInitial) = "stay_near_initial",
+});
+
+/// Distance used by [`Expr::Equal`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Metric {
+    /// Squared error.
+    #[default]
+    Squared,
+    /// Absolute error.
+    Absolute,
+}
+
+/// Fields of [`Expr::Equal`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Equal {
+    /// The measured quantity.
+    pub quantity: Quantity,
+    /// Target, one value per component of the quantity, in its unit.
+    #[schemars(length(min = 1, max = 3), inner(range(min = -1000.0, max = 1000.0)))]
+    pub target: Vec<f64>,
+    /// Squared (default) or absolute error.
+    #[serde(default)]
+    pub metric: Metric,
+    /// Frames the constraint applies to (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+    /// Further keep only frames meeting this condition.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub when: Option<Condition>,
+    /// Reduction over frames (default: mean).
+    #[serde(default)]
+    pub reduce: Reduce,
+}
+
+/// Fields of [`Expr::LessThan`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LessThan {
+    /// The measured quantity.
+    pub quantity: Quantity,
+    /// Upper bound for every component, in the quantity's unit.
+    #[schemars(range(min = -1000.0, max = 1000.0))]
+    pub max: f64,
+    /// Frames the constraint applies to (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+    /// Further keep only frames meeting this condition.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub when: Option<Condition>,
+    /// Reduction over frames (default: mean).
+    #[serde(default)]
+    pub reduce: Reduce,
+}
+
+/// Fields of [`Expr::GreaterThan`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GreaterThan {
+    /// The measured quantity.
+    pub quantity: Quantity,
+    /// Lower bound for every component, in the quantity's unit.
+    #[schemars(range(min = -1000.0, max = 1000.0))]
+    pub min: f64,
+    /// Frames the constraint applies to (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+    /// Further keep only frames meeting this condition.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub when: Option<Condition>,
+    /// Reduction over frames (default: mean).
+    #[serde(default)]
+    pub reduce: Reduce,
+}
+
+/// Arguments of [`Expr::And`] and [`Expr::Or`] (at least one).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Args {
+    /// The combined expressions.
+    pub args: NonEmpty<Expr>,
+}
+
+/// Fields of [`Expr::Not`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Not {
+    /// The negated expression.
+    pub arg: Box<Expr>,
+    /// Error of `arg` at which NOT is satisfied (> 0, in `arg`'s error units).
+    #[schemars(range(min = 0.0, max = 1000.0))]
+    pub margin: f64,
+}
+
+/// Which extrema [`Expr::Count`] counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Extremum {
+    /// Local maxima above `threshold` (eq. 15: steps as foot-speed peaks):
+    /// `Σ_t σ(T(s[t]−s[t+1]))·σ(T(s[t]−s[t−1]))·σ(T(s[t]−θ))`.
+    Peaks,
+    /// Local minima below `threshold` (eq. 16: claps and touches as distance minima):
+    /// `Σ_t σ(T(s[t+1]−s[t]))·σ(T(s[t−1]−s[t]))·σ(T(θ−s[t]))`.
+    Valleys,
+}
+
+/// Fields of [`Expr::Count`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Count {
+    /// Scalar signals whose counts are added (e.g. the speeds of both feet for steps).
+    pub signals: NonEmpty<Quantity>,
+    /// Peaks or valleys.
+    pub extremum: Extremum,
+    /// θ, in the signals' unit.
+    #[schemars(range(min = -1000.0, max = 1000.0))]
+    pub threshold: f64,
+    /// Required number of extrema.
+    #[schemars(range(max = 10000))]
+    pub target_count: u32,
+    /// Sigmoid scale T, per unit of the signal (RG-DNO uses 10000).
+    #[serde(default = "default_sharpness")]
+    #[schemars(range(min = 0.0, max = 1000000.0))]
+    pub sharpness: f64,
+    /// Width (frames, odd) of the box filter applied to each signal first; 1: none.
+    #[serde(default = "default_smoothing")]
+    #[schemars(range(min = 1, max = 101))]
+    pub smoothing_frames: u32,
+    /// Frames searched (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+}
+
+fn default_sharpness() -> f64 {
+    10_000.0
+}
+
+fn default_smoothing() -> u32 {
+    1
+}
+
+/// Fields of [`Expr::Scene`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SceneConstraint {
+    /// Tested body points.
+    pub body: Body,
+    /// The obstacle or region.
+    pub primitive: Primitive,
+    /// Frames the constraint applies to (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+    /// Reduction over frames and points (default: mean).
+    #[serde(default)]
+    pub reduce: Reduce,
+}
+
+/// Fields of [`Expr::BoneDirection`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BoneDirection {
+    /// The bone from this joint's parent to it (not the pelvis).
+    #[schemars(with = "JointName")]
+    pub joint: Joint,
+    /// Wanted direction (any non-zero length).
+    pub direction: [f64; 3],
+    /// Frames the constraint applies to (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+    /// Reduction over frames (default: mean).
+    #[serde(default)]
+    pub reduce: Reduce,
+}
+
+/// Fields of [`Expr::FootContact`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FootContact {
+    /// Foot joints (`left_ankle`, `right_ankle`, `left_foot`, `right_foot`).
+    #[schemars(with = "NonEmpty<JointName>")]
+    pub feet: NonEmpty<Joint>,
+    /// Frames of contact (of the clip; a speed at the last frame uses the backward difference).
+    pub at: NonEmpty<FrameRef>,
+    /// Height below which a foot counts as on the ground (m).
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub max_height_m: f64,
+    /// Speed below which a foot counts as still (m/s); absent: no speed term.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub max_speed_m_per_s: Option<f64>,
+}
+
+/// Fields of [`Expr::SelfCollision`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SelfCollision {
+    /// Moving joints kept away (e.g. elbows and wrists).
+    #[schemars(with = "NonEmpty<JointName>")]
+    pub limbs: NonEmpty<Joint>,
+    /// Joints they must avoid (e.g. pelvis and spine); disjoint from `limbs`.
+    #[schemars(with = "NonEmpty<JointName>")]
+    pub torso: NonEmpty<Joint>,
+    /// Minimum distance between every limb–torso pair (m).
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub min_distance_m: f64,
+    /// Coordinates the distance is measured over (`xz`: horizontal).
+    pub axes: Axes,
+    /// Frames the constraint applies to (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+    /// Reduction over frames and pairs (default: mean).
+    #[serde(default)]
+    pub reduce: Reduce,
+}
+
+/// Supporting feet of [`Expr::ComInSupport`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Support {
+    /// Both feet: the hull of both ankles and both foot joints.
+    BothFeet,
+    /// Standing on the left foot.
+    LeftFoot,
+    /// Standing on the right foot.
+    RightFoot,
+}
+
+/// Fields of [`Expr::ComInSupport`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ComInSupport {
+    /// Which feet carry the body.
+    pub support: Support,
+    /// Distance the projected centre of mass keeps inside the region's edge (m).
+    #[serde(default)]
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub margin_m: f64,
+    /// Frames the constraint applies to (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+    /// Reduction over frames (default: mean).
+    #[serde(default)]
+    pub reduce: Reduce,
+}
+
+/// Fields of [`Expr::StayNearInitial`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct StayNearInitial {
+    /// Quantities kept close to their values on the initial sample.
+    pub quantities: NonEmpty<Quantity>,
+    /// Frames the constraint applies to (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+}
