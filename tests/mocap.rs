@@ -37,7 +37,11 @@ fn deepmimic_walk_has_human_height_speed_and_alternating_steps() {
     let e = extract_features(&poses).unwrap();
     let c = &e.canonical;
     let head: Vec<f64> = c.iter().map(|p| p[Joint::Head.index()].y).collect();
-    assert!(head.iter().all(|h| (1.45..=1.75).contains(h)), "head {:?}", head.iter().fold((9.0f64, 0.0f64), |a, h| (a.0.min(*h), a.1.max(*h))));
+    assert!(
+        head.iter().all(|h| (1.45..=1.75).contains(h)),
+        "head {:?}",
+        head.iter().fold((9.0f64, 0.0f64), |a, h| (a.0.min(*h), a.1.max(*h)))
+    );
     let seconds = (c.len() - 1) as f64 / FPS;
     let pelvis = |p: &Pose| glam::DVec2::new(p[0].x, p[0].z);
     let speed = (pelvis(&c[c.len() - 1]) - pelvis(&c[0])).length() / seconds;
@@ -86,4 +90,3 @@ fn looping_a_cycle_has_no_jumps() {
         assert!(jump < 0.01, "{name}: {jump} m jump at the loop seam");
     }
 }
-

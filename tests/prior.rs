@@ -21,7 +21,8 @@ fn prior() -> Prior {
 fn database() -> MotionDatabase {
     let (sources, _) = Catalog::read(&fixtures().join("mocap/catalog.json")).unwrap().load().unwrap();
     let walks: Vec<_> = sources.into_iter().filter(|s| s.label == WALK).collect();
-    MotionDatabase::build(&walks, &DatabaseConfig { speeds: vec![1.0], mirror: false, ..DatabaseConfig::default() }).unwrap()
+    MotionDatabase::build(&walks, &DatabaseConfig { speeds: vec![1.0], mirror: false, ..DatabaseConfig::default() })
+        .unwrap()
 }
 
 #[test]
@@ -50,7 +51,18 @@ fn inversion_round_trip() -> (f32, f32) {
     let original = recover_from_ric(&raw).unwrap();
     let rebuilt = p.to_joints(&back).unwrap();
     let mean_dist = |a: &Tensor, b: &Tensor| {
-        (a - b).unwrap().sqr().unwrap().sum_keepdim(3).unwrap().sqrt().unwrap().mean_all().unwrap().to_scalar::<f32>().unwrap()
+        (a - b)
+            .unwrap()
+            .sqr()
+            .unwrap()
+            .sum_keepdim(3)
+            .unwrap()
+            .sqrt()
+            .unwrap()
+            .mean_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap()
     };
     let rel = |j: &Tensor| j.broadcast_sub(&j.narrow(2, 0, 1).unwrap()).unwrap();
     let global = mean_dist(&original, &rebuilt);

@@ -16,7 +16,9 @@ fn unrolled_ddim10_gradient_to_the_noise_matches_finite_differences() {
     let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 10).unwrap();
     let text = Tensor::new(&[[0.0f64, 1.0, 0.0, 0.0]], &dev).unwrap();
     let stats = MeanStd::from_vecs(vec![0.0; 263], vec![0.1; 263], &dev).unwrap();
-    let z = (motion_core::diffusion::noise::gaussian((1, 6, 263), 5, &dev).unwrap().to_dtype(DType::F64).unwrap() * 1.0).unwrap();
+    let z = (motion_core::diffusion::noise::gaussian((1, 6, 263), 5, &dev).unwrap().to_dtype(DType::F64).unwrap()
+        * 1.0)
+        .unwrap();
     // Loss: mean height of the recovered right wrist, through CFG (scale 2.5).
     let loss = |z: &Tensor| {
         let x = sampler.sample_unrolled(&mdm, z, &text, Guidance::default())?;

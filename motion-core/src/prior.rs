@@ -14,8 +14,8 @@ use candle_nn::VarBuilder;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{DdimSampler, Guidance, NoiseSchedule};
 use crate::model::{Mdm, MdmConfig};
-use crate::tensor_file::write_safetensors;
 use crate::representation::{recover_from_ric, MeanStd, NormalizationError};
+use crate::tensor_file::write_safetensors;
 use crate::text::vocabulary::VocabularyEncoder;
 use crate::text::TextEncoder;
 
@@ -67,7 +67,8 @@ impl Prior {
     pub fn load(path: &Path, device: &Device) -> Result<Self, PriorError> {
         let format = |message: String| PriorError::Format { path: path.into(), message };
         let bytes = std::fs::read(path).map_err(|source| PriorError::Io { path: path.into(), source })?;
-        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| format(format!("not a safetensors file: {e}")))?;
+        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
+            .map_err(|e| format(format!("not a safetensors file: {e}")))?;
         let meta = meta.metadata().clone().unwrap_or_default();
         let get = |key: &str| meta.get(key).ok_or_else(|| format(format!("no `{key}` in the header metadata")));
         let cfg: MdmConfig =
@@ -75,7 +76,11 @@ impl Prior {
         let encoder: VocabularyEncoder =
             serde_json::from_str(get("vocabulary")?).map_err(|e| format(format!("bad vocabulary: {e}")))?;
         if TextEncoder::dim(&encoder) != cfg.text_dim {
-            return Err(format(format!("vocabulary has {} words, the model expects {}", encoder.words().len(), cfg.text_dim)));
+            return Err(format(format!(
+                "vocabulary has {} words, the model expects {}",
+                encoder.words().len(),
+                cfg.text_dim
+            )));
         }
         let tensors = candle_core::safetensors::load_buffer(&bytes, device).map_err(|e| format(e.to_string()))?;
         let stat = |key: &str| -> Result<Vec<f32>, PriorError> {
@@ -88,7 +93,8 @@ impl Prior {
         };
         let mean_std = MeanStd::from_vecs(stat(MEAN_KEY)?, stat(STD_KEY)?, device)
             .map_err(|source| PriorError::Normalization { path: path.into(), source })?;
-        let mdm = Mdm::new(cfg, VarBuilder::from_tensors(tensors, DType::F32, device)).map_err(|e| format(e.to_string()))?;
+        let mdm =
+            Mdm::new(cfg, VarBuilder::from_tensors(tensors, DType::F32, device)).map_err(|e| format(e.to_string()))?;
         Ok(Self { mdm, encoder, mean_std })
     }
 
@@ -138,7 +144,8 @@ impl Prior {
         let sampler = DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(|e| fail(e.to_string()))?;
         let text = self.encode_text(&vec![prompt; batch], device).map_err(|e| fail(e.to_string()))?;
         let guidance = guidance.for_text(&text).map_err(|e| fail(e.to_string()))?;
-        let x_t = gaussian((batch, frames, crate::representation::FEATURE_DIM), seed, device).map_err(|e| fail(e.to_string()))?;
+        let x_t = gaussian((batch, frames, crate::representation::FEATURE_DIM), seed, device)
+            .map_err(|e| fail(e.to_string()))?;
         sampler.sample(&self.mdm, &x_t, &text, guidance).map_err(|e| fail(e.to_string()))
     }
 
@@ -155,7 +162,14 @@ mod tests {
     #[test]
     fn saves_and_loads_with_metadata_and_names_missing_parts() {
         let encoder = VocabularyEncoder::from_labels(["a person walks", "a person runs"]);
-        let cfg = MdmConfig { latent_dim: 16, ff_size: 32, num_layers: 1, num_heads: 2, text_dim: encoder.words().len(), ..MdmConfig::small() };
+        let cfg = MdmConfig {
+            latent_dim: 16,
+            ff_size: 32,
+            num_layers: 1,
+            num_heads: 2,
+            text_dim: encoder.words().len(),
+            ..MdmConfig::small()
+        };
         let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
         let mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
         let prior = Prior { mdm, encoder, mean_std };

@@ -131,12 +131,29 @@ pub fn quality_report(
     let train_desc = descriptors(&crops.iter().map(|c| c.2.clone()).collect::<Vec<_>>()).map_err(fail)?;
     let mut rows = Vec::new();
     for (i, label) in db.labels().iter().enumerate() {
-        let x = prior.sample(label, t, config.samples_per_label, config.seed + i as u64, config.ddim_steps, Guidance { scale: config.guidance }, device)?;
+        let x = prior.sample(
+            label,
+            t,
+            config.samples_per_label,
+            config.seed + i as u64,
+            config.ddim_steps,
+            Guidance { scale: config.guidance },
+            device,
+        )?;
         let raw = prior.mean_std.denormalize(&x).map_err(fail)?;
         let samples = tensor_to_poses(&recover_from_ric(&raw).map_err(fail)?).map_err(fail)?;
-        let sample_desc = descriptors(&raw.chunk(raw.dim(0).map_err(fail)?, 0).map_err(fail)?.iter().map(|s| s.squeeze(0)).collect::<candle_core::Result<Vec<_>>>().map_err(fail)?).map_err(fail)?;
+        let sample_desc = descriptors(
+            &raw.chunk(raw.dim(0).map_err(fail)?, 0)
+                .map_err(fail)?
+                .iter()
+                .map(|s| s.squeeze(0))
+                .collect::<candle_core::Result<Vec<_>>>()
+                .map_err(fail)?,
+        )
+        .map_err(fail)?;
         let own: Vec<usize> = crops.iter().enumerate().filter(|(_, c)| &c.1 == label).map(|(k, _)| k).collect();
-        let own_crops: Vec<Tensor> = own.iter().map(|k| crops[*k].2.unsqueeze(0)).collect::<candle_core::Result<_>>().map_err(fail)?;
+        let own_crops: Vec<Tensor> =
+            own.iter().map(|k| crops[*k].2.unsqueeze(0)).collect::<candle_core::Result<_>>().map_err(fail)?;
         let training = if own_crops.is_empty() {
             MetricMeans::default()
         } else {
@@ -147,7 +164,13 @@ pub fn quality_report(
         let spacing = if own.is_empty() {
             f64::NAN
         } else {
-            let own_desc = train_desc.index_select(&Tensor::from_vec(own.iter().map(|k| *k as u32).collect::<Vec<_>>(), own.len(), device).map_err(fail)?, 0).map_err(fail)?;
+            let own_desc = train_desc
+                .index_select(
+                    &Tensor::from_vec(own.iter().map(|k| *k as u32).collect::<Vec<_>>(), own.len(), device)
+                        .map_err(fail)?,
+                    0,
+                )
+                .map_err(fail)?;
             nearest_distances(&own_desc, &train_desc, |a, b| crops[own[a]].0 != crops[b].0).map_err(fail)?
         };
         let diversity = mean_pairwise(&sample_desc).map_err(fail)?;
@@ -168,7 +191,10 @@ pub fn quality_report(
 /// Heading-free pose descriptors `[n, frames·63]`: the root-relative joint positions (ric) of
 /// raw features `[frames, 263]` each.
 fn descriptors(raw: &[Tensor]) -> candle_core::Result<Tensor> {
-    let rows = raw.iter().map(|x| x.narrow(1, RIC.start, RIC.len())?.flatten_all()).collect::<candle_core::Result<Vec<_>>>()?;
+    let rows = raw
+        .iter()
+        .map(|x| x.narrow(1, RIC.start, RIC.len())?.flatten_all())
+        .collect::<candle_core::Result<Vec<_>>>()?;
     Tensor::stack(&rows, 0)
 }
 
@@ -180,7 +206,12 @@ fn nearest_distances(a: &Tensor, b: &Tensor, allowed: impl Fn(usize, usize) -> b
     let mut total = 0.0;
     let mut n = 0;
     for (i, row) in d2.iter().enumerate() {
-        let best = row.iter().enumerate().filter(|(j, _)| allowed(i, *j)).map(|(_, d)| f64::from(*d)).fold(f64::INFINITY, f64::min);
+        let best = row
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| allowed(i, *j))
+            .map(|(_, d)| f64::from(*d))
+            .fold(f64::INFINITY, f64::min);
         if best.is_finite() {
             total += (best.max(0.0) / joints_frames).sqrt();
             n += 1;

@@ -180,10 +180,7 @@ impl FromStr for Joint {
     type Err = UnknownJoint;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Joint::ALL
-            .into_iter()
-            .find(|j| j.name() == s)
-            .ok_or_else(|| UnknownJoint { name: s.to_owned() })
+        Joint::ALL.into_iter().find(|j| j.name() == s).ok_or_else(|| UnknownJoint { name: s.to_owned() })
     }
 }
 

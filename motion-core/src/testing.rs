@@ -10,12 +10,7 @@ use candle_core::{DType, Result, Tensor, Var};
 /// `x` must be f64. Up to 24 coordinates spread over the tensor are perturbed by `eps`; each
 /// analytic partial derivative must match within `tol · max(1, |numeric|)`. A missing gradient
 /// is an error, never a silent pass (candle returns `None` for ops without a backward).
-pub fn finite_difference_check(
-    x: &Tensor,
-    f: impl Fn(&Tensor) -> Result<Tensor>,
-    eps: f64,
-    tol: f64,
-) -> Result<()> {
+pub fn finite_difference_check(x: &Tensor, f: impl Fn(&Tensor) -> Result<Tensor>, eps: f64, tol: f64) -> Result<()> {
     if x.dtype() != DType::F64 {
         candle_core::bail!("finite_difference_check needs an f64 input, got {:?}", x.dtype());
     }

@@ -41,7 +41,13 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
     let db = MotionDatabase::load(&args.database)
         .with_context(|| format!("reading {} (build it with `mogen data build`)", args.database.display()))?;
-    let config = QualityConfig { samples_per_label: args.samples, frames: args.frames, ddim_steps: args.steps, seed: args.seed, ..QualityConfig::default() };
+    let config = QualityConfig {
+        samples_per_label: args.samples,
+        frames: args.frames,
+        ddim_steps: args.steps,
+        seed: args.seed,
+        ..QualityConfig::default()
+    };
     let header = "| label | skate gen / data | max acc gen / data (m/frame²) | bone range gen (m) | penetration gen / data (m) | head y gen / data (m) | nearest train (m) | data spacing (m) | diversity (m) |";
     let mut lines = vec![header.to_owned(), "|---|---|---|---|---|---|---|---|---|".to_owned()];
     println!("{header}");
@@ -68,12 +74,29 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
     std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
     std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&rows)?)?;
-    let strip_labels = ["a person walks forward", "a person runs forward", "a person crawls forward on the ground", "a person jumps forward", "a person does a cartwheel to the left"];
+    let strip_labels = [
+        "a person walks forward",
+        "a person runs forward",
+        "a person crawls forward on the ground",
+        "a person jumps forward",
+        "a person does a cartwheel to the left",
+    ];
     let mut motions = Vec::new();
     for (i, label) in strip_labels.iter().enumerate() {
         for seed in 0..2u64 {
-            let x = prior.sample(label, args.frames, 1, 1000 + 10 * i as u64 + seed, args.steps, Default::default(), &device)?;
-            motions.push((format!("{label} (seed {})", 1000 + 10 * i as u64 + seed), motion_core::quality::joints_of(&prior, &x)?.remove(0)));
+            let x = prior.sample(
+                label,
+                args.frames,
+                1,
+                1000 + 10 * i as u64 + seed,
+                args.steps,
+                Default::default(),
+                &device,
+            )?;
+            motions.push((
+                format!("{label} (seed {})", 1000 + 10 * i as u64 + seed),
+                motion_core::quality::joints_of(&prior, &x)?.remove(0),
+            ));
         }
     }
     let strip: Vec<StripRow<'_>> = motions.iter().map(|(l, p)| StripRow { label: l.clone(), poses: p }).collect();

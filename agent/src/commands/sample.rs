@@ -44,14 +44,23 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.samples >= 1, "--samples must be at least 1");
     anyhow::ensure!(args.guidance.is_finite(), "--guidance must be a finite number");
     let device = candle_core::Device::Cpu;
-    let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading the prior {}", args.prior.display()))?;
+    let prior =
+        Prior::load(&args.prior, &device).with_context(|| format!("loading the prior {}", args.prior.display()))?;
     let heard = prior.encoder.known_words(&args.prompt);
     if heard.is_empty() {
         eprintln!("note: the prior knows none of the words of {:?}; sampling unconditionally", args.prompt);
     } else {
         eprintln!("the prior hears: {}", heard.join(" "));
     }
-    let x = prior.sample(&args.prompt, args.frames, args.samples, args.seed, args.steps, Guidance { scale: args.guidance }, &device)?;
+    let x = prior.sample(
+        &args.prompt,
+        args.frames,
+        args.samples,
+        args.seed,
+        args.steps,
+        Guidance { scale: args.guidance },
+        &device,
+    )?;
     let raw = prior.mean_std.denormalize(&x)?;
     let joints = prior.to_joints(&x)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;

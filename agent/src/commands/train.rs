@@ -94,7 +94,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let mut csv = match &args.loss_csv {
         Some(p) => {
             let exists = p.exists();
-            let mut f = std::fs::OpenOptions::new().create(true).append(true).open(p)
+            let mut f = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(p)
                 .with_context(|| format!("opening {}", p.display()))?;
             if !exists {
                 use std::io::Write;
@@ -113,7 +116,13 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         bar.set_message(format!("loss {s:.4} lr {:.1e} T={}", r.lr, r.frames));
         if !bar.is_hidden() || r.step % 100 == 0 {
             if bar.is_hidden() {
-                eprintln!("step {}/{} loss {s:.4} lr {:.1e} ({:.0} s)", r.step, r.steps, r.lr, start.elapsed().as_secs_f64());
+                eprintln!(
+                    "step {}/{} loss {s:.4} lr {:.1e} ({:.0} s)",
+                    r.step,
+                    r.steps,
+                    r.lr,
+                    start.elapsed().as_secs_f64()
+                );
             }
         }
         if let Some(f) = csv.as_mut() {

@@ -163,7 +163,11 @@ impl MotionDatabase {
                         continue;
                     }
                     let sequence = sequences.len();
-                    windows.extend(window_starts(frames, config).map(|(start, len)| Window { sequence, start, frames: len }));
+                    windows.extend(window_starts(frames, config).map(|(start, len)| Window {
+                        sequence,
+                        start,
+                        frames: len,
+                    }));
                     sequences.push(Sequence {
                         source: source.name.clone(),
                         label: if mirrored { mirror_label(&source.label) } else { source.label.clone() },
@@ -278,7 +282,8 @@ impl MotionDatabase {
     pub fn load(path: &Path) -> Result<Self, DatabaseError> {
         let format = |message: String| DatabaseError::Format { path: path.into(), message };
         let bytes = std::fs::read(path).map_err(|source| DatabaseError::Io { path: path.into(), source })?;
-        let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| format(format!("not a safetensors file: {e}")))?;
+        let st = safetensors::SafeTensors::deserialize(&bytes)
+            .map_err(|e| format(format!("not a safetensors file: {e}")))?;
         let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| format(e.to_string()))?;
         let json = meta
             .metadata()
@@ -292,7 +297,11 @@ impl MotionDatabase {
         let read = |name: &str, shape: &[usize]| -> Result<Vec<f32>, DatabaseError> {
             let t = st.tensor(name).map_err(|e| format(format!("tensor `{name}`: {e}")))?;
             if t.dtype() != safetensors::Dtype::F32 || t.shape() != shape {
-                return Err(format(format!("tensor `{name}` is {:?} {:?}, expected F32 {shape:?}", t.dtype(), t.shape())));
+                return Err(format(format!(
+                    "tensor `{name}` is {:?} {:?}, expected F32 {shape:?}",
+                    t.dtype(),
+                    t.shape()
+                )));
             }
             Ok(t.data().chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
         };

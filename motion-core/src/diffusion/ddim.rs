@@ -19,17 +19,11 @@ use super::{Denoiser, DiffusionError};
 /// stride `s` in `1..T` with `len(range(0, T, s)) == steps` (`respace.py::space_timesteps`).
 ///
 /// ddim10 → {0, 100, …, 900}; ddim50 → {0, 20, …, 980}; ddim100 → {0, 10, …, 990}. Ascending.
-pub fn respaced_timesteps(
-    num_timesteps: usize,
-    steps: usize,
-) -> std::result::Result<Vec<usize>, DiffusionError> {
+pub fn respaced_timesteps(num_timesteps: usize, steps: usize) -> std::result::Result<Vec<usize>, DiffusionError> {
     (1..num_timesteps)
         .find(|&stride| num_timesteps.div_ceil(stride) == steps)
         .map(|stride| (0..num_timesteps).step_by(stride).collect())
-        .ok_or(DiffusionError::NoStride {
-            timesteps: num_timesteps,
-            steps,
-        })
+        .ok_or(DiffusionError::NoStride { timesteps: num_timesteps, steps })
 }
 
 /// What one sampling step produced, for progress displays.
@@ -59,19 +53,10 @@ pub struct DdimSampler {
 
 impl DdimSampler {
     /// The "ddim`steps`" sampler of `schedule` (see [`respaced_timesteps`]).
-    pub fn new(
-        schedule: &NoiseSchedule,
-        steps: usize,
-    ) -> std::result::Result<Self, DiffusionError> {
+    pub fn new(schedule: &NoiseSchedule, steps: usize) -> std::result::Result<Self, DiffusionError> {
         let timesteps = respaced_timesteps(schedule.num_timesteps(), steps)?;
-        let alphas_cumprod = timesteps
-            .iter()
-            .map(|&t| schedule.alphas_cumprod()[t])
-            .collect();
-        Ok(Self {
-            timesteps,
-            alphas_cumprod,
-        })
+        let alphas_cumprod = timesteps.iter().map(|&t| schedule.alphas_cumprod()[t]).collect();
+        Ok(Self { timesteps, alphas_cumprod })
     }
 
     /// Number of DDIM steps K (= denoiser evaluations per sample, without guidance).
@@ -176,28 +161,12 @@ impl DdimSampler {
         let detach = |t: Tensor| if keep_graph { t } else { t.detach() };
         let mut x = detach(x_t.clone());
         let steps = self.steps();
-        for (k, (&t, &abar)) in self
-            .timesteps
-            .iter()
-            .zip(&self.alphas_cumprod)
-            .enumerate()
-            .rev()
-        {
+        for (k, (&t, &abar)) in self.timesteps.iter().zip(&self.alphas_cumprod).enumerate().rev() {
             // ᾱ_{−1} := 1, so the last step returns the model's x̂0 at t = 0.
-            let abar_prev = k
-                .checked_sub(1)
-                .and_then(|j| self.alphas_cumprod.get(j))
-                .copied()
-                .unwrap_or(1.0);
-            let x0_hat =
-                detach(guidance.predict_x0(denoiser, &x, &timestep_tensor(t, &x)?, text)?);
+            let abar_prev = k.checked_sub(1).and_then(|j| self.alphas_cumprod.get(j)).copied().unwrap_or(1.0);
+            let x0_hat = detach(guidance.predict_x0(denoiser, &x, &timestep_tensor(t, &x)?, text)?);
             x = detach(ddim_update(&x, &x0_hat, abar, abar_prev)?);
-            on_step(&DdimProgress {
-                step: steps - k,
-                steps,
-                timestep: t,
-                x0_hat: &x0_hat,
-            });
+            on_step(&DdimProgress { step: steps - k, steps, timestep: t, x0_hat: &x0_hat });
         }
         Ok(x)
     }
@@ -219,8 +188,7 @@ fn ddim_update(x: &Tensor, x0_hat: &Tensor, abar_from: f64, abar_to: f64) -> Res
 
 /// `[batch]` u32 tensor filled with timestep `t`, on `x`'s device.
 fn timestep_tensor(t: usize, x: &Tensor) -> Result<Tensor> {
-    let t = u32::try_from(t)
-        .map_err(|_| candle_core::Error::Msg(format!("timestep {t} overflows u32")))?;
+    let t = u32::try_from(t).map_err(|_| candle_core::Error::Msg(format!("timestep {t} overflows u32")))?;
     Tensor::full(t, x.dim(0)?, x.device())
 }
 
@@ -238,9 +206,7 @@ mod tests {
     use candle_core::Var;
 
     use super::*;
-    use crate::diffusion::test_denoiser::{
-        max_abs_diff, start_noise, text, GaussianDenoiser, TEXT_DIM,
-    };
+    use crate::diffusion::test_denoiser::{max_abs_diff, start_noise, text, GaussianDenoiser, TEXT_DIM};
     use crate::testing::finite_difference_check;
 
     #[test]
@@ -252,13 +218,7 @@ mod tests {
         assert_eq!(respaced_timesteps(1000, 1000)?, every(1, 1000));
         assert_eq!(respaced_timesteps(1000, 30)?, every(34, 30));
         for bad in [0, 1, 400, 1001] {
-            assert_eq!(
-                respaced_timesteps(1000, bad),
-                Err(DiffusionError::NoStride {
-                    timesteps: 1000,
-                    steps: bad
-                })
-            );
+            assert_eq!(respaced_timesteps(1000, bad), Err(DiffusionError::NoStride { timesteps: 1000, steps: bad }));
         }
         let s = NoiseSchedule::mdm();
         let ddim10 = DdimSampler::new(&s, 10)?;
@@ -283,12 +243,7 @@ mod tests {
             let x_prev = a0.sqrt() * x0 + (1.0 - a0).sqrt() * eps;
             d.x0_hat(x_prev, 0)
         };
-        let expected: Vec<f64> = x_t
-            .flatten_all()?
-            .to_vec1::<f64>()?
-            .into_iter()
-            .map(hand)
-            .collect();
+        let expected: Vec<f64> = x_t.flatten_all()?.to_vec1::<f64>()?.into_iter().map(hand).collect();
         let got = out.flatten_all()?.to_vec1::<f64>()?;
         for (g, e) in got.iter().zip(&expected) {
             assert!((g - e).abs() < 1e-12, "{g} vs {e}");
@@ -304,32 +259,21 @@ mod tests {
         let no_text = text(&[[0.0; TEXT_DIM]; 2])?;
         let x_t = start_noise(2, 9)?;
         for (steps, tol) in [(100, 3e-2), (1000, 3e-3)] {
-            let sampler =
-                DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(candle_core::Error::wrap)?;
+            let sampler = DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(candle_core::Error::wrap)?;
             let start = sampler.timesteps()[steps - 1];
             let out = sampler.sample(&d, &x_t, &no_text, Guidance::none())?;
             let exact = x_t.flatten_all()?.to_vec1::<f64>()?;
-            let exact = exact
-                .iter()
-                .map(|&x| d.x0_hat(d.exact_flow(x, start, 0), 0));
+            let exact = exact.iter().map(|&x| d.x0_hat(d.exact_flow(x, start, 0), 0));
             let got = out.flatten_all()?.to_vec1::<f64>()?;
-            let err = got
-                .iter()
-                .zip(exact)
-                .map(|(g, e)| (g - e).abs())
-                .fold(0.0, f64::max);
-            assert!(
-                err < tol,
-                "ddim{steps}: max deviation from the exact flow {err}"
-            );
+            let err = got.iter().zip(exact).map(|(g, e)| (g - e).abs()).fold(0.0, f64::max);
+            assert!(err < tol, "ddim{steps}: max deviation from the exact flow {err}");
         }
         Ok(())
     }
 
     #[test]
     fn unrolled_and_detached_sampling_agree() -> Result<()> {
-        let sampler =
-            DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
+        let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
         let d = GaussianDenoiser::new(0.2, 0.5, 0.3);
         let cond = text(&[[0.5, -0.2, 1.0], [0.1, 0.0, 0.4]])?;
         let z = Var::from_tensor(&start_noise(2, 1)?)?;
@@ -344,8 +288,7 @@ mod tests {
 
     #[test]
     fn unrolled_gradient_matches_finite_differences() -> Result<()> {
-        let sampler =
-            DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
+        let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
         let d = GaussianDenoiser::new(0.2, 0.5, 0.3);
         let cond = text(&[[0.5, -0.2, 1.0], [0.1, 0.0, 0.4]])?;
         let target = start_noise(2, 2)?;
@@ -378,18 +321,14 @@ mod tests {
         let x0 = ((start_noise(2, 4)? * 0.7)? + 0.4)?;
         let mut previous = f64::INFINITY;
         for (steps, tol) in [(10, 0.7), (100, 8e-2), (1000, 8e-3)] {
-            let sampler =
-                DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(candle_core::Error::wrap)?;
+            let sampler = DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(candle_core::Error::wrap)?;
             d.calls.borrow_mut().clear();
             let z = sampler.invert(&d, &x0, &no_text, Guidance::default())?;
             assert_eq!(d.calls.borrow().len(), steps - 1);
             let back = sampler.sample(&d, &z, &no_text, Guidance::default())?;
             let err = max_abs_diff(&back, &x0)?;
             assert!(err < tol, "ddim{steps}: round-trip error {err}");
-            assert!(
-                err < previous / 5.0,
-                "ddim{steps}: error {err} did not fall with more steps"
-            );
+            assert!(err < previous / 5.0, "ddim{steps}: error {err} did not fall with more steps");
             previous = err;
         }
         Ok(())
@@ -400,30 +339,21 @@ mod tests {
         let d = GaussianDenoiser::new(0.4, 0.7, 0.0);
         let x0 = ((start_noise(1, 6)? * 0.7)? + 0.4)?;
         for (steps, tol) in [(100, 4e-2), (1000, 4e-3)] {
-            let sampler =
-                DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(candle_core::Error::wrap)?;
+            let sampler = DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(candle_core::Error::wrap)?;
             let end = sampler.timesteps()[steps - 1];
             let z = sampler.invert(&d, &x0, &text(&[[0.0; TEXT_DIM]])?, Guidance::none())?;
             let exact = x0.flatten_all()?.to_vec1::<f64>()?;
             let exact = exact.iter().map(|&x| d.exact_flow(x, 0, end));
             let got = z.flatten_all()?.to_vec1::<f64>()?;
-            let err = got
-                .iter()
-                .zip(exact)
-                .map(|(g, e)| (g - e).abs())
-                .fold(0.0, f64::max);
-            assert!(
-                err < tol,
-                "ddim{steps}: max deviation from the exact flow {err}"
-            );
+            let err = got.iter().zip(exact).map(|(g, e)| (g - e).abs()).fold(0.0, f64::max);
+            assert!(err < tol, "ddim{steps}: max deviation from the exact flow {err}");
         }
         Ok(())
     }
 
     #[test]
     fn sampling_skips_the_unconditional_half_when_it_cannot_matter() -> Result<()> {
-        let sampler =
-            DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
+        let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
         let d = GaussianDenoiser::new(0.2, 0.5, 0.3);
         let x = start_noise(2, 3)?;
         let cond = text(&[[0.5, -0.2, 1.0], [0.1, 0.0, 0.4]])?;
@@ -437,18 +367,14 @@ mod tests {
             sampler.sample(&d, &x, &txt, guidance)?;
             let calls = d.calls.borrow();
             assert_eq!(calls.len(), 10, "one denoiser call per step");
-            assert!(
-                calls.iter().all(|c| c.rows == rows),
-                "{guidance:?}: {calls:?}"
-            );
+            assert!(calls.iter().all(|c| c.rows == rows), "{guidance:?}: {calls:?}");
         }
         Ok(())
     }
 
     #[test]
     fn same_seed_same_sample_and_progress_reports_every_step() -> Result<()> {
-        let sampler =
-            DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
+        let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
         let d = GaussianDenoiser::new(0.2, 0.5, 0.3);
         let cond = text(&[[0.5, -0.2, 1.0]])?;
         let run = |seed| sampler.sample(&d, &start_noise(1, seed)?, &cond, Guidance::default());
@@ -456,44 +382,25 @@ mod tests {
         assert!(max_abs_diff(&run(21)?, &run(22)?)? > 1e-3);
 
         let mut seen = Vec::new();
-        let last = sampler.sample_with_progress(
-            &d,
-            &start_noise(1, 21)?,
-            &cond,
-            Guidance::default(),
-            |p| {
-                seen.push((p.step, p.steps, p.timestep, p.x0_hat.clone()));
-            },
-        )?;
+        let last = sampler.sample_with_progress(&d, &start_noise(1, 21)?, &cond, Guidance::default(), |p| {
+            seen.push((p.step, p.steps, p.timestep, p.x0_hat.clone()));
+        })?;
         let timesteps: Vec<usize> = seen.iter().map(|s| s.2).collect();
-        assert_eq!(
-            timesteps,
-            (0..10).rev().map(|i| i * 100).collect::<Vec<_>>()
-        );
-        assert!(seen
-            .iter()
-            .enumerate()
-            .all(|(i, s)| s.0 == i + 1 && s.1 == 10));
+        assert_eq!(timesteps, (0..10).rev().map(|i| i * 100).collect::<Vec<_>>());
+        assert!(seen.iter().enumerate().all(|(i, s)| s.0 == i + 1 && s.1 == 10));
         // The final step returns exactly the x̂0 predicted at t = 0.
-        let (_, _, _, final_x0) = seen
-            .last()
-            .ok_or_else(|| candle_core::Error::Msg("no steps".into()))?;
+        let (_, _, _, final_x0) = seen.last().ok_or_else(|| candle_core::Error::Msg("no steps".into()))?;
         assert_eq!(max_abs_diff(final_x0, &last)?, 0.0);
         Ok(())
     }
 
     #[test]
     fn mismatched_text_rows_are_rejected() -> Result<()> {
-        let sampler =
-            DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
+        let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 10).map_err(candle_core::Error::wrap)?;
         let d = GaussianDenoiser::new(0.0, 1.0, 0.0);
         let x = start_noise(2, 1)?;
-        assert!(sampler
-            .sample(&d, &x, &text(&[[1.0; TEXT_DIM]])?, Guidance::default())
-            .is_err());
-        assert!(sampler
-            .invert(&d, &x, &text(&[[1.0; TEXT_DIM]])?, Guidance::default())
-            .is_err());
+        assert!(sampler.sample(&d, &x, &text(&[[1.0; TEXT_DIM]])?, Guidance::default()).is_err());
+        assert!(sampler.invert(&d, &x, &text(&[[1.0; TEXT_DIM]])?, Guidance::default()).is_err());
         Ok(())
     }
 }

@@ -16,9 +16,7 @@ pub struct Guidance {
 impl Default for Guidance {
     /// MDM's, DNO's and ProgMoGen's scale, 2.5.
     fn default() -> Self {
-        Self {
-            scale: Self::MDM_SCALE,
-        }
+        Self { scale: Self::MDM_SCALE }
     }
 }
 
@@ -44,12 +42,7 @@ impl Guidance {
         if !self.is_active() {
             return Ok(self);
         }
-        let magnitude = text
-            .detach()
-            .abs()?
-            .sum_all()?
-            .to_dtype(DType::F64)?
-            .to_scalar::<f64>()?;
+        let magnitude = text.detach().abs()?.sum_all()?.to_dtype(DType::F64)?.to_scalar::<f64>()?;
         Ok(if magnitude == 0.0 { Self::none() } else { self })
     }
 
@@ -82,9 +75,7 @@ impl Guidance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diffusion::test_denoiser::{
-        max_abs_diff, start_noise, text, Call, GaussianDenoiser,
-    };
+    use crate::diffusion::test_denoiser::{max_abs_diff, start_noise, text, Call, GaussianDenoiser};
     use candle_core::Device;
 
     #[test]
@@ -96,13 +87,7 @@ mod tests {
         let zeros = cond.zeros_like()?;
 
         let guided = Guidance { scale: 2.5 }.predict_x0(&d, &x, &t, &cond)?;
-        assert_eq!(
-            *d.calls.borrow(),
-            vec![Call {
-                rows: 4,
-                zero_text_rows: vec![false, false, true, true]
-            }]
-        );
+        assert_eq!(*d.calls.borrow(), vec![Call { rows: 4, zero_text_rows: vec![false, false, true, true] }]);
         let c = d.predict_x0(&x, &t, &cond)?;
         let u = d.predict_x0(&x, &t, &zeros)?;
         let expected = (&u + ((&c - &u)? * 2.5)?)?;
@@ -110,13 +95,7 @@ mod tests {
 
         d.calls.borrow_mut().clear();
         let plain = Guidance::none().predict_x0(&d, &x, &t, &cond)?;
-        assert_eq!(
-            *d.calls.borrow(),
-            vec![Call {
-                rows: 2,
-                zero_text_rows: vec![false, false]
-            }]
-        );
+        assert_eq!(*d.calls.borrow(), vec![Call { rows: 2, zero_text_rows: vec![false, false] }]);
         assert_eq!(max_abs_diff(&plain, &c)?, 0.0);
         Ok(())
     }

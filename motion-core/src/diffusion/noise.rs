@@ -21,15 +21,9 @@ pub fn gaussian(shape: impl Into<Shape>, seed: u64, device: &Device) -> Result<T
 ///
 /// Use this form to draw several tensors from one seeded stream (for example the noise of
 /// each training step).
-pub fn gaussian_from_rng<R: Rng + ?Sized>(
-    shape: impl Into<Shape>,
-    rng: &mut R,
-    device: &Device,
-) -> Result<Tensor> {
+pub fn gaussian_from_rng<R: Rng + ?Sized>(shape: impl Into<Shape>, rng: &mut R, device: &Device) -> Result<Tensor> {
     let shape = shape.into();
-    let values: Vec<f32> = (0..shape.elem_count())
-        .map(|_| rng.sample(StandardNormal))
-        .collect();
+    let values: Vec<f32> = (0..shape.elem_count()).map(|_| rng.sample(StandardNormal)).collect();
     Tensor::from_vec(values, shape, device)
 }
 
@@ -40,15 +34,9 @@ mod tests {
     #[test]
     fn same_seed_gives_the_same_tensor() -> Result<()> {
         let dev = Device::Cpu;
-        let a = gaussian((2, 5, 263), 7, &dev)?
-            .flatten_all()?
-            .to_vec1::<f32>()?;
-        let b = gaussian((2, 5, 263), 7, &dev)?
-            .flatten_all()?
-            .to_vec1::<f32>()?;
-        let c = gaussian((2, 5, 263), 8, &dev)?
-            .flatten_all()?
-            .to_vec1::<f32>()?;
+        let a = gaussian((2, 5, 263), 7, &dev)?.flatten_all()?.to_vec1::<f32>()?;
+        let b = gaussian((2, 5, 263), 7, &dev)?.flatten_all()?.to_vec1::<f32>()?;
+        let c = gaussian((2, 5, 263), 8, &dev)?.flatten_all()?.to_vec1::<f32>()?;
         assert_eq!(a, b);
         assert_ne!(a, c);
         Ok(())
@@ -71,11 +59,7 @@ mod tests {
         let v = gaussian(20_000, 11, &Device::Cpu)?.to_vec1::<f32>()?;
         let n = v.len() as f64;
         let mean = v.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
-        let var = v
-            .iter()
-            .map(|&x| (f64::from(x) - mean).powi(2))
-            .sum::<f64>()
-            / n;
+        let var = v.iter().map(|&x| (f64::from(x) - mean).powi(2)).sum::<f64>() / n;
         assert!(mean.abs() < 0.03, "mean {mean}");
         assert!((var - 1.0).abs() < 0.05, "variance {var}");
         Ok(())

@@ -41,11 +41,8 @@ impl NoiseSchedule {
     }
 
     fn cosine_unchecked(num_timesteps: usize) -> Self {
-        let alpha_bar = |s: f64| {
-            ((s + COSINE_OFFSET) / (1.0 + COSINE_OFFSET) * std::f64::consts::FRAC_PI_2)
-                .cos()
-                .powi(2)
-        };
+        let alpha_bar =
+            |s: f64| ((s + COSINE_OFFSET) / (1.0 + COSINE_OFFSET) * std::f64::consts::FRAC_PI_2).cos().powi(2);
         let n = num_timesteps as f64;
         let betas: Vec<f64> = (0..num_timesteps)
             .map(|i| {
@@ -60,10 +57,7 @@ impl NoiseSchedule {
                 Some(*acc)
             })
             .collect();
-        Self {
-            betas,
-            alphas_cumprod,
-        }
+        Self { betas, alphas_cumprod }
     }
 
     /// Number of timesteps T; valid timesteps are `0..T`.
@@ -90,11 +84,7 @@ impl NoiseSchedule {
     /// Returns x_t with the shape and dtype of `x0`; differentiable in `x0` and `noise`.
     pub fn q_sample(&self, x0: &Tensor, timesteps: &Tensor, noise: &Tensor) -> Result<Tensor> {
         if noise.shape() != x0.shape() {
-            candle_core::bail!(
-                "q_sample: noise shape {:?} differs from x0 shape {:?}",
-                noise.shape(),
-                x0.shape()
-            );
+            candle_core::bail!("q_sample: noise shape {:?} differs from x0 shape {:?}", noise.shape(), x0.shape());
         }
         let signal = self.per_sample(timesteps, x0, f64::sqrt)?;
         let sigma = self.per_sample(timesteps, x0, |abar| (1.0 - abar).sqrt())?;
@@ -103,12 +93,7 @@ impl NoiseSchedule {
 
     /// `batch` training timesteps drawn uniformly from `0..T` (MDM's `UniformSampler`), as a
     /// `[batch]` u32 tensor.
-    pub fn sample_timesteps<R: Rng + ?Sized>(
-        &self,
-        batch: usize,
-        rng: &mut R,
-        device: &Device,
-    ) -> Result<Tensor> {
+    pub fn sample_timesteps<R: Rng + ?Sized>(&self, batch: usize, rng: &mut R, device: &Device) -> Result<Tensor> {
         let max = u32::try_from(self.num_timesteps())
             .map_err(|_| candle_core::Error::Msg("schedule too long for u32 timesteps".into()))?;
         let values: Vec<u32> = (0..batch).map(|_| rng.random_range(0..max)).collect();
@@ -116,12 +101,7 @@ impl NoiseSchedule {
     }
 
     /// `f(ᾱ_t)` per sample as a `[batch, 1, …, 1]` tensor that broadcasts against `like`.
-    fn per_sample(
-        &self,
-        timesteps: &Tensor,
-        like: &Tensor,
-        f: impl Fn(f64) -> f64,
-    ) -> Result<Tensor> {
+    fn per_sample(&self, timesteps: &Tensor, like: &Tensor, f: impl Fn(f64) -> f64) -> Result<Tensor> {
         let ts = timesteps.to_dtype(DType::U32)?.to_vec1::<u32>()?;
         let batch = like.dim(0)?;
         if ts.len() != batch {
@@ -131,10 +111,7 @@ impl NoiseSchedule {
             .iter()
             .map(|&t| match self.alphas_cumprod.get(t as usize) {
                 Some(&abar) => Ok(f(abar)),
-                None => candle_core::bail!(
-                    "timestep {t} outside the schedule's 0..{}",
-                    self.num_timesteps()
-                ),
+                None => candle_core::bail!("timestep {t} outside the schedule's 0..{}", self.num_timesteps()),
             })
             .collect::<Result<Vec<f64>>>()?;
         let mut shape = vec![1; like.rank()];
@@ -151,10 +128,7 @@ mod tests {
 
     /// Asserts `|actual − expected| ≤ tol`.
     fn assert_near(what: &str, actual: f64, expected: f64, tol: f64) {
-        assert!(
-            (actual - expected).abs() <= tol,
-            "{what}: {actual} is not within {tol} of {expected}"
-        );
+        assert!((actual - expected).abs() <= tol, "{what}: {actual} is not within {tol} of {expected}");
     }
 
     #[test]
@@ -208,14 +182,10 @@ mod tests {
         let dev = Device::Cpu;
         let s = NoiseSchedule::mdm();
         let x0 = Tensor::zeros((2, 3, 4), DType::F32, &dev)?;
-        assert!(s
-            .q_sample(&x0, &Tensor::new(&[0u32, 1000], &dev)?, &x0)
-            .is_err());
+        assert!(s.q_sample(&x0, &Tensor::new(&[0u32, 1000], &dev)?, &x0).is_err());
         assert!(s.q_sample(&x0, &Tensor::new(&[0u32], &dev)?, &x0).is_err());
         let other = Tensor::zeros((2, 3, 5), DType::F32, &dev)?;
-        assert!(s
-            .q_sample(&x0, &Tensor::new(&[0u32, 1], &dev)?, &other)
-            .is_err());
+        assert!(s.q_sample(&x0, &Tensor::new(&[0u32, 1], &dev)?, &other).is_err());
         Ok(())
     }
 
@@ -223,10 +193,7 @@ mod tests {
     fn training_timesteps_are_seeded_and_in_range() -> Result<()> {
         let dev = Device::Cpu;
         let s = NoiseSchedule::mdm();
-        let draw = |seed| {
-            s.sample_timesteps(64, &mut StdRng::seed_from_u64(seed), &dev)?
-                .to_vec1::<u32>()
-        };
+        let draw = |seed| s.sample_timesteps(64, &mut StdRng::seed_from_u64(seed), &dev)?.to_vec1::<u32>();
         let (a, b, c) = (draw(1)?, draw(1)?, draw(2)?);
         assert_eq!(a, b);
         assert_ne!(a, c);

@@ -66,10 +66,7 @@ impl Denoiser for GaussianDenoiser {
         let text_rows = text.to_dtype(DType::F64)?.to_vec2::<f64>()?;
         self.calls.borrow_mut().push(Call {
             rows: x_t.dim(0)?,
-            zero_text_rows: text_rows
-                .iter()
-                .map(|r| r.iter().all(|&v| v == 0.0))
-                .collect(),
+            zero_text_rows: text_rows.iter().map(|r| r.iter().all(|&v| v == 0.0)).collect(),
         });
         let ts = timesteps.to_vec1::<u32>()?;
         let gains: Vec<f64> = ts.iter().map(|&t| self.gain(t as usize)).collect();

@@ -66,28 +66,28 @@ const FOOT_BALL: [f64; 3] = [0.11, -0.045, 0.0];
 /// the DeepMimic neck joint; placing spine3 on that joint keeps all 21 bone lengths exact (the
 /// proposed mapping stretched spine3→neck by up to 5 mm when the head bends).
 const SMPL22_FROM_DM: [(usize, [f64; 3]); NUM_JOINTS] = [
-    (0, [0.0, 0.0, 0.0]),     // pelvis
-    (9, [0.0, 0.0, 0.0]),     // left_hip
-    (3, [0.0, 0.0, 0.0]),     // right_hip
-    (0, [0.0, 0.118, 0.0]),   // spine1: half-way root → chest
-    (10, [0.0, 0.0, 0.0]),    // left_knee
-    (4, [0.0, 0.0, 0.0]),     // right_knee
-    (1, [0.0, 0.0, 0.0]),     // spine2: the chest joint
-    (11, [0.0, 0.0, 0.0]),    // left_ankle
-    (5, [0.0, 0.0, 0.0]),     // right_ankle
-    (2, [0.0, 0.0, 0.0]),     // spine3: the DeepMimic neck joint (see below)
-    (11, FOOT_BALL),          // left_foot
-    (5, FOOT_BALL),           // right_foot
-    (2, [0.0, 0.06, 0.0]),    // neck
+    (0, [0.0, 0.0, 0.0]),      // pelvis
+    (9, [0.0, 0.0, 0.0]),      // left_hip
+    (3, [0.0, 0.0, 0.0]),      // right_hip
+    (0, [0.0, 0.118, 0.0]),    // spine1: half-way root → chest
+    (10, [0.0, 0.0, 0.0]),     // left_knee
+    (4, [0.0, 0.0, 0.0]),      // right_knee
+    (1, [0.0, 0.0, 0.0]),      // spine2: the chest joint
+    (11, [0.0, 0.0, 0.0]),     // left_ankle
+    (5, [0.0, 0.0, 0.0]),      // right_ankle
+    (2, [0.0, 0.0, 0.0]),      // spine3: the DeepMimic neck joint (see below)
+    (11, FOOT_BALL),           // left_foot
+    (5, FOOT_BALL),            // right_foot
+    (2, [0.0, 0.06, 0.0]),     // neck
     (1, [-0.02, 0.20, -0.07]), // left_collar
-    (1, [-0.02, 0.20, 0.07]), // right_collar
-    (2, [0.0, 0.16, 0.0]),    // head
-    (12, [0.0, 0.0, 0.0]),    // left_shoulder
-    (6, [0.0, 0.0, 0.0]),     // right_shoulder
-    (13, [0.0, 0.0, 0.0]),    // left_elbow
-    (7, [0.0, 0.0, 0.0]),     // right_elbow
-    (14, [0.0, 0.0, 0.0]),    // left_wrist
-    (8, [0.0, 0.0, 0.0]),     // right_wrist
+    (1, [-0.02, 0.20, 0.07]),  // right_collar
+    (2, [0.0, 0.16, 0.0]),     // head
+    (12, [0.0, 0.0, 0.0]),     // left_shoulder
+    (6, [0.0, 0.0, 0.0]),      // right_shoulder
+    (13, [0.0, 0.0, 0.0]),     // left_elbow
+    (7, [0.0, 0.0, 0.0]),      // right_elbow
+    (14, [0.0, 0.0, 0.0]),     // left_wrist
+    (8, [0.0, 0.0, 0.0]),      // right_wrist
 ];
 
 /// Quaternions whose norm is further than this from 1 are reported when normalised.
@@ -151,7 +151,9 @@ impl DeepMimicClip {
         let cyclic = match json.get("Loop").and_then(|v| v.as_str()) {
             Some("wrap") => true,
             Some("none") | None => false,
-            Some(other) => return Err(invalid("\"Loop\"".into(), format!("expected \"wrap\" or \"none\", found {other:?}"))),
+            Some(other) => {
+                return Err(invalid("\"Loop\"".into(), format!("expected \"wrap\" or \"none\", found {other:?}")))
+            }
         };
         let rows = json
             .get("Frames")
@@ -162,11 +164,13 @@ impl DeepMimicClip {
         }
         let mut frames = Vec::with_capacity(rows.len());
         for (f, row) in rows.iter().enumerate() {
-            let values = row
-                .as_array()
-                .ok_or_else(|| invalid(format!("frame {f}"), "is not an array of numbers".into()))?;
+            let values =
+                row.as_array().ok_or_else(|| invalid(format!("frame {f}"), "is not an array of numbers".into()))?;
             if values.len() != FRAME_WIDTH {
-                return Err(invalid(format!("frame {f}"), format!("expected {FRAME_WIDTH} values, found {}", values.len())));
+                return Err(invalid(
+                    format!("frame {f}"),
+                    format!("expected {FRAME_WIDTH} values, found {}", values.len()),
+                ));
             }
             let mut frame = [0f64; FRAME_WIDTH];
             for (i, v) in values.iter().enumerate() {
@@ -373,7 +377,8 @@ fn summarize_norms(off: &[(usize, usize, f64)], path: &Path) -> Vec<ImportWarnin
         .filter_map(|j| {
             let hits: Vec<_> = off.iter().filter(|(jj, _, _)| *jj == j).collect();
             let (first, last) = (hits.first()?, hits.last()?);
-            let worst = hits.iter().map(|h| h.2).fold(1.0, |a: f64, n| if (n - 1.0).abs() > (a - 1.0).abs() { n } else { a });
+            let worst =
+                hits.iter().map(|h| h.2).fold(1.0, |a: f64, n| if (n - 1.0).abs() > (a - 1.0).abs() { n } else { a });
             Some(ImportWarning {
                 path: path.into(),
                 message: format!(
@@ -487,6 +492,9 @@ mod tests {
         let (clip, warnings) = DeepMimicClip::from_frames("x", &rows, false, Path::new("x.txt")).unwrap();
         assert_eq!(warnings.len(), 1);
         assert!(warnings[0].message.contains("right_hip") && warnings[0].message.contains("0.600"));
-        assert!(bone_lengths(&clip.pose_at(0.05)).iter().zip(bone_lengths(&rest_pose())).all(|(a, b)| (a - b).abs() < 1e-9));
+        assert!(bone_lengths(&clip.pose_at(0.05))
+            .iter()
+            .zip(bone_lengths(&rest_pose()))
+            .all(|(a, b)| (a - b).abs() < 1e-9));
     }
 }

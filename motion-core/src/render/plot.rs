@@ -19,9 +19,17 @@ pub struct Series<'a> {
 }
 
 /// Draws series on shared axes to a PNG; `log_y` plots log10(y) (non-positive values skipped).
-pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series<'_>], log_y: bool, path: &Path) -> Result<(), RenderError> {
+pub fn line_plot(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series<'_>],
+    log_y: bool,
+    path: &Path,
+) -> Result<(), RenderError> {
     let ty = |y: f64| if log_y { (y > 0.0).then(|| y.log10()) } else { Some(y) };
-    let pts: Vec<(f64, f64)> = series.iter().flat_map(|s| s.points.iter().filter_map(|(x, y)| ty(*y).map(|y| (*x, y)))).collect();
+    let pts: Vec<(f64, f64)> =
+        series.iter().flat_map(|s| s.points.iter().filter_map(|(x, y)| ty(*y).map(|y| (*x, y)))).collect();
     if pts.is_empty() {
         return Err(RenderError::Empty("no points".into()));
     }
@@ -32,7 +40,10 @@ pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series<'_>
     let mut pixmap = Pixmap::new(w as u32, h as u32).ok_or_else(|| RenderError::Empty("size".into()))?;
     pixmap.fill(Color::WHITE);
     let px = |x: f64, y: f64| {
-        (left + ((x - x0) / (x1 - x0)) as f32 * (w - left - right), h - bottom - ((y - y0) / (y1 - y0)) as f32 * (h - top - bottom))
+        (
+            left + ((x - x0) / (x1 - x0)) as f32 * (w - left - right),
+            h - bottom - ((y - y0) / (y1 - y0)) as f32 * (h - top - bottom),
+        )
     };
     let grey = Color::from_rgba8(120, 120, 120, 255);
     line(&mut pixmap, (left, h - bottom), (w - right, h - bottom), Color::BLACK, 1.0);
@@ -49,7 +60,14 @@ pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series<'_>
         draw_text(&mut pixmap, &yl, 4.0, sy - 3.0, 1.0, grey);
     }
     draw_text(&mut pixmap, title, left, 12.0, 2.0, Color::BLACK);
-    draw_text(&mut pixmap, x_label, w / 2.0 - x_label.len() as f32 * char_width(1.5) / 2.0, h - 22.0, 1.5, Color::BLACK);
+    draw_text(
+        &mut pixmap,
+        x_label,
+        w / 2.0 - x_label.len() as f32 * char_width(1.5) / 2.0,
+        h - 22.0,
+        1.5,
+        Color::BLACK,
+    );
     draw_text(&mut pixmap, y_label, 4.0, top - 14.0, 1.0, Color::BLACK);
     for (i, s) in series.iter().enumerate() {
         let color = Color::from_rgba8(s.rgb.0, s.rgb.1, s.rgb.2, 255);

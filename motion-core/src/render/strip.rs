@@ -29,8 +29,7 @@ pub fn motion_strip(rows: &[StripRow<'_>], panels: usize, path: &Path) -> Result
         return Err(RenderError::Empty("no motion to draw".into()));
     }
     let (w, h) = (PANEL_PX * panels as f32, (PANEL_PX + LABEL_PX) * rows.len() as f32);
-    let mut pixmap =
-        Pixmap::new(w as u32, h as u32).ok_or_else(|| RenderError::Empty(format!("{w}x{h} pixels")))?;
+    let mut pixmap = Pixmap::new(w as u32, h as u32).ok_or_else(|| RenderError::Empty(format!("{w}x{h} pixels")))?;
     pixmap.fill(Color::WHITE);
     let scale = PANEL_PX / PANEL_M;
     for (r, row) in rows.iter().enumerate() {
@@ -41,8 +40,21 @@ pub fn motion_strip(rows: &[StripRow<'_>], panels: usize, path: &Path) -> Result
             let pose = &row.poses[t];
             let (cx, ground) = (p as f32 * PANEL_PX + PANEL_PX / 2.0, top + LABEL_PX + PANEL_PX - 10.0);
             let to_px = |v: glam::DVec3| (cx + (v.z - pose[0].z) as f32 * scale, ground - v.y as f32 * scale);
-            line(&mut pixmap, (p as f32 * PANEL_PX + 5.0, ground), ((p + 1) as f32 * PANEL_PX - 5.0, ground), Color::from_rgba8(170, 170, 170, 255), 1.0);
-            draw_text(&mut pixmap, &format!("{:.1}S", t as f64 / crate::skeleton::FPS), p as f32 * PANEL_PX + 4.0, ground + 2.0, 1.0, Color::from_rgba8(120, 120, 120, 255));
+            line(
+                &mut pixmap,
+                (p as f32 * PANEL_PX + 5.0, ground),
+                ((p + 1) as f32 * PANEL_PX - 5.0, ground),
+                Color::from_rgba8(170, 170, 170, 255),
+                1.0,
+            );
+            draw_text(
+                &mut pixmap,
+                &format!("{:.1}S", t as f64 / crate::skeleton::FPS),
+                p as f32 * PANEL_PX + 4.0,
+                ground + 2.0,
+                1.0,
+                Color::from_rgba8(120, 120, 120, 255),
+            );
             for (parent, child) in bones() {
                 let color = match child.name() {
                     n if n.starts_with("left_") => Color::from_rgba8(40, 80, 220, 255),

@@ -38,17 +38,11 @@ pub struct ExtractedMotion {
 /// Puts a clip on the floor, moves frame 0's pelvis to x = z = 0 and turns it to face +z.
 pub fn canonicalize(poses: &[Pose]) -> Result<Vec<Pose>, MotionError> {
     check_poses(poses)?;
-    let floor = poses
-        .iter()
-        .flat_map(|p| p.iter().map(|v| v.y))
-        .fold(f64::INFINITY, f64::min);
+    let floor = poses.iter().flat_map(|p| p.iter().map(|v| v.y)).fold(f64::INFINITY, f64::min);
     let first = poses.first().ok_or(MotionError::TooShort { frames: 0, min: 2 })?;
     let origin = DVec3::new(first[0].x, floor, first[0].z);
     let heading = heading_rotation(facing_direction(first).ok_or(MotionError::NoFacing { frame: 0 })?);
-    Ok(poses
-        .iter()
-        .map(|pose| pose.map(|v| heading * (v - origin)))
-        .collect())
+    Ok(poses.iter().map(|pose| pose.map(|v| heading * (v - origin))).collect())
 }
 
 /// Computes the 263-d features of a clip of joint positions (metres, y up, at the rate of the
@@ -139,9 +133,8 @@ fn smoothed_forward(poses: &[Pose]) -> Result<Vec<DVec3>, MotionError> {
         .map(|(frame, p)| facing_direction(p).ok_or(MotionError::NoFacing { frame }))
         .collect::<Result<Vec<_>, _>>()?;
     let radius = (4.0 * FORWARD_SMOOTHING_SIGMA + 0.5) as i64;
-    let weights: Vec<f64> = (-radius..=radius)
-        .map(|k| (-0.5 * (k as f64 / FORWARD_SMOOTHING_SIGMA).powi(2)).exp())
-        .collect();
+    let weights: Vec<f64> =
+        (-radius..=radius).map(|k| (-0.5 * (k as f64 / FORWARD_SMOOTHING_SIGMA).powi(2)).exp()).collect();
     let total: f64 = weights.iter().sum();
     let last = raw.len() as i64 - 1;
     (0..raw.len() as i64)

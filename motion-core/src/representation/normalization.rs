@@ -71,28 +71,14 @@ impl MeanStd {
             return Err(NormalizationError::Empty);
         }
         let mean: Vec<f64> = sum.iter().map(|s| s / n as f64).collect();
-        let mut std: Vec<f64> = sum_sq
-            .iter()
-            .zip(&mean)
-            .map(|(s, m)| (s / n as f64 - m * m).max(0.0).sqrt())
-            .collect();
-        for block in [
-            ROOT_ROT_VEL..ROOT_ROT_VEL + 1,
-            ROOT_LIN_VEL,
-            ROOT_Y..ROOT_Y + 1,
-            RIC,
-            ROT,
-            LOCAL_VEL,
-            FOOT_CONTACT,
-        ] {
+        let mut std: Vec<f64> = sum_sq.iter().zip(&mean).map(|(s, m)| (s / n as f64 - m * m).max(0.0).sqrt()).collect();
+        for block in
+            [ROOT_ROT_VEL..ROOT_ROT_VEL + 1, ROOT_LIN_VEL, ROOT_Y..ROOT_Y + 1, RIC, ROT, LOCAL_VEL, FOOT_CONTACT]
+        {
             let avg = std[block.clone()].iter().sum::<f64>() / block.len() as f64;
             std[block].iter_mut().for_each(|s| *s = avg.max(MIN_STD));
         }
-        Self::from_vecs(
-            mean.iter().map(|v| *v as f32).collect(),
-            std.iter().map(|v| *v as f32).collect(),
-            &Device::Cpu,
-        )
+        Self::from_vecs(mean.iter().map(|v| *v as f32).collect(), std.iter().map(|v| *v as f32).collect(), &Device::Cpu)
     }
 
     /// Statistics from explicit vectors of 263 values each.
@@ -101,12 +87,14 @@ impl MeanStd {
             if v.len() != FEATURE_DIM {
                 return Err(NormalizationError::WrongLength { what: what.into(), found: v.len() });
             }
-            if let Some((index, value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite() || (positive && **x <= 0.0)) {
+            if let Some((index, value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite() || (positive && **x <= 0.0))
+            {
                 return Err(NormalizationError::BadValue { what: what.into(), index, value: *value });
             }
         }
         let t = |what: &str, v: Vec<f32>| {
-            Tensor::from_vec(v, FEATURE_DIM, device).map_err(|source| NormalizationError::Tensor { what: what.into(), source })
+            Tensor::from_vec(v, FEATURE_DIM, device)
+                .map_err(|source| NormalizationError::Tensor { what: what.into(), source })
         };
         Ok(Self { mean: t("mean", mean)?, std: t("std", std)? })
     }
@@ -153,14 +141,12 @@ impl MeanStd {
 
     /// `(x − mean) / std` for `x` of shape `[..., 263]`.
     pub fn normalize(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        x.broadcast_sub(&self.mean.to_dtype(x.dtype())?)?
-            .broadcast_div(&self.std.to_dtype(x.dtype())?)
+        x.broadcast_sub(&self.mean.to_dtype(x.dtype())?)?.broadcast_div(&self.std.to_dtype(x.dtype())?)
     }
 
     /// `x · std + mean` for `x` of shape `[..., 263]`.
     pub fn denormalize(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        x.broadcast_mul(&self.std.to_dtype(x.dtype())?)?
-            .broadcast_add(&self.mean.to_dtype(x.dtype())?)
+        x.broadcast_mul(&self.std.to_dtype(x.dtype())?)?.broadcast_add(&self.mean.to_dtype(x.dtype())?)
     }
 }
 

@@ -43,9 +43,7 @@ pub fn recover_from_ric(features: &Tensor) -> Result<Tensor> {
     let root_y = features.narrow(D::Minus1, ROOT_Y, 1)?;
     let root = Tensor::cat(&[&root_x, &root_y, &root_z], D::Minus1)?.unsqueeze(2)?; // [B, T, 1, 3]
 
-    let ric = features
-        .narrow(D::Minus1, RIC.start, RIC.len())?
-        .reshape((batch, frames, NUM_JOINTS - 1, 3))?;
+    let ric = features.narrow(D::Minus1, RIC.start, RIC.len())?.reshape((batch, frames, NUM_JOINTS - 1, 3))?;
     let (px, py, pz) = (ric.narrow(3, 0, 1)?, ric.narrow(3, 1, 1)?, ric.narrow(3, 2, 1)?);
     let cos4 = cos.unsqueeze(D::Minus1)?; // [B, T, 1, 1]
     let sin4 = sin.unsqueeze(D::Minus1)?;
@@ -58,9 +56,7 @@ pub fn recover_from_ric(features: &Tensor) -> Result<Tensor> {
 /// `[T, T]` matrix M with M[k, t] = 1 when k < t, so `x · M` is the exclusive cumulative sum of
 /// the rows of `x` along time (a gemm, which candle differentiates).
 fn exclusive_cumsum_matrix(frames: usize, dtype: DType, dev: &Device) -> Result<Tensor> {
-    let data: Vec<f32> = (0..frames * frames)
-        .map(|i| if i / frames < i % frames { 1.0 } else { 0.0 })
-        .collect();
+    let data: Vec<f32> = (0..frames * frames).map(|i| if i / frames < i % frames { 1.0 } else { 0.0 }).collect();
     Tensor::from_vec(data, (frames, frames), dev)?.to_dtype(dtype)
 }
 

@@ -12,12 +12,13 @@ use serde::{Deserialize, Serialize};
 use super::TextEncoder;
 
 /// Direction and manner words every vocabulary contains.
-const DIRECTION_WORDS: [&str; 10] = ["forward", "backward", "left", "right", "around", "up", "down", "place", "slow", "fast"];
+const DIRECTION_WORDS: [&str; 10] =
+    ["forward", "backward", "left", "right", "around", "up", "down", "place", "slow", "fast"];
 
 /// Words that carry no action: articles, the subject, linking words.
 const STOP_WORDS: [&str; 22] = [
-    "a", "an", "the", "person", "man", "woman", "someone", "human", "and", "then", "with", "on", "of", "from", "to", "in",
-    "is", "his", "her", "their", "while", "at",
+    "a", "an", "the", "person", "man", "woman", "someone", "human", "and", "then", "with", "on", "of", "from", "to",
+    "in", "is", "his", "her", "their", "while", "at",
 ];
 
 /// Irregular forms and synonyms mapped to the lemma used in labels.
@@ -111,10 +112,7 @@ impl VocabularyEncoder {
 
     /// The words of a prompt that the vocabulary knows (what the model will "hear").
     pub fn known_words(&self, prompt: &str) -> Vec<String> {
-        content_lemmas(prompt)
-            .into_iter()
-            .filter(|l| self.words.binary_search(l).is_ok())
-            .collect()
+        content_lemmas(prompt).into_iter().filter(|l| self.words.binary_search(l).is_ok()).collect()
     }
 }
 

@@ -32,9 +32,9 @@ impl AdamW {
         let bc1 = 1.0 - BETA1.powi(self.steps as i32);
         let bc2 = 1.0 - BETA2.powi(self.steps as i32);
         for ((var, m), v) in self.vars.iter().zip(self.m.iter_mut()).zip(self.v.iter_mut()) {
-            let g = grads
-                .get(var.as_tensor())
-                .ok_or_else(|| candle_core::Error::Msg(format!("no gradient for a variable of shape {:?}", var.shape())))?;
+            let g = grads.get(var.as_tensor()).ok_or_else(|| {
+                candle_core::Error::Msg(format!("no gradient for a variable of shape {:?}", var.shape()))
+            })?;
             *m = ((&*m * BETA1)? + (g * (1.0 - BETA1))?)?;
             *v = ((&*v * BETA2)? + (g.sqr()? * (1.0 - BETA2))?)?;
             let update = ((&*m / bc1)? / ((&*v / bc2)?.sqrt()? + EPS)?)?;
@@ -57,7 +57,12 @@ impl AdamW {
     /// Restores moments and the step count (from a checkpoint).
     pub fn restore(&mut self, m: Vec<Tensor>, v: Vec<Tensor>, steps: usize) -> Result<()> {
         if m.len() != self.vars.len() || v.len() != self.vars.len() {
-            candle_core::bail!("optimizer state has {} / {} moments for {} variables", m.len(), v.len(), self.vars.len());
+            candle_core::bail!(
+                "optimizer state has {} / {} moments for {} variables",
+                m.len(),
+                v.len(),
+                self.vars.len()
+            );
         }
         for ((var, m), v) in self.vars.iter().zip(&m).zip(&v) {
             if m.shape() != var.shape() || v.shape() != var.shape() {

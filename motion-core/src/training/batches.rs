@@ -46,9 +46,9 @@ impl BatchSampler {
         let mut windows = Vec::new();
         let usable: Vec<&Window> = db.windows().iter().filter(|w| w.frames >= config.min_frames).collect();
         for w in usable {
-            let label = labels.binary_search_by(|l| l.as_str().cmp(db.label(w))).map_err(|_| {
-                TrainError::Data(format!("window {w:?} has a label missing from the label list"))
-            })?;
+            let label = labels
+                .binary_search_by(|l| l.as_str().cmp(db.label(w)))
+                .map_err(|_| TrainError::Data(format!("window {w:?} has a label missing from the label list")))?;
             let x = db.mean_std().to_device(device)?.normalize(&db.window_tensor(w, device)?)?;
             by_label[label].push(windows.len());
             windows.push((x, label));
@@ -82,7 +82,8 @@ impl BatchSampler {
             .filter(|ids: &Vec<usize>| !ids.is_empty())
             .collect();
         // Fall back to the shortest crop every window can give when none is long enough.
-        let (frames, pools) = if long_enough.is_empty() { (self.min_frames, self.by_label.clone()) } else { (frames, long_enough) };
+        let (frames, pools) =
+            if long_enough.is_empty() { (self.min_frames, self.by_label.clone()) } else { (frames, long_enough) };
         let all: Vec<usize> = pools.iter().flatten().copied().collect();
         let mut crops = Vec::with_capacity(self.batch_size);
         let mut rows = Vec::with_capacity(self.batch_size);

@@ -46,7 +46,8 @@ impl Trainer {
         let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
         let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| err(e.to_string()))?;
         let meta = meta.metadata().clone().unwrap_or_default();
-        let step: usize = meta.get("step").and_then(|s| s.parse().ok()).ok_or_else(|| err("no step in metadata".into()))?;
+        let step: usize =
+            meta.get("step").and_then(|s| s.parse().ok()).ok_or_else(|| err("no step in metadata".into()))?;
         let saved_cfg = meta.get("mdm_config").ok_or_else(|| err("no mdm_config in metadata".into()))?;
         if serde_json::to_string(&self.model_config).map_err(|e| err(e.to_string()))? != *saved_cfg {
             return Err(err(format!("model sizes differ: checkpoint {saved_cfg}")));

@@ -160,7 +160,8 @@ impl Trainer {
         let varmap = VarMap::new();
         let model = Mdm::init_seeded(model_config.clone(), &varmap, DType::F32, device, config.seed)?;
         let vars = named_vars(&varmap, &model)?;
-        let ema = vars.iter().map(|(_, v)| Ok(v.as_tensor().copy()?.detach())).collect::<candle_core::Result<Vec<_>>>()?;
+        let ema =
+            vars.iter().map(|(_, v)| Ok(v.as_tensor().copy()?.detach())).collect::<candle_core::Result<Vec<_>>>()?;
         let optimizer = AdamW::new(vars.iter().map(|(_, v)| v.clone()).collect(), config.weight_decay)?;
         let sampler = BatchSampler::new(db, &encoder, &config, device)?;
         Ok(Self {
@@ -190,11 +191,7 @@ impl Trainer {
 
     /// Runs until `config.steps`, calling `on_step` after each step and writing a checkpoint
     /// to `checkpoint` every `checkpoint_every` steps and at the end.
-    pub fn run(
-        &mut self,
-        checkpoint: Option<&Path>,
-        mut on_step: impl FnMut(&StepReport),
-    ) -> Result<(), TrainError> {
+    pub fn run(&mut self, checkpoint: Option<&Path>, mut on_step: impl FnMut(&StepReport)) -> Result<(), TrainError> {
         while self.step < self.config.steps {
             let report = self.train_step()?;
             on_step(&report);
@@ -255,7 +252,10 @@ fn named_vars(varmap: &VarMap, model: &Mdm) -> Result<Vec<(String, Var)>, TrainE
         .named_parameters()
         .iter()
         .map(|(name, _)| {
-            data.get(name).cloned().map(|v| (name.clone(), v)).ok_or_else(|| TrainError::Data(format!("no variable for `{name}`")))
+            data.get(name)
+                .cloned()
+                .map(|v| (name.clone(), v))
+                .ok_or_else(|| TrainError::Data(format!("no variable for `{name}`")))
         })
         .collect()
 }
@@ -269,10 +269,22 @@ mod tests {
     fn tiny_run() -> (MotionDatabase, MdmConfig, TrainConfig) {
         let catalog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/catalog.json");
         let (sources, _) = Catalog::read(&catalog).unwrap().load().unwrap();
-        let sources: Vec<_> = sources.into_iter().filter(|s| s.name.contains("walk") || s.name.contains("run")).take(2).collect();
-        let db = MotionDatabase::build(&sources, &DatabaseConfig { speeds: vec![1.0], mirror: false, loop_seconds: 3.0, ..DatabaseConfig::default() }).unwrap();
+        let sources: Vec<_> =
+            sources.into_iter().filter(|s| s.name.contains("walk") || s.name.contains("run")).take(2).collect();
+        let db = MotionDatabase::build(
+            &sources,
+            &DatabaseConfig { speeds: vec![1.0], mirror: false, loop_seconds: 3.0, ..DatabaseConfig::default() },
+        )
+        .unwrap();
         let model = MdmConfig { latent_dim: 16, ff_size: 32, num_layers: 1, num_heads: 2, ..MdmConfig::small() };
-        let train = TrainConfig { steps: 4, batch_size: 2, max_frames: 40, warmup_steps: 2, checkpoint_every: 2, ..TrainConfig::default() };
+        let train = TrainConfig {
+            steps: 4,
+            batch_size: 2,
+            max_frames: 40,
+            warmup_steps: 2,
+            checkpoint_every: 2,
+            ..TrainConfig::default()
+        };
         (db, model, train)
     }
 
@@ -293,7 +305,14 @@ mod tests {
         resumed.run(None, |r| losses.push(r.loss)).unwrap();
         assert_eq!(losses.len(), 2);
         for ((a, b), (ea, eb)) in straight.vars.iter().zip(&resumed.vars).zip(straight.ema.iter().zip(&resumed.ema)) {
-            let d = (a.1.as_tensor() - b.1.as_tensor()).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+            let d = (a.1.as_tensor() - b.1.as_tensor())
+                .unwrap()
+                .abs()
+                .unwrap()
+                .max_all()
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap();
             assert!(d < 1e-6, "{}: weights differ by {d}", a.0);
             let d = (ea - eb).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
             assert!(d < 1e-6, "{}: EMA differs by {d}", a.0);
