@@ -15,7 +15,7 @@ use crate::diffusion::noise::gaussian;
 use crate::diffusion::{DdimSampler, Guidance, NoiseSchedule};
 use crate::model::{Mdm, MdmConfig};
 use crate::representation::{recover_from_ric, MeanStd, NormalizationError};
-use crate::tensor_file::write_safetensors;
+use crate::tensor_file::{read_metadata, write_safetensors};
 use crate::text::vocabulary::VocabularyEncoder;
 use crate::text::TextEncoder;
 
@@ -67,9 +67,7 @@ impl Prior {
     pub fn load(path: &Path, device: &Device) -> Result<Self, PriorError> {
         let format = |message: String| PriorError::Format { path: path.into(), message };
         let bytes = std::fs::read(path).map_err(|source| PriorError::Io { path: path.into(), source })?;
-        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
-            .map_err(|e| format(format!("not a safetensors file: {e}")))?;
-        let meta = meta.metadata().clone().unwrap_or_default();
+        let meta = read_metadata(&bytes).map_err(format)?;
         let get = |key: &str| meta.get(key).ok_or_else(|| format(format!("no `{key}` in the header metadata")));
         let cfg: MdmConfig =
             serde_json::from_str(get("mdm_config")?).map_err(|e| format(format!("bad mdm_config: {e}")))?;

@@ -35,3 +35,11 @@ pub(crate) fn write_safetensors(
     }
     std::fs::write(path, bytes).map_err(|e| e.to_string())
 }
+
+/// The string metadata of a safetensors file's header (empty when it has none). Errors are
+/// messages; callers add the path.
+pub(crate) fn read_metadata(bytes: &[u8]) -> Result<HashMap<String, String>, String> {
+    let (_, meta) =
+        safetensors::SafeTensors::read_metadata(bytes).map_err(|e| format!("not a safetensors file: {e}"))?;
+    Ok(meta.metadata().clone().unwrap_or_default())
+}

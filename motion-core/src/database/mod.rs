@@ -21,7 +21,7 @@ use crate::import::{resample, MocapClip};
 use crate::motion::mirror;
 use crate::representation::{extract_features, FeatureFrame, MeanStd, NormalizationError, FEATURE_DIM};
 use crate::skeleton::{Pose, FPS};
-use crate::tensor_file::write_safetensors;
+use crate::tensor_file::{read_metadata, write_safetensors};
 use crate::MotionError;
 use catalog::SourceClip;
 
@@ -284,12 +284,8 @@ impl MotionDatabase {
         let bytes = std::fs::read(path).map_err(|source| DatabaseError::Io { path: path.into(), source })?;
         let st = safetensors::SafeTensors::deserialize(&bytes)
             .map_err(|e| format(format!("not a safetensors file: {e}")))?;
-        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| format(e.to_string()))?;
-        let json = meta
-            .metadata()
-            .as_ref()
-            .and_then(|m| m.get("index"))
-            .ok_or_else(|| format("no `index` in the header metadata".into()))?;
+        let meta = read_metadata(&bytes).map_err(format)?;
+        let json = meta.get("index").ok_or_else(|| format("no `index` in the header metadata".into()))?;
         let index: Index = serde_json::from_str(json).map_err(|e| format(format!("bad index: {e}")))?;
         if index.format_version != FORMAT_VERSION {
             return Err(format(format!("format version {} (expected {FORMAT_VERSION})", index.format_version)));

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use candle_core::Tensor;
 
-use crate::tensor_file::write_safetensors;
+use crate::tensor_file::{read_metadata, write_safetensors};
 
 use super::{TrainError, Trainer};
 
@@ -44,8 +44,7 @@ impl Trainer {
     pub fn resume(&mut self, path: &Path) -> Result<TrainState, TrainError> {
         let err = |message: String| TrainError::Checkpoint { path: path.into(), message };
         let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
-        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| err(e.to_string()))?;
-        let meta = meta.metadata().clone().unwrap_or_default();
+        let meta = read_metadata(&bytes).map_err(err)?;
         let step: usize =
             meta.get("step").and_then(|s| s.parse().ok()).ok_or_else(|| err("no step in metadata".into()))?;
         let saved_cfg = meta.get("mdm_config").ok_or_else(|| err("no mdm_config in metadata".into()))?;
