@@ -39,7 +39,8 @@ pub enum Expr {
     /// selected frames and the points.
     Scene(SceneConstraint),
     /// Bone direction (ProgMoGen `loss_directional`): per frame `‖u − d/‖d‖‖²` with `u` the unit
-    /// vector from the joint's parent to the joint (its norm detached).
+    /// vector from the joint's parent to the joint (ProgMoGen detaches the norm of `u`; we keep
+    /// its gradient, so the loss's gradient is the true one).
     BoneDirection(BoneDirection),
     /// Feet planted at given frames: per foot and frame `relu(y − max_height_m)² +
     /// relu(speed − max_speed_m_per_s)²` (speed term only when given), averaged (RG-DNO
