@@ -25,6 +25,8 @@ enum Command {
     Train(commands::train::TrainArgs),
     /// Unconstrained motions from the prior for a text prompt (npy + PNG strip).
     Sample(commands::sample::SampleArgs),
+    /// Generate motions for a constraint program file (npy, JSON report, PNG strip).
+    Run(commands::run::RunArgs),
     /// Reports: `prior` compares unconstrained samples with the training data per label.
     #[command(subcommand)]
     Report(ReportCommand),
@@ -37,6 +39,10 @@ enum Command {
 enum BenchCommand {
     /// Denoiser forward, ddim sampling, unrolled DNO step at batch 1 and 8; peak memory.
     Prior(commands::bench::BenchArgs),
+    /// Every shipped task × {unconstrained, IK, IK+Reg, DNO}: results table (markdown + JSON).
+    Tasks(commands::bench_tasks::BenchTasksArgs),
+    /// Wall time of a full DNO run (500 steps) at batch 1 and 8.
+    Dno(commands::bench_tasks::BenchDnoArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -58,8 +64,11 @@ fn main() -> anyhow::Result<()> {
         Command::Data(cmd) => commands::data::run(cmd),
         Command::Train(args) => commands::train::run(args),
         Command::Sample(args) => commands::sample::run(args),
+        Command::Run(args) => commands::run::run(args),
         Command::Report(ReportCommand::Prior(args)) => commands::report::run(args),
         Command::Report(ReportCommand::Loss(args)) => commands::report::run_loss(args),
         Command::Bench(BenchCommand::Prior(args)) => commands::bench::run(args),
+        Command::Bench(BenchCommand::Tasks(args)) => commands::bench_tasks::run_tasks(args),
+        Command::Bench(BenchCommand::Dno(args)) => commands::bench_tasks::run_dno(args),
     }
 }

@@ -7,6 +7,8 @@ pub mod constraints;
 pub mod database;
 pub mod diffusion;
 pub mod dno;
+pub mod evaluation;
+pub mod generation;
 pub mod import;
 pub mod metrics;
 pub mod model;

@@ -1,0 +1,203 @@
+//! `mogen bench tasks`: every shipped task × every method, written as a results table
+//! (markdown + JSON); `mogen bench dno`: the time of a full DNO run.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+use motion_core::constraints::CompiledProgram;
+use motion_core::evaluation::TaskReport;
+use motion_core::generation::{generate, GenerationConfig, Method};
+use motion_core::prior::Prior;
+use motion_core::program::TaskProgram;
+use serde::{Deserialize, Serialize};
+
+use super::run::{run_program, GenerationArgs, MethodArg};
+use crate::paths;
+
+#[derive(Debug, Args)]
+pub struct BenchTasksArgs {
+    /// Folder of task programs (every `*.json` in it).
+    #[arg(long, default_value_os_t = paths::fixtures_dir().join("tasks"))]
+    tasks: PathBuf,
+    /// Only tasks whose file name contains one of these strings.
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// Methods to run.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Unconstrained, MethodArg::Ik, MethodArg::IkReg, MethodArg::Dno])]
+    methods: Vec<MethodArg>,
+    #[command(flatten)]
+    generation: GenerationArgs,
+    /// Output folder: results.json, results.md and one folder of motions per task and method.
+    /// Rows already in results.json are kept and not run again (delete it to start over).
+    #[arg(long, short, default_value = "out/bench-tasks")]
+    out: PathBuf,
+}
+
+/// One row of the results table.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ResultRow {
+    /// Task file stem.
+    pub task: String,
+    /// The run's report.
+    pub report: TaskReport,
+}
+
+pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
+    let device = candle_core::Device::Cpu;
+    let prior = Prior::load(&args.generation.prior, &device)
+        .with_context(|| format!("loading the prior {}", args.generation.prior.display()))?;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&args.tasks)
+        .with_context(|| format!("listing {}", args.tasks.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .filter(|p| args.only.is_empty() || args.only.iter().any(|o| p.to_string_lossy().contains(o.as_str())))
+        .collect();
+    files.sort();
+    anyhow::ensure!(!files.is_empty(), "no task files in {}", args.tasks.display());
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let json_path = args.out.join("results.json");
+    let mut rows: Vec<ResultRow> = match std::fs::read_to_string(&json_path) {
+        Ok(text) => serde_json::from_str(&text).with_context(|| format!("reading {}", json_path.display()))?,
+        Err(_) => Vec::new(),
+    };
+    for file in &files {
+        let task = file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let text = std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+        let program = TaskProgram::from_json_validated(&text).map_err(|e| {
+            anyhow::anyhow!("{}: {}", file.display(), e.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; "))
+        })?;
+        for &method in &args.methods {
+            let method = Method::from(method);
+            if rows.iter().any(|r| r.task == task && r.report.config.method == method) {
+                continue;
+            }
+            eprintln!("{task} / {method}");
+            let config = args.generation.config(method);
+            let report = run_program(&prior, &program, &config, &args.out.join(&task).join(method.name()))?;
+            rows.push(ResultRow { task: task.clone(), report });
+            std::fs::write(&json_path, serde_json::to_string_pretty(&rows)?)
+                .with_context(|| format!("writing {}", json_path.display()))?;
+            std::fs::write(args.out.join("results.md"), markdown(&rows))?;
+        }
+    }
+    println!("{}", markdown(&rows));
+    println!("wrote {} and {}", json_path.display(), args.out.join("results.md").display());
+    Ok(())
+}
+
+fn fmt_opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("–".to_owned(), |v| format!("{v:.digits$}"))
+}
+
+/// The results table: one line per task and method, then DNO's gain over unconstrained
+/// sampling per task.
+pub fn markdown(rows: &[ResultRow]) -> String {
+    let mut out = String::new();
+    if let Some(first) = rows.first() {
+        let c = &first.report.config;
+        out.push_str(&format!(
+            "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s)), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
+            c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
+        ));
+    }
+    out.push_str("| task | method | constraint error | max scene penetration (m) | foot skate | max acc (m/frame²) | steps (target) / success | hands raised | head-neck incorrect | time (s) |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
+    for r in rows {
+        let p = &r.report;
+        let steps = p
+            .steps
+            .as_ref()
+            .map_or("–".to_owned(), |s| format!("{:?} ({}) / {:.2}", s.counts, s.target, s.success_rate));
+        out.push_str(&format!(
+            "| {} | {} | {:.6} | {} | {:.3} | {:.4} | {} | {:.2} | {:.2} | {:.1} |\n",
+            r.task,
+            p.config.method,
+            p.constraint_error,
+            fmt_opt(p.max_scene_penetration_m, 4),
+            p.foot_skate_ratio,
+            p.max_acceleration,
+            steps,
+            p.hands_raised_rate,
+            p.head_neck_incorrect_ratio,
+            p.seconds
+        ));
+    }
+    let mut by_task: BTreeMap<&str, BTreeMap<Method, &TaskReport>> = BTreeMap::new();
+    for r in rows {
+        by_task.entry(&r.task).or_default().insert(r.report.config.method, &r.report);
+    }
+    out.push_str("\nDNO against unconstrained sampling (error ratio: unconstrained / DNO; acceleration ratio: DNO / unconstrained):\n\n");
+    out.push_str("| task | error ratio | acceleration ratio |\n|---|---|---|\n");
+    for (task, methods) in &by_task {
+        if let (Some(u), Some(d)) = (methods.get(&Method::Unconstrained), methods.get(&Method::Dno)) {
+            let ratio = if d.constraint_error > 0.0 {
+                format!("{:.1}", u.constraint_error / d.constraint_error)
+            } else {
+                "∞".into()
+            };
+            out.push_str(&format!(
+                "| {task} | {ratio} | {:.2} |\n",
+                d.max_acceleration / u.max_acceleration.max(1e-12)
+            ));
+        }
+    }
+    out
+}
+
+#[derive(Debug, Args)]
+pub struct BenchDnoArgs {
+    /// Task program to optimise (its frame count sets the motion length).
+    #[arg(long, default_value_os_t = paths::fixtures_dir().join("tasks").join("rgdno_task1_narrow_gap.json"))]
+    task: PathBuf,
+    /// Batch sizes to time.
+    #[arg(long, value_delimiter = ',', default_values_t = [1usize, 8])]
+    batches: Vec<usize>,
+    /// DNO steps.
+    #[arg(long, default_value_t = 500)]
+    steps: usize,
+    /// Classifier-free guidance scale (1: one denoiser call per DDIM step; 2.5 doubles it).
+    #[arg(long, default_value_t = 1.0)]
+    guidance: f64,
+    /// Trained prior file.
+    #[arg(long, default_value_os_t = paths::default_prior())]
+    prior: PathBuf,
+}
+
+pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
+    let device = candle_core::Device::Cpu;
+    let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
+    let program = load_program(&args.task)?;
+    let compiled = CompiledProgram::compile(&program, &device)?;
+    println!(
+        "DNO {} steps on {} ({} frames), guidance {}; RAYON_NUM_THREADS={}",
+        args.steps,
+        args.task.display(),
+        program.frames,
+        args.guidance,
+        std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into())
+    );
+    println!("| batch | total (s) | per step (s) | constraint error before → after |\n|---|---|---|---|");
+    for &batch in &args.batches {
+        let mut config = GenerationConfig::new(Method::Dno);
+        config.samples = batch;
+        config.guidance = args.guidance;
+        config.dno.steps = args.steps;
+        let start = Instant::now();
+        let generated = generate(&prior, &program, &compiled, &config, &device, |_| {})?;
+        let total = start.elapsed().as_secs_f64();
+        let first: f64 = generated.loss_history.iter().filter_map(|h| h.first()).sum::<f64>() / batch as f64;
+        let last: f64 = generated.loss_history.iter().filter_map(|h| h.last()).sum::<f64>() / batch as f64;
+        println!("| {batch} | {total:.1} | {:.4} | {first:.5} → {last:.5} |", total / args.steps as f64);
+    }
+    Ok(())
+}
+
+fn load_program(path: &Path) -> anyhow::Result<TaskProgram> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    TaskProgram::from_json_validated(&text).map_err(|e| {
+        anyhow::anyhow!("{}: {}", path.display(), e.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; "))
+    })
+}

@@ -1,0 +1,63 @@
+//! `mogen run` as a user calls it: outputs on success, clear errors on bad programs.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+const PROGRAM: &str = r#"{"text": "a person walks", "frames": 30, "constraints": [
+  {"id": "c1", "expr": {"op": "less_than", "quantity": {"kind": "position", "of": {"joint": "head"}, "axes": "y"}, "max": 1.2}}
+]}"#;
+
+fn mogen(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mogen")).args(args).output().unwrap()
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path.display().to_string()
+}
+
+#[test]
+fn run_writes_motion_report_and_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = write(dir.path(), "task.json", PROGRAM);
+    let out = dir.path().join("out");
+    let output = mogen(&["run", &program, "--method", "dno", "--steps", "2", "--out", &out.display().to_string()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    for file in ["features.npy", "joints.npy", "report.json", "strip.png"] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["config"]["method"], "dno");
+    assert_eq!(report["config"]["dno"]["steps"], 2);
+    assert!(report["constraint_error"].as_f64().is_some_and(f64::is_finite));
+    assert!(String::from_utf8_lossy(&output.stdout).contains("constraint error"));
+}
+
+#[test]
+fn bad_programs_and_missing_files_get_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let unknown = write(dir.path(), "bad.json", &PROGRAM.replace("\"head\"", "\"hed\""));
+    let output = mogen(&["run", &unknown, "--steps", "1"]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success());
+    assert!(stderr.contains("constraints[0].expr.quantity.of.joint") && stderr.contains("hed"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+
+    let outside = write(
+        dir.path(),
+        "frames.json",
+        &PROGRAM.replace(r#""max": 1.2"#, r#""max": 1.2, "frames": {"keyframes": [{"frame": 30}]}"#),
+    );
+    let stderr = String::from_utf8_lossy(&mogen(&["run", &outside, "--steps", "1"]).stderr).into_owned();
+    assert!(
+        stderr.contains("constraints[0].expr.frames.keyframes[0].frame") && stderr.contains("outside the clip"),
+        "{stderr}"
+    );
+
+    let missing = dir.path().join("nope.json").display().to_string();
+    let output = mogen(&["run", &missing]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success() && stderr.contains("nope.json"), "{stderr}");
+}

@@ -1,0 +1,142 @@
+//! The report of one constrained-generation run: every constraint's error per sample and the
+//! papers' motion metrics (`reference/anchors.md` §3.7, RG-DNO §5), as serialisable data.
+
+use candle_core::{DType, Tensor};
+use serde::{Deserialize, Serialize};
+
+use crate::constraints::CompiledProgram;
+use crate::generation::{Generated, GenerationConfig};
+use crate::metrics::{foot_skate_ratio, hands_raised, head_neck_incorrect, max_acceleration, pace, step_count};
+use crate::program::TaskProgram;
+use crate::quality::tensor_to_poses;
+
+/// One constraint's errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConstraintReport {
+    /// Its id (`c1`, ...).
+    pub id: String,
+    /// Its description from the program, if any.
+    pub description: Option<String>,
+    /// Its weight in the total.
+    pub weight: f64,
+    /// Unweighted error per sample, in the constraint's own unit.
+    pub error: Vec<f64>,
+}
+
+/// Step counting against a counting constraint's target.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepReport {
+    /// The counting constraint's target.
+    pub target: u32,
+    /// Steps counted per sample ([`crate::metrics::step_count`]).
+    pub counts: Vec<usize>,
+    /// Fraction of samples with exactly `target` steps.
+    pub success_rate: f64,
+}
+
+/// The report of a run (written as `report.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TaskReport {
+    /// The program's prompt.
+    pub text: String,
+    /// Frames per motion (20 fps).
+    pub frames: usize,
+    /// The run's settings (method, samples, seed, optimiser settings).
+    pub config: GenerationConfig,
+    /// Wall-clock seconds of the method.
+    pub seconds: f64,
+    /// Constraint error: mean over samples of `Σ wᵢ·Eᵢ` (ProgMoGen's mean `f_eval`).
+    pub constraint_error: f64,
+    /// `Σ wᵢ·Eᵢ` per sample.
+    pub constraint_error_per_sample: Vec<f64>,
+    /// Every constraint's errors.
+    pub constraints: Vec<ConstraintReport>,
+    /// Mean over samples of the deepest penetration into an obstacle (m; margins ignored;
+    /// RG-DNO's Max SP); `None` without obstacles.
+    pub max_scene_penetration_m: Option<f64>,
+    /// Mean foot skate ratio ([`crate::metrics::foot_skate_ratio`]).
+    pub foot_skate_ratio: f64,
+    /// Mean over samples of the maximum joint acceleration, m/frame² (ProgMoGen's Max Acc).
+    pub max_acceleration: f64,
+    /// Step counting, for programs with a counting constraint over foot speeds.
+    pub steps: Option<StepReport>,
+    /// Fraction of samples with a hand above the shoulder in at least half of the frames
+    /// ([`crate::metrics::hands_raised`]).
+    pub hands_raised_rate: f64,
+    /// Mean steps per second ([`crate::metrics::pace`]).
+    pub pace_steps_per_s: f64,
+    /// Mean coefficient of variation of step intervals over the samples that have one.
+    pub pace_interval_cv: Option<f64>,
+    /// Fraction of head–neck lengths at frames 0, L//2, L−1 outside
+    /// [`crate::metrics::HEAD_NECK_VALID_M`].
+    pub head_neck_incorrect_ratio: f64,
+}
+
+/// Builds the report of `generated` for `program`.
+pub fn report(
+    program: &TaskProgram,
+    compiled: &CompiledProgram,
+    generated: &Generated,
+    config: &GenerationConfig,
+) -> candle_core::Result<TaskReport> {
+    let evaluation =
+        compiled.evaluate(&generated.joints, Some(&generated.initial_joints)).map_err(candle_core::Error::wrap)?;
+    let per_sample = to_f64(&evaluation.total)?;
+    let constraints = evaluation
+        .per_constraint
+        .iter()
+        .map(|(id, error)| {
+            let spec = program.constraint(id);
+            Ok(ConstraintReport {
+                id: id.clone(),
+                description: spec.and_then(|c| c.description.clone()),
+                weight: spec.map_or(1.0, |c| c.weight()),
+                error: to_f64(error)?,
+            })
+        })
+        .collect::<candle_core::Result<Vec<_>>>()?;
+    let penetration = compiled.max_scene_penetration(&generated.joints)?.map(|t| to_f64(&t)).transpose()?;
+    let motions = tensor_to_poses(&generated.joints)?;
+    let mean = |values: Vec<f64>| values.iter().sum::<f64>() / values.len().max(1) as f64;
+    let steps = compiled.count_targets().into_iter().find(|(id, _)| is_step_count(program, id)).map(|(_, target)| {
+        let counts: Vec<usize> = motions.iter().map(|m| step_count(m)).collect();
+        let hits = counts.iter().filter(|&&c| c == target as usize).count();
+        StepReport { target, success_rate: hits as f64 / counts.len().max(1) as f64, counts }
+    });
+    let paces: Vec<(f64, Option<f64>)> = motions.iter().map(|m| pace(m)).collect();
+    let cvs: Vec<f64> = paces.iter().filter_map(|p| p.1).collect();
+    let (bad, checked) =
+        motions.iter().map(|m| head_neck_incorrect(m)).fold((0, 0), |(b, c), (b1, c1)| (b + b1, c + c1));
+    Ok(TaskReport {
+        text: program.text.clone(),
+        frames: compiled.frames(),
+        config: config.clone(),
+        seconds: generated.seconds,
+        constraint_error: mean(per_sample.clone()),
+        constraint_error_per_sample: per_sample,
+        constraints,
+        max_scene_penetration_m: penetration.map(mean),
+        foot_skate_ratio: mean(motions.iter().map(|m| foot_skate_ratio(m)).collect()),
+        max_acceleration: mean(motions.iter().map(|m| max_acceleration(m)).collect()),
+        steps,
+        hands_raised_rate: mean(motions.iter().map(|m| f64::from(u8::from(hands_raised(m)))).collect()),
+        pace_steps_per_s: mean(paces.iter().map(|p| p.0).collect()),
+        pace_interval_cv: (!cvs.is_empty()).then(|| mean(cvs)),
+        head_neck_incorrect_ratio: bad as f64 / checked.max(1) as f64,
+    })
+}
+
+/// Whether constraint `id` counts steps: a count over foot speeds.
+fn is_step_count(program: &TaskProgram, id: &str) -> bool {
+    use crate::program::{Expr, Point, Quantity};
+    use crate::skeleton::Joint;
+    let Some(Expr::Count(count)) = program.constraint(id).map(|c| &c.expr) else { return false };
+    count.signals.iter().all(|s| {
+        matches!(s, Quantity::Speed(d) | Quantity::Velocity(d)
+            if matches!(d.of, Point::Joint(Joint::LeftFoot | Joint::RightFoot | Joint::LeftAnkle | Joint::RightAnkle)))
+    })
+}
+
+fn to_f64(t: &Tensor) -> candle_core::Result<Vec<f64>> {
+    t.to_dtype(DType::F64)?.to_vec1::<f64>()
+}
