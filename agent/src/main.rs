@@ -27,6 +27,8 @@ enum Command {
     Sample(commands::sample::SampleArgs),
     /// Generate motions for a constraint program file (npy, JSON report, PNG strip).
     Run(commands::run::RunArgs),
+    /// Print the JSON Schema of constraint programs (what `run` accepts).
+    Schema,
     /// Reports: `prior` compares unconstrained samples with the training data per label.
     #[command(subcommand)]
     Report(ReportCommand),
@@ -65,6 +67,10 @@ fn main() -> anyhow::Result<()> {
         Command::Train(args) => commands::train::run(args),
         Command::Sample(args) => commands::sample::run(args),
         Command::Run(args) => commands::run::run(args),
+        Command::Schema => {
+            println!("{}", serde_json::to_string_pretty(&motion_core::program::json_schema())?);
+            Ok(())
+        }
         Command::Report(ReportCommand::Prior(args)) => commands::report::run(args),
         Command::Report(ReportCommand::Loss(args)) => commands::report::run_loss(args),
         Command::Bench(BenchCommand::Prior(args)) => commands::bench::run(args),

@@ -83,6 +83,10 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
             std::fs::write(args.out.join("results.md"), markdown(&rows))?;
         }
     }
+    rows.sort_by(|a, b| (&a.task, a.report.config.method).cmp(&(&b.task, b.report.config.method)));
+    std::fs::write(&json_path, serde_json::to_string_pretty(&rows)?)
+        .with_context(|| format!("writing {}", json_path.display()))?;
+    std::fs::write(args.out.join("results.md"), markdown(&rows))?;
     println!("{}", markdown(&rows));
     println!("wrote {} and {}", json_path.display(), args.out.join("results.md").display());
     Ok(())
@@ -99,8 +103,8 @@ pub fn markdown(rows: &[ResultRow]) -> String {
     if let Some(first) = rows.first() {
         let c = &first.report.config;
         out.push_str(&format!(
-            "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s)), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
-            c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
+            "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s), jitter guard weight {}), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
+            c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.jitter_weight, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
         ));
     }
     out.push_str("| task | method | constraint error | max scene penetration (m) | foot skate | max acc (m/frame²) | steps (target) / success | hands raised | head-neck incorrect | time (s) |\n");

@@ -57,6 +57,9 @@ pub struct GenerationArgs {
     /// Classifier-free guidance scale of the prior (1 = conditional only).
     #[arg(long, default_value_t = motion_core::diffusion::Guidance::MDM_SCALE)]
     pub guidance: f64,
+    /// Weight of DNO's jitter guard on joint accelerations above 0.15 m/frame² (0: off).
+    #[arg(long, default_value_t = 1.0)]
+    pub jitter_weight: f64,
     /// Trained prior file.
     #[arg(long, default_value_os_t = paths::default_prior())]
     pub prior: PathBuf,
@@ -70,6 +73,7 @@ impl GenerationArgs {
         config.seed = self.seed;
         config.guidance = self.guidance;
         config.dno.restarts = self.restarts;
+        config.jitter_weight = self.jitter_weight;
         if let Some(steps) = self.steps {
             config.dno.steps = steps;
             config.direct.steps = steps;
