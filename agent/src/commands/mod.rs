@@ -1,7 +1,9 @@
-//! One module per subcommand group.
+//! One module per subcommand group, and the task command.
 
 pub mod bench;
 pub mod data;
+pub mod generate;
 pub mod report;
 pub mod sample;
+pub mod task;
 pub mod train;
