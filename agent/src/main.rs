@@ -14,7 +14,7 @@ use clap::{Parser, Subcommand};
 ///
 /// Conventions: y up, metres, seconds, +x is the character's left, motions start facing +z,
 /// 20 frames per second, the 22-joint SMPL/HumanML3D skeleton.
-#[derive(Debug, Parser)]
+#[derive(Parser)]
 #[command(
     name = "mogen",
     version,

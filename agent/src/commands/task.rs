@@ -11,7 +11,8 @@ use clap::Args;
 
 use super::generate::{self, RunOptions};
 
-#[derive(Debug, Args)]
+/// No `Debug`: the arguments hold the API key.
+#[derive(Args)]
 pub struct TaskArgs {
     /// The task in words, e.g. "walk forwards through a 0.4 m wide gap and stop 5 m ahead".
     #[arg(required_unless_present = "program")]
@@ -47,7 +48,7 @@ pub struct TaskArgs {
 }
 
 /// Where the LLM is. With no endpoint configured, replies are replayed from the recordings.
-#[derive(Debug, Args)]
+#[derive(Args)]
 #[command(next_help_heading = "LLM")]
 struct LlmArgs {
     /// Base URL of an OpenAI-compatible API (vLLM http://localhost:8000/v1, Ollama

@@ -129,11 +129,6 @@ impl Llm {
         &self.model
     }
 
-    /// The current output mode.
-    pub fn output_mode(&self) -> OutputMode {
-        self.mode.get()
-    }
-
     /// Where replies come from.
     pub fn source(&self) -> ReplySource {
         match self.transport {
