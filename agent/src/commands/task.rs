@@ -3,13 +3,13 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use crate::paths;
 use agent::llm::{ApiKey, ClientConfig, Llm, LlmSettings, OutputMode, ReplySource, RetryPolicy, DEFAULT_MODEL};
 use agent::plan::{plan_from_file, plan_task, PlanSettings, PlannedTask};
 use anyhow::Context;
 use clap::Args;
 
 use super::generate::{self, RunOptions};
+use crate::paths;
 
 /// No `Debug`: the arguments hold the API key.
 #[derive(Args)]
