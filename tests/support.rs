@@ -1,5 +1,8 @@
 //! Helpers shared by the end-to-end tests.
 
+#[path = "support/llm_server.rs"]
+pub mod llm_server;
+
 use std::path::PathBuf;
 
 use candle_core::{Device, Tensor};

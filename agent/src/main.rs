@@ -1,19 +1,33 @@
 //! `mogen`: constrained human motion generation from the command line.
 
 mod commands;
-mod paths;
+
+use agent::paths;
 
 use clap::{Parser, Subcommand};
 
 /// Constrained human motion generation driven by language.
 ///
+/// `mogen "walk forwards through a 0.4 m wide gap and stop 5 m ahead"`: an LLM writes the
+/// constraint program and its relational parse, then the motions are generated. Without an LLM
+/// endpoint the recorded replies of fixtures/llm/ answer.
+///
 /// Conventions: y up, metres, seconds, +x is the character's left, motions start facing +z,
 /// 20 frames per second, the 22-joint SMPL/HumanML3D skeleton.
-#[derive(Debug, Parser)]
-#[command(name = "mogen", version, about, long_about = None)]
+#[derive(Parser)]
+#[command(
+    name = "mogen",
+    version,
+    about,
+    args_conflicts_with_subcommands = true,
+    subcommand_negates_reqs = true,
+    arg_required_else_help = true
+)]
 struct Cli {
+    #[command(flatten)]
+    task: commands::task::TaskArgs,
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -62,7 +76,8 @@ fn main() -> anyhow::Result<()> {
         .without_time()
         .init();
     let cli = Cli::parse();
-    match cli.command {
+    let Some(command) = cli.command else { return commands::task::run(cli.task) };
+    match command {
         Command::Data(cmd) => commands::data::run(cmd),
         Command::Train(args) => commands::train::run(args),
         Command::Sample(args) => commands::sample::run(args),

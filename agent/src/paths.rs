@@ -24,3 +24,8 @@ pub fn default_database() -> PathBuf {
 pub fn default_prior() -> PathBuf {
     fixtures_dir().join("model").join("prior.safetensors")
 }
+
+/// The recorded LLM exchanges that replay answers from.
+pub fn default_recordings() -> PathBuf {
+    fixtures_dir().join("llm").join("recorded")
+}

@@ -1,9 +1,11 @@
-//! One module per subcommand group.
+//! One module per subcommand group, and the task command.
 
 pub mod bench;
 pub mod bench_tasks;
 pub mod data;
+pub mod generate;
 pub mod report;
 pub mod run;
 pub mod sample;
+pub mod task;
 pub mod train;

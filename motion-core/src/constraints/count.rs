@@ -20,7 +20,7 @@ pub fn soft_count(s: &Tensor, frames: &[usize], extremum: Extremum, threshold: f
     }
     let pick = |offset: i64| -> Result<Tensor> {
         let index: Vec<u32> = interior.iter().map(|&t| (i64::from(t) + offset) as u32).collect();
-        s.index_select(&Tensor::from_vec(index, interior.len(), s.device())?, 1)
+        s.contiguous()?.index_select(&Tensor::from_vec(index, interior.len(), s.device())?, 1)
     };
     let (centre, next, previous) = (pick(0)?, pick(1)?, pick(-1)?);
     let sign = match extremum {

@@ -46,7 +46,7 @@ impl Frames {
     pub fn select(&self, x: &Tensor) -> Result<Tensor> {
         match &self.index {
             None => Ok(x.clone()),
-            Some(index) => x.index_select(index, 1),
+            Some(index) => x.contiguous()?.index_select(index, 1),
         }
     }
 }

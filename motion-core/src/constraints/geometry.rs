@@ -25,7 +25,7 @@ pub fn select_axes(x: &Tensor, axes: Axes) -> Result<Tensor> {
         [0, 1, 2] => Ok(x.clone()),
         indices => {
             let index = Tensor::from_vec(indices.iter().map(|&i| i as u32).collect(), indices.len(), x.device())?;
-            x.index_select(&index, x.rank() - 1)
+            x.contiguous()?.index_select(&index, x.rank() - 1)
         }
     }
 }

@@ -13,6 +13,7 @@ mod body;
 mod count;
 mod frames;
 mod geometry;
+mod probe;
 mod scene;
 mod signal;
 mod support;
@@ -23,6 +24,7 @@ use candle_core::{Result, Tensor, D};
 
 pub use body::{bone_radius_m, surface_points, HEAD_RADIUS_M, SURFACE_POINTS};
 pub use geometry::NORM_EPS;
+pub use probe::{probe_motion, GradientCheck, STANDING};
 pub use scene::{is_obstacle, primitive_error};
 pub use signal::{centre_of_mass_weights, point, root_relative, signal};
 pub use support::FOOT_HALF_WIDTH_M;
@@ -194,6 +196,8 @@ impl CompiledProgram {
         if dims.len() != 4 || dims[1] != self.frames || dims[2] != 22 || dims[3] != 3 {
             return Err(ConstraintError::Shape { shape: dims.to_vec(), frames: self.frames });
         }
+        // index_select (joint and frame selections) needs contiguous storage.
+        let joints = &joints.contiguous()?;
         let mut total = Tensor::zeros(dims[0], joints.dtype(), joints.device())?;
         let mut per_constraint = Vec::with_capacity(self.constraints.len());
         for c in &self.constraints {
@@ -202,6 +206,15 @@ impl CompiledProgram {
             per_constraint.push((c.id.clone(), error));
         }
         Ok(Evaluation { total, per_constraint })
+    }
+
+    /// This program with every counting sharpness capped at `max` (per unit of its signal).
+    pub fn with_sharpness_at_most(&self, max: f64) -> CompiledProgram {
+        let mut softened = self.clone();
+        for c in &mut softened.constraints {
+            c.node.cap_sharpness(max);
+        }
+        softened
     }
 
     /// Only the constraints with these ids (RG-DNO's subsets `C1`, `C2`, `C_R`); unknown ids are
@@ -394,6 +407,15 @@ impl Node {
             Node::And(args) | Node::Or(args) => args.iter().any(Node::needs_initial),
             Node::Not { arg, .. } => arg.needs_initial(),
             _ => false,
+        }
+    }
+
+    fn cap_sharpness(&mut self, max: f64) {
+        match self {
+            Node::Count { sharpness, .. } => *sharpness = sharpness.min(max),
+            Node::And(args) | Node::Or(args) => args.iter_mut().for_each(|a| a.cap_sharpness(max)),
+            Node::Not { arg, .. } => arg.cap_sharpness(max),
+            _ => {}
         }
     }
 

@@ -4,35 +4,10 @@
 use candle_core::{DType, Device, Tensor};
 use proptest::prelude::*;
 
+use super::probe::STANDING;
 use super::*;
 use crate::skeleton::NUM_JOINTS;
 use crate::testing::finite_difference_check;
-
-/// A standing pose (m, y up, facing +z, +x left): hand-placed joints.
-const STANDING: [[f64; 3]; NUM_JOINTS] = [
-    [0.0, 0.9, 0.0],    // pelvis
-    [0.1, 0.85, 0.0],   // left_hip
-    [-0.1, 0.85, 0.0],  // right_hip
-    [0.0, 1.0, 0.0],    // spine1
-    [0.1, 0.5, 0.0],    // left_knee
-    [-0.1, 0.5, 0.0],   // right_knee
-    [0.0, 1.15, 0.0],   // spine2
-    [0.1, 0.1, 0.0],    // left_ankle
-    [-0.1, 0.1, 0.0],   // right_ankle
-    [0.0, 1.25, 0.0],   // spine3
-    [0.1, 0.02, 0.12],  // left_foot
-    [-0.1, 0.02, 0.12], // right_foot
-    [0.0, 1.45, 0.0],   // neck
-    [0.08, 1.4, 0.0],   // left_collar
-    [-0.08, 1.4, 0.0],  // right_collar
-    [0.0, 1.6, 0.02],   // head
-    [0.18, 1.4, 0.0],   // left_shoulder
-    [-0.18, 1.4, 0.0],  // right_shoulder
-    [0.2, 1.12, 0.0],   // left_elbow
-    [-0.2, 1.12, 0.0],  // right_elbow
-    [0.22, 0.87, 0.0],  // left_wrist
-    [-0.22, 0.87, 0.0], // right_wrist
-];
 
 /// The standing pose gliding along +z at 1 m/s (0.05 m per frame), frames `[T][22][3]`.
 fn glide(frames: usize) -> Vec<[[f64; 3]; NUM_JOINTS]> {

@@ -61,6 +61,68 @@ fn relational_parse_groups_follow_algorithm_1() {
     assert_eq!(program.constraint_groups().unwrap().random_noise, ["c1", "c2", "c3", "c4"]);
 }
 
+/// A valid program with constraints `c1..=cn` and this relational parse.
+fn parsed(n: usize, most_difficult: &str, connected: &[&str], conflicting: &[&str], confidence: f64) -> TaskProgram {
+    let mut program = TaskProgram::from_json(&base().to_string()).unwrap();
+    let template = program.constraints[1].clone();
+    program.constraints = (1..=n).map(|i| NamedConstraint { id: format!("c{i}"), ..template.clone() }).collect();
+    let ids = |list: &[&str]| list.iter().map(|id| id.to_string()).collect();
+    program.relational_parse = Some(RelationalParse {
+        most_difficult: most_difficult.into(),
+        connected: ids(connected),
+        conflicting: ids(conflicting),
+        retrieval_confidence: confidence,
+    });
+    program.validate().unwrap();
+    program
+}
+
+/// `(C_R, C1, C2)` of Algorithm 1.
+fn algorithm_1(program: &TaskProgram) -> [Vec<String>; 3] {
+    let groups = program.constraint_groups().unwrap();
+    [groups.retrieval, groups.random_noise, groups.retrieved_noise]
+}
+
+#[test]
+fn algorithm_1_on_the_dive_example_of_fig_9() {
+    // c2 (head below 0.5 m) is c_D, c3 (dive posture) connected, c1 and c4 (upright) conflicting.
+    let confident = parsed(5, "c2", &["c3"], &["c1", "c4"], 1.0);
+    assert_eq!(algorithm_1(&confident), [vec!["c2", "c3"], vec!["c1", "c3", "c4", "c5"], vec!["c2", "c3", "c5"]]);
+    // s = 0 (Rule 4): c_D is also fitted from random noise; C_R and C2 do not change.
+    let unsure = parsed(5, "c2", &["c3"], &["c1", "c4"], 0.0);
+    assert_eq!(algorithm_1(&unsure), [vec!["c2", "c3"], vec!["c1", "c2", "c3", "c4", "c5"], vec!["c2", "c3", "c5"]]);
+}
+
+#[test]
+fn algorithm_1_without_relations_and_at_the_confidence_threshold() {
+    // Three touches (Table 6): c_D alone is retrieved; C1 loses it only when confident.
+    assert_eq!(algorithm_1(&parsed(2, "c1", &[], &[], 1.0)), [vec!["c1"], vec!["c2"], vec!["c1", "c2"]]);
+    assert_eq!(algorithm_1(&parsed(2, "c1", &[], &[], 0.0)), [vec!["c1"], vec!["c1", "c2"], vec!["c1", "c2"]]);
+    // s ∈ [0, 1] reads as the paper's s ∈ {0, 1} from CONFIDENT_RETRIEVAL on.
+    assert_eq!(algorithm_1(&parsed(2, "c1", &[], &[], CONFIDENT_RETRIEVAL))[1], ["c2"]);
+    assert_eq!(algorithm_1(&parsed(2, "c1", &[], &[], 0.49))[1], ["c1", "c2"]);
+    let mut no_parse = TaskProgram::from_json(&base().to_string()).unwrap();
+    no_parse.relational_parse = None;
+    assert_eq!(no_parse.constraint_groups(), None);
+}
+
+#[test]
+fn algorithm_1_covers_every_constraint_in_the_shipped_tasks() {
+    // Eq. 4: C = C1 ∪ C2 and C_R ⊆ C2, at both confidences.
+    for (name, text) in load_library().into_iter().filter(|(name, _)| name.starts_with("rgdno_")) {
+        let mut program = TaskProgram::from_json(&text).unwrap();
+        for confidence in [0.0, 1.0] {
+            program.relational_parse.as_mut().unwrap().retrieval_confidence = confidence;
+            let [retrieval, random_noise, retrieved_noise] = algorithm_1(&program);
+            for constraint in &program.constraints {
+                let id = &constraint.id;
+                assert!(random_noise.contains(id) || retrieved_noise.contains(id), "{name}: {id} in neither set");
+            }
+            assert!(retrieval.iter().all(|id| retrieved_noise.contains(id)), "{name}: C_R not in C2");
+        }
+    }
+}
+
 #[test]
 fn frame_refs_resolve_like_progmogen() {
     assert_eq!(FrameRef::Middle.resolve(80), Some(40));

@@ -1,0 +1,34 @@
+//! The motion generator behind a planned task: the one place the command line hands a validated
+//! program to the optimiser.
+
+use std::path::PathBuf;
+
+use agent::plan::PlannedTask;
+use anyhow::Context;
+use motion_core::generation::GenerationConfig;
+use motion_core::prior::Prior;
+
+use super::run::{print_summary, run_program};
+
+/// What to generate.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// Method, samples, seed and optimiser settings.
+    pub config: GenerationConfig,
+    /// The trained prior.
+    pub prior: PathBuf,
+    /// Output folder (already holds `program.json`).
+    pub out: PathBuf,
+}
+
+/// Generates the motions of `planned` into `options.out` with the configured method (DNO by
+/// default; RG-DNO's retrieval stages will use the plan's constraint groups when they land) and
+/// prints the report's headline figures.
+pub fn run(planned: &PlannedTask, options: &RunOptions) -> anyhow::Result<()> {
+    let device = candle_core::Device::Cpu;
+    let prior = Prior::load(&options.prior, &device)
+        .with_context(|| format!("loading the prior {}", options.prior.display()))?;
+    let report = run_program(&prior, &planned.program, &options.config, &options.out)?;
+    print_summary(&report);
+    Ok(())
+}

@@ -1,0 +1,210 @@
+//! `mogen "<task>"`: a task in words → constraint program → relational parse → motions.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use agent::llm::{ApiKey, ClientConfig, Llm, LlmSettings, OutputMode, ReplySource, RetryPolicy, DEFAULT_MODEL};
+use agent::plan::{plan_from_file, plan_task, PlanSettings, PlannedTask};
+use anyhow::Context;
+use clap::Args;
+
+use super::generate::{self, RunOptions};
+use super::run::{GenerationArgs, MethodArg};
+use crate::paths;
+
+/// No `Debug`: the arguments hold the API key.
+#[derive(Args)]
+pub struct TaskArgs {
+    /// The task in words, e.g. "walk forwards through a 0.4 m wide gap and stop 5 m ahead".
+    #[arg(required_unless_present = "program")]
+    task: Option<String>,
+    /// A constraint program written by hand (JSON, like fixtures/tasks/*.json) instead of a task in
+    /// words; its relational parse is used when it has one.
+    #[arg(long, value_name = "FILE", conflicts_with = "task")]
+    program: Option<PathBuf>,
+    /// Stop after validation: print the program, the relational parse and the constraint groups.
+    #[arg(long)]
+    dry_run: bool,
+    /// Print the program before generating.
+    #[arg(long)]
+    show_program: bool,
+    /// Generation method.
+    #[arg(long, short, value_enum, default_value_t = MethodArg::Dno)]
+    method: MethodArg,
+    #[command(flatten)]
+    generation: GenerationArgs,
+    /// Output folder: program.json, features.npy, joints.npy, report.json, strip.png.
+    #[arg(long, short, default_value = "out/task")]
+    out: PathBuf,
+    /// Repair rounds per LLM stage when an answer is invalid.
+    #[arg(long, default_value_t = PlanSettings::default().max_repairs)]
+    max_repairs: u32,
+    /// RG-DNO's retrieval confidence s in [0, 1]: below 0.5 the most difficult constraint is also
+    /// fitted from random noise.
+    #[arg(long, default_value_t = PlanSettings::default().retrieval_confidence, value_parser = unit_interval)]
+    retrieval_confidence: f64,
+    #[command(flatten)]
+    llm: LlmArgs,
+}
+
+/// Where the LLM is. With no endpoint configured, replies are replayed from the recordings.
+#[derive(Args)]
+#[command(next_help_heading = "LLM")]
+struct LlmArgs {
+    /// Base URL of an OpenAI-compatible API (vLLM http://localhost:8000/v1, Ollama
+    /// http://localhost:11434/v1, llama.cpp http://localhost:8080/v1, https://api.deepseek.com/v1).
+    #[arg(long, env = "OPENAI_BASE_URL")]
+    base_url: Option<String>,
+    /// Model name.
+    #[arg(long, env = "OPENAI_MODEL", default_value = DEFAULT_MODEL)]
+    model: String,
+    /// API key (alone: OpenAI's endpoint).
+    #[arg(long, env = "OPENAI_API_KEY", hide_env_values = true)]
+    api_key: Option<String>,
+    /// Write every exchange with the endpoint to the recordings folder.
+    #[arg(long, conflicts_with = "replay")]
+    record: bool,
+    /// Answer from the recordings folder only (no network), even with an endpoint configured.
+    #[arg(long)]
+    replay: bool,
+    /// The recordings folder.
+    #[arg(long, value_name = "DIR", default_value_os_t = paths::default_recordings())]
+    recordings: PathBuf,
+    /// Structured output: json-schema (strict), json-object (schema in the prompt) or prompt-only.
+    /// Default: what the server supports, stepping down when it rejects a mode.
+    #[arg(long, value_enum)]
+    structured_output: Option<OutputMode>,
+    /// Seconds one request may take.
+    #[arg(long, value_name = "SECONDS", default_value_t = ClientConfig::default().request_timeout.as_secs())]
+    timeout: u64,
+    /// Retries of a request on 429, 5xx, connection errors and timeouts.
+    #[arg(long, default_value_t = RetryPolicy::default().max_retries)]
+    retries: u32,
+    /// Sampling temperature.
+    #[arg(long, default_value_t = 0.0)]
+    temperature: f64,
+    /// Reply token limit (default: the server's).
+    #[arg(long)]
+    max_tokens: Option<u32>,
+}
+
+impl LlmArgs {
+    fn settings(&self) -> LlmSettings {
+        let source = match (self.record, self.replay) {
+            (true, _) => Some(ReplySource::Record),
+            (_, true) => Some(ReplySource::Replay),
+            _ => None,
+        };
+        let defaults = ClientConfig::default();
+        LlmSettings {
+            base_url: self.base_url.clone().filter(|url| !url.trim().is_empty()),
+            api_key: self.api_key.clone().and_then(ApiKey::new),
+            model: self.model.clone(),
+            source,
+            recordings: self.recordings.clone(),
+            client: ClientConfig {
+                request_timeout: Duration::from_secs(self.timeout),
+                retry: RetryPolicy { max_retries: self.retries, ..defaults.retry.clone() },
+                ..defaults
+            },
+            output: self.structured_output,
+            temperature: Some(self.temperature),
+            max_tokens: self.max_tokens,
+        }
+    }
+}
+
+fn unit_interval(text: &str) -> Result<f64, String> {
+    let value: f64 = text.parse().map_err(|error| format!("{error}"))?;
+    if (0.0..=1.0).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!("{value} is not in [0, 1]"))
+    }
+}
+
+pub fn run(args: TaskArgs) -> anyhow::Result<()> {
+    let planned = match (&args.program, &args.task) {
+        (Some(path), _) => plan_from_file(path)?,
+        (None, Some(task)) => plan_words(task, &args)?,
+        (None, None) => anyhow::bail!("give a task in words or --program FILE"),
+    };
+    if args.show_program || args.dry_run {
+        println!("{}", planned.program.to_json_pretty()?);
+    }
+    print_plan(&planned);
+    if args.dry_run {
+        println!("dry run: the program is valid; stopping before generation");
+        return Ok(());
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let program_path = args.out.join("program.json");
+    std::fs::write(&program_path, planned.program.to_json_pretty()? + "\n")
+        .with_context(|| format!("writing {}", program_path.display()))?;
+    eprintln!("wrote {}", program_path.display());
+    let options = RunOptions {
+        config: args.generation.config(args.method.into()),
+        prior: args.generation.prior.clone(),
+        out: args.out.clone(),
+    };
+    generate::run(&planned, &options)
+}
+
+/// The two LLM stages for `task`.
+fn plan_words(task: &str, args: &TaskArgs) -> anyhow::Result<PlannedTask> {
+    let settings = args.llm.settings();
+    let endpoint_configured = settings.base_url.is_some() || settings.api_key.is_some();
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    runtime.block_on(async {
+        let llm = Llm::connect(settings)?;
+        if llm.source() == ReplySource::Replay && !endpoint_configured {
+            eprintln!(
+                "no LLM endpoint configured (--base-url / OPENAI_BASE_URL, --api-key / OPENAI_API_KEY): \
+                 replaying recorded replies"
+            );
+        }
+        eprintln!("LLM: {}", llm.describe());
+        let plan = PlanSettings { max_repairs: args.max_repairs, retrieval_confidence: args.retrieval_confidence };
+        Ok(plan_task(task, &llm, &plan).await?)
+    })
+}
+
+/// The relational parse and the groups of Algorithm 1, on stdout.
+fn print_plan(planned: &PlannedTask) {
+    let program = &planned.program;
+    println!(
+        "program: {} constraint(s), {} frames, prompt {:?}",
+        program.constraints.len(),
+        program.frames,
+        program.text
+    );
+    for constraint in &program.constraints {
+        println!("  {}: {}", constraint.id, constraint.description.as_deref().unwrap_or("(no description)"));
+    }
+    let Some(parse) = &program.relational_parse else {
+        println!("no relational parse: every constraint is fitted from random noise");
+        return;
+    };
+    println!(
+        "relational parse: most difficult {}; connected {}; conflicting {}; retrieval confidence {}",
+        parse.most_difficult,
+        set(&parse.connected),
+        set(&parse.conflicting),
+        parse.retrieval_confidence
+    );
+    if let Some(analysis) = &planned.analysis {
+        println!("  analysis: {analysis}");
+    }
+    if let Some(groups) = &planned.groups {
+        println!(
+            "Algorithm 1: C_R = {}, C1 = {}, C2 = {}",
+            set(&groups.retrieval),
+            set(&groups.random_noise),
+            set(&groups.retrieved_noise)
+        );
+    }
+}
+
+fn set(ids: &[String]) -> String {
+    format!("{{{}}}", ids.join(", "))
+}
