@@ -1,5 +1,8 @@
 //! The motion database built from the shipped catalog, as `mogen data build` does.
 
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use e2e_tests::fixtures;
 use motion_core::database::catalog::Catalog;
 use motion_core::database::{DatabaseConfig, MotionDatabase};

@@ -1,6 +1,9 @@
 //! Constrained generation end to end with the shipped prior: a program compiled, every method
 //! run on a short clip, the report's figures checked.
 
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use candle_core::Device;
 use e2e_tests::fixtures;
 use motion_core::constraints::CompiledProgram;

@@ -1,5 +1,8 @@
 //! Real motion capture through the importers and the 263-d representation.
 
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use e2e_tests::{fixtures, recover};
 use motion_core::database::catalog::Catalog;
 use motion_core::import::deepmimic::DeepMimicClip;

@@ -1,6 +1,9 @@
 //! The shipped prior (`fixtures/model/prior.safetensors`): determinism, inversion, and the
 //! quality of unconstrained walks against the training walks.
 
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use candle_core::{Device, Tensor};
 use e2e_tests::fixtures;
 use motion_core::database::catalog::Catalog;

@@ -2,6 +2,9 @@
 //! gradient of a joint-space loss w.r.t. the start noise is finite, non-zero and matches finite
 //! differences.
 
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use candle_core::{DType, Device, Tensor};
 use motion_core::diffusion::{DdimSampler, Guidance, NoiseSchedule};
 use motion_core::model::{Mdm, MdmConfig};

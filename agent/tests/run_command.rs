@@ -1,5 +1,8 @@
 //! `mogen run` as a user calls it: outputs on success, clear errors on bad programs.
 
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use std::path::Path;
 use std::process::{Command, Output};
 
