@@ -46,7 +46,7 @@ enum Command {
     /// Reports: `prior` compares unconstrained samples with the training data per label.
     #[command(subcommand)]
     Report(ReportCommand),
-    /// Benchmarks: `prior` times the denoiser, sampling and the DNO step.
+    /// Benchmarks: `prior` (denoiser and DNO-step speed), `tasks` (results table), `dno` (full DNO run time).
     #[command(subcommand)]
     Bench(BenchCommand),
 }
