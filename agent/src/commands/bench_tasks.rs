@@ -2,7 +2,7 @@
 //! (markdown + JSON); `mogen bench dno`: the time of a full DNO run.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -11,10 +11,9 @@ use motion_core::constraints::CompiledProgram;
 use motion_core::evaluation::TaskReport;
 use motion_core::generation::{generate, GenerationConfig, Method};
 use motion_core::prior::Prior;
-use motion_core::program::TaskProgram;
 use serde::{Deserialize, Serialize};
 
-use super::run::{run_program, GenerationArgs, MethodArg};
+use super::run::{load_program, run_program, GenerationArgs, MethodArg};
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -65,10 +64,7 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
     };
     for file in &files {
         let task = file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let text = std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
-        let program = TaskProgram::from_json_validated(&text).map_err(|e| {
-            anyhow::anyhow!("{}: {}", file.display(), e.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; "))
-        })?;
+        let program = load_program(file)?;
         for &method in &args.methods {
             let method = Method::from(method);
             if rows.iter().any(|r| r.task == task && r.report.config.method == method) {
@@ -197,11 +193,4 @@ pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
         println!("| {batch} | {total:.1} | {:.4} | {first:.5} → {last:.5} |", total / args.steps as f64);
     }
     Ok(())
-}
-
-fn load_program(path: &Path) -> anyhow::Result<TaskProgram> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    TaskProgram::from_json_validated(&text).map_err(|e| {
-        anyhow::anyhow!("{}: {}", path.display(), e.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; "))
-    })
 }

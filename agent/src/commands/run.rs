@@ -98,12 +98,7 @@ pub struct RunArgs {
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&args.program)
-        .with_context(|| format!("reading the program {}", args.program.display()))?;
-    let program = TaskProgram::from_json_validated(&text).map_err(|errors| {
-        let list: Vec<String> = errors.iter().map(|e| format!("  - {e}")).collect();
-        anyhow::anyhow!("{} is not a valid program:\n{}", args.program.display(), list.join("\n"))
-    })?;
+    let program = load_program(&args.program)?;
     let device = candle_core::Device::Cpu;
     let prior = Prior::load(&args.generation.prior, &device)
         .with_context(|| format!("loading the prior {}", args.generation.prior.display()))?;
@@ -111,6 +106,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let report = run_program(&prior, &program, &config, &args.out)?;
     print_summary(&report);
     Ok(())
+}
+
+/// Reads and validates a program file; the error lists every problem with its JSON path.
+pub fn load_program(path: &Path) -> anyhow::Result<TaskProgram> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading the program {}", path.display()))?;
+    TaskProgram::from_json_validated(&text).map_err(|errors| {
+        let list: Vec<String> = errors.iter().map(|e| format!("  - {e}")).collect();
+        anyhow::anyhow!("{} is not a valid program:\n{}", path.display(), list.join("\n"))
+    })
 }
 
 /// Generates motions for `program` and writes features.npy, joints.npy, report.json and

@@ -104,6 +104,7 @@ fn head_directions() -> Vec<[f64; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diffusion::noise::gaussian;
     use crate::testing::finite_difference_check;
     use candle_core::{DType, Device};
 
@@ -153,10 +154,10 @@ mod tests {
 
     #[test]
     fn surface_gradient_matches_finite_differences() {
-        let joints =
-            (tpose() + Tensor::randn(0.0, 0.02, (1, 1, 22, 3), &Device::Cpu).unwrap().to_dtype(DType::F64)).unwrap();
-        let weights =
-            Tensor::randn(0.0, 1.0, (1, 1, SURFACE_POINTS, 3), &Device::Cpu).unwrap().to_dtype(DType::F64).unwrap();
+        let joints = (tpose()
+            + (gaussian((1, 1, 22, 3), 1, &Device::Cpu).unwrap().to_dtype(DType::F64).unwrap() * 0.02))
+            .unwrap();
+        let weights = gaussian((1, 1, SURFACE_POINTS, 3), 2, &Device::Cpu).unwrap().to_dtype(DType::F64).unwrap();
         finite_difference_check(&joints, |j| surface_points(j)?.broadcast_mul(&weights)?.sum_all(), 1e-6, 1e-4)
             .unwrap();
     }

@@ -26,7 +26,7 @@ pub use body::{bone_radius_m, surface_points, HEAD_RADIUS_M, SURFACE_POINTS};
 pub use geometry::NORM_EPS;
 pub use probe::{probe_motion, GradientCheck, STANDING};
 pub use scene::{is_obstacle, primitive_error};
-pub use signal::{centre_of_mass_weights, point, root_relative, signal};
+pub use signal::{centre_of_mass_weights, point, root_relative, second_difference, signal};
 pub use support::FOOT_HALF_WIDTH_M;
 
 use crate::program::{
@@ -249,7 +249,7 @@ impl CompiledProgram {
         Ok(worst)
     }
 
-    /// The first counting constraint's target count and signals, for the step-count metric.
+    /// `(constraint id, target count)` of every counting expression, for the step-count metric.
     pub fn count_targets(&self) -> Vec<(String, u32)> {
         let mut found = Vec::new();
         for c in &self.constraints {
@@ -283,29 +283,38 @@ impl Compiler<'_> {
         Tensor::from_vec(joints.iter().map(|j| j.index() as u32).collect::<Vec<_>>(), joints.len(), self.device)
     }
 
+    fn compare(
+        &self,
+        quantity: &Quantity,
+        comparison: Comparison,
+        frames: &crate::program::FrameSelection,
+        when: &Option<Condition>,
+        reduce: Reduce,
+    ) -> Result<Node> {
+        Ok(Node::Compare {
+            quantity: quantity.clone(),
+            comparison,
+            frames: self.select(frames, self.length(quantity))?,
+            when: when.clone(),
+            reduce,
+        })
+    }
+
     fn expr(&self, id: &str, expr: &Expr) -> Result<Node> {
         Ok(match expr {
-            Expr::Equal(Equal { quantity, target, metric, frames, when, reduce }) => Node::Compare {
-                quantity: quantity.clone(),
-                comparison: Comparison::Equal { target: target.clone(), metric: *metric },
-                frames: self.select(frames, self.length(quantity))?,
-                when: when.clone(),
-                reduce: *reduce,
-            },
-            Expr::LessThan(LessThan { quantity, max, frames, when, reduce }) => Node::Compare {
-                quantity: quantity.clone(),
-                comparison: Comparison::LessThan(*max),
-                frames: self.select(frames, self.length(quantity))?,
-                when: when.clone(),
-                reduce: *reduce,
-            },
-            Expr::GreaterThan(GreaterThan { quantity, min, frames, when, reduce }) => Node::Compare {
-                quantity: quantity.clone(),
-                comparison: Comparison::GreaterThan(*min),
-                frames: self.select(frames, self.length(quantity))?,
-                when: when.clone(),
-                reduce: *reduce,
-            },
+            Expr::Equal(Equal { quantity, target, metric, frames, when, reduce }) => self.compare(
+                quantity,
+                Comparison::Equal { target: target.clone(), metric: *metric },
+                frames,
+                when,
+                *reduce,
+            )?,
+            Expr::LessThan(LessThan { quantity, max, frames, when, reduce }) => {
+                self.compare(quantity, Comparison::LessThan(*max), frames, when, *reduce)?
+            }
+            Expr::GreaterThan(GreaterThan { quantity, min, frames, when, reduce }) => {
+                self.compare(quantity, Comparison::GreaterThan(*min), frames, when, *reduce)?
+            }
             Expr::And(args) => Node::And(args.args.iter().map(|a| self.expr(id, a)).collect::<Result<_>>()?),
             Expr::Or(args) => Node::Or(args.args.iter().map(|a| self.expr(id, a)).collect::<Result<_>>()?),
             Expr::Not(not) => Node::Not { arg: Box::new(self.expr(id, &not.arg)?), margin: not.margin },

@@ -102,14 +102,7 @@ pub fn signal(joints: &Tensor, quantity: &Quantity) -> Result<Tensor> {
             norm(&select_axes(&velocity(&point(joints, of)?)?, *axes)?)?.unsqueeze(D::Minus1)
         }
         Quantity::Acceleration(Derivative { of, axes }) => {
-            let p = point(joints, of)?;
-            let frames = p.dim(1)?;
-            if frames < 3 {
-                candle_core::bail!("an acceleration needs at least 3 frames, the motion has {frames}");
-            }
-            let second = ((p.narrow(1, 2, frames - 2)? - (p.narrow(1, 1, frames - 2)? * 2.0)?)?
-                + p.narrow(1, 0, frames - 2)?)?;
-            select_axes(&(second * (FPS * FPS))?, *axes)
+            select_axes(&(second_difference(&point(joints, of)?)? * (FPS * FPS))?, *axes)
         }
         Quantity::Distance(Distance { a, b, axes }) => {
             let d = (point(joints, a)? - point(joints, b)?)?;
@@ -146,6 +139,16 @@ pub fn velocity(p: &Tensor) -> Result<Tensor> {
         candle_core::bail!("a velocity needs at least 2 frames, the motion has {frames}");
     }
     (p.narrow(1, 1, frames - 1)? - p.narrow(1, 0, frames - 1)?)? * FPS
+}
+
+/// Second difference along axis 1 (frames), `x[t+2] − 2·x[t+1] + x[t]`: `[B, T − 2, ..]` in
+/// units per frame².
+pub fn second_difference(x: &Tensor) -> Result<Tensor> {
+    let frames = x.dim(1)?;
+    if frames < 3 {
+        candle_core::bail!("an acceleration needs at least 3 frames, the motion has {frames}");
+    }
+    (x.narrow(1, 2, frames - 2)? - (x.narrow(1, 1, frames - 2)? * 2.0)?)? + x.narrow(1, 0, frames - 2)?
 }
 
 /// `p` `[B, T, 3]` in HumanML3D's root frame: relative to the pelvis on the ground plane (y

@@ -52,7 +52,8 @@ fn close(expr: &str, motion: &[[[f64; 3]; NUM_JOINTS]], expected: f64) {
 fn gradient_ok(expr: &str, motion: &[[[f64; 3]; NUM_JOINTS]]) {
     let compiled = compile(motion.len(), expr);
     let base = tensor(motion);
-    let jitter = Tensor::randn(0.0, 0.004, base.shape(), &Device::Cpu).unwrap().to_dtype(DType::F64).unwrap();
+    let jitter = (random_motion(motion.len(), 11) - tensor(&glide(motion.len()))).unwrap() * 0.02;
+    let jitter = jitter.unwrap();
     let x = (base + jitter).unwrap();
     let initial = (&x + 0.03).unwrap().detach();
     finite_difference_check(
@@ -449,16 +450,17 @@ fn every_shipped_task_compiles_and_has_a_gradient() {
     assert!(tasks.len() >= 20);
     for (name, task) in tasks {
         let compiled = CompiledProgram::compile(&task, &Device::Cpu).unwrap_or_else(|e| panic!("{name}: {e}"));
+        // On a jittered walk (seeded) the loss is positive and finite ...
         let motion = tensor(&glide(task.frames as usize));
-        let jitter = Tensor::randn(0.0, 0.05, motion.shape(), &Device::Cpu).unwrap().to_dtype(DType::F64).unwrap();
-        let x = candle_core::Var::from_tensor(&(motion + jitter).unwrap()).unwrap();
+        let jitter = ((random_motion(task.frames as usize, 7) - &motion).unwrap() * 0.25).unwrap();
+        let x = (motion + jitter).unwrap();
         let initial = tensor(&glide(task.frames as usize));
-        let e = compiled.evaluate(x.as_tensor(), Some(&initial)).unwrap();
-        let total = e.total.to_vec1::<f64>().unwrap()[0];
+        let total = compiled.evaluate(&x, Some(&initial)).unwrap().total.to_vec1::<f64>().unwrap()[0];
         assert!(total.is_finite() && total > 0.0, "{name}: {total}");
-        let grad = e.total.sum_all().unwrap().backward().unwrap();
-        let g = grad.get(x.as_tensor()).unwrap().sqr().unwrap().sum_all().unwrap().to_scalar::<f64>().unwrap();
-        assert!(g.is_finite() && g > 0.0, "{name}: gradient norm² {g}");
+        // ... and on the probe walk it has a gradient (counting softened: at T = 10⁴ a count far
+        // from its events is flat by design, e.g. three touches of a target out of reach).
+        let check = compiled.gradient_check().unwrap();
+        assert!(check.gradient_norm.is_finite() && check.gradient_norm > 0.0, "{name}: {check:?}");
     }
 }
 

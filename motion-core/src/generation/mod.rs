@@ -103,8 +103,7 @@ pub fn jitter_penalty(joints: &Tensor, limit: f64) -> candle_core::Result<Tensor
     if frames < 3 {
         return Tensor::zeros(batch, joints.dtype(), joints.device());
     }
-    let a = ((joints.narrow(1, 2, frames - 2)? - (joints.narrow(1, 1, frames - 2)? * 2.0)?)?
-        + joints.narrow(1, 0, frames - 2)?)?;
+    let a = crate::constraints::second_difference(joints)?;
     let norm = (a.sqr()?.sum(candle_core::D::Minus1)? + crate::constraints::NORM_EPS)?.sqrt()?;
     (norm - limit)?.relu()?.sqr()?.reshape((batch, ()))?.sum(candle_core::D::Minus1)
 }
@@ -193,29 +192,27 @@ pub fn generate(
     let z0 = gaussian(shape, config.seed, device)?;
     let x0 = solver.sampler.sample(solver.denoiser, &z0, &solver.text, solver.guidance)?;
     let initial_joints = prior.to_joints(&x0)?;
-    let criterion = |x: &Tensor| -> candle_core::Result<Tensor> {
+    // The program's loss on the recovered joints, plus `jitter_weight ×` the jitter guard.
+    let objective = |x: &Tensor, jitter_weight: f64| -> candle_core::Result<Tensor> {
         let joints = prior.to_joints(x)?;
-        Ok(compiled.evaluate(&joints, Some(&initial_joints)).map_err(candle_core::Error::wrap)?.total)
+        let error = compiled.evaluate(&joints, Some(&initial_joints)).map_err(candle_core::Error::wrap)?.total;
+        if jitter_weight > 0.0 {
+            error + (jitter_penalty(&joints, JITTER_LIMIT)? * jitter_weight)?
+        } else {
+            Ok(error)
+        }
     };
     let (features, loss_history) = match config.method {
         Method::Unconstrained => (x0, vec![Vec::new(); config.samples]),
         Method::Ik | Method::IkReg => {
             let smoothness = if config.method == Method::IkReg { config.direct.smoothness_weight } else { 0.0 };
-            direct::optimize_motion(&x0, &criterion, &config.direct, smoothness, |step, loss| {
+            direct::optimize_motion(&x0, &|x: &Tensor| objective(x, 0.0), &config.direct, smoothness, |step, loss| {
                 progress(&Progress { round: 0, step, steps: config.direct.steps, loss })
             })?
         }
         Method::Dno => {
             let dno = DnoConfig { seed: config.seed, ..config.dno.clone() };
-            let guarded = |x: &Tensor| -> candle_core::Result<Tensor> {
-                let joints = prior.to_joints(x)?;
-                let error = compiled.evaluate(&joints, Some(&initial_joints)).map_err(candle_core::Error::wrap)?.total;
-                if config.jitter_weight > 0.0 {
-                    error + (jitter_penalty(&joints, JITTER_LIMIT)? * config.jitter_weight)?
-                } else {
-                    Ok(error)
-                }
-            };
+            let guarded = |x: &Tensor| objective(x, config.jitter_weight);
             let run = optimize_with_restarts(&solver as &dyn Solver, guarded, shape, device, &dno, |round, s| {
                 let loss = s.loss.iter().sum::<f64>() / s.loss.len().max(1) as f64;
                 progress(&Progress { round, step: s.step, steps: s.steps, loss })
