@@ -7,7 +7,7 @@
 
 use std::future::Future;
 use std::io::Write;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 use agent::llm::wire::ReplyMessage;
@@ -283,9 +283,24 @@ async fn a_rejected_json_schema_steps_down_to_json_object() {
     assert_eq!(server.received().len(), 1);
 }
 
-/// Log lines written by `tracing` while a test runs.
+/// Log lines written by `tracing` while this binary's tests run.
 #[derive(Clone, Default)]
 struct Logs(Arc<Mutex<Vec<u8>>>);
+
+/// The process-wide log capture. A global subscriber, not a scoped one: with `set_default`,
+/// tests running in parallel threads raced on tracing's callsite interest cache and the capture
+/// sometimes missed the events.
+fn captured_logs() -> Logs {
+    static LOGS: OnceLock<Logs> = OnceLock::new();
+    LOGS.get_or_init(|| {
+        let logs = Logs::default();
+        let subscriber =
+            tracing_subscriber::fmt().with_writer(logs.clone()).with_max_level(tracing::Level::TRACE).finish();
+        tracing::subscriber::set_global_default(subscriber).unwrap();
+        logs
+    })
+    .clone()
+}
 
 impl Write for Logs {
     fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
@@ -306,9 +321,7 @@ impl<'a> tracing_subscriber::fmt::MakeWriter<'a> for Logs {
 
 #[tokio::test]
 async fn the_api_key_never_appears_in_logs_errors_or_recordings() {
-    let logs = Logs::default();
-    let subscriber = tracing_subscriber::fmt().with_writer(logs.clone()).with_max_level(tracing::Level::TRACE).finish();
-    let _guard = tracing::subscriber::set_default(subscriber);
+    let logs = captured_logs();
     let recordings = tempfile::tempdir().unwrap();
     let recording = |server: &LlmServer| LlmSettings {
         source: Some(ReplySource::Record),
