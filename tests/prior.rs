@@ -8,10 +8,11 @@ use candle_core::{Device, Tensor};
 use e2e_tests::fixtures;
 use motion_core::database::catalog::Catalog;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
-use motion_core::diffusion::{DdimSampler, Guidance, NoiseSchedule};
+use motion_core::diffusion::Guidance;
+use motion_core::inversion::InversionConfig;
 use motion_core::metrics::foot_skate_ratio;
 use motion_core::prior::Prior;
-use motion_core::quality::{joints_of, tensor_to_poses};
+use motion_core::quality::{self, joints_of, tensor_to_poses};
 use motion_core::representation::recover_from_ric;
 use motion_core::skeleton::{Joint, Pose};
 
@@ -39,53 +40,26 @@ fn the_same_seed_gives_the_same_motion() {
     assert!(diff(&a, &c) > 0.1);
 }
 
-/// Inverts the first walk window of 120 frames with DDIM-100 and samples it back; returns
-/// (mean joint error, mean pelvis-relative joint error), metres.
-fn inversion_round_trip() -> (f32, f32) {
-    let p = prior();
-    let db = database();
-    let window = db.windows()[0];
-    let raw = db.window_tensor(&window, &Device::Cpu).unwrap().narrow(0, 0, 120).unwrap().unsqueeze(0).unwrap();
-    let x0 = p.mean_std.normalize(&raw).unwrap();
-    let text = p.encode_text(&[WALK], &Device::Cpu).unwrap();
-    let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 100).unwrap();
-    let z = sampler.invert(&p.mdm, &x0, &text, Guidance::none()).unwrap();
-    let back = sampler.sample(&p.mdm, &z, &text, Guidance::none()).unwrap();
-    let original = recover_from_ric(&raw).unwrap();
-    let rebuilt = p.to_joints(&back).unwrap();
-    let mean_dist = |a: &Tensor, b: &Tensor| {
-        (a - b)
-            .unwrap()
-            .sqr()
-            .unwrap()
-            .sum_keepdim(3)
-            .unwrap()
-            .sqrt()
-            .unwrap()
-            .mean_all()
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap()
-    };
-    let rel = |j: &Tensor| j.broadcast_sub(&j.narrow(2, 0, 1).unwrap()).unwrap();
-    let global = mean_dist(&original, &rebuilt);
-    let relative = mean_dist(&rel(&original), &rel(&rebuilt));
-    println!("DDIM-100 inversion and sampling: mean joint error {global:.4} m, pelvis-relative {relative:.4} m");
-    (global, relative)
+/// Inverts the first walk window of 120 frames and samples it back; returns (mean joint error,
+/// mean pelvis-relative joint error), metres.
+fn inversion_round_trip(config: &InversionConfig) -> (f64, f64) {
+    let r = quality::inversion_round_trip(&prior(), &database(), WALK, (1, 120), config, &Device::Cpu).unwrap();
+    println!("{config:?}: mean joint error {:.4} m, pelvis-relative {:.4} m", r.mean_joint_error_m, r.pelvis_relative_error_m);
+    (r.mean_joint_error_m, r.pelvis_relative_error_m)
 }
 
 #[test]
-fn ddim_inversion_then_sampling_reproduces_the_pose_of_a_database_window() {
-    let (_, relative) = inversion_round_trip();
+fn classic_ddim100_inversion_then_sampling_reproduces_the_pose_of_a_database_window() {
+    let classic = InversionConfig { ddim_steps: 100, fixed_point_iterations: 0, polish_steps: 0, ..InversionConfig::default() };
+    let (_, relative) = inversion_round_trip(&classic);
     assert!(relative <= 0.05, "pelvis-relative joint error {relative} m");
 }
 
-/// Issue 3's bar for the whole motion, trajectory included. The shipped prior reproduces the
-/// poses (test above) but its root velocities drift: 0.38 m mean error at the time of writing.
+/// Issue 3's bar for the whole motion, trajectory included, with the default inversion
+/// (ddim10, fixed-point, DNO polish).
 #[test]
-#[ignore = "acceptance target not yet met by the shipped prior (trajectory drift); run with --ignored"]
-fn ddim_inversion_then_sampling_reproduces_a_database_window_within_5cm() {
-    let (global, _) = inversion_round_trip();
+fn inversion_then_sampling_reproduces_a_database_window_within_5cm() {
+    let (global, _) = inversion_round_trip(&InversionConfig::default());
     assert!(global <= 0.05, "mean joint error {global} m");
 }
 

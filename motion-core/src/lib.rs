@@ -10,6 +10,7 @@ pub mod dno;
 pub mod evaluation;
 pub mod generation;
 pub mod import;
+pub mod inversion;
 pub mod metrics;
 pub mod model;
 pub mod motion;

@@ -52,6 +52,17 @@ pub fn max_acceleration(poses: &[Pose]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Horizontal (x–z) distance of the pelvis from the first to the last frame, m (0 when empty).
+pub fn root_travel(poses: &[Pose]) -> f64 {
+    match (poses.first(), poses.last()) {
+        (Some(a), Some(b)) => {
+            let d = b[Joint::Pelvis.index()] - a[Joint::Pelvis.index()];
+            d.x.hypot(d.z)
+        }
+        _ => 0.0,
+    }
+}
+
 /// Largest difference between any bone's longest and shortest length over the motion, m.
 pub fn bone_length_range(poses: &[Pose]) -> f64 {
     let mut lo = [f64::INFINITY; NUM_JOINTS];
@@ -193,6 +204,15 @@ mod tests {
 
     fn still(frames: usize) -> Vec<Pose> {
         vec![[DVec3::new(0.0, 0.01, 0.0); NUM_JOINTS]; frames]
+    }
+
+    #[test]
+    fn travel_is_the_horizontal_pelvis_displacement() {
+        let mut poses = still(3);
+        poses[2][Joint::Pelvis.index()] = DVec3::new(3.0, 5.0, 4.0);
+        poses[1][Joint::Pelvis.index()] = DVec3::new(-9.0, 0.0, 0.0);
+        assert_eq!(root_travel(&poses), 5.0);
+        assert_eq!(root_travel(&[]), 0.0);
     }
 
     #[test]

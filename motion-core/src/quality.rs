@@ -6,7 +6,8 @@ use serde::Serialize;
 
 use crate::database::MotionDatabase;
 use crate::diffusion::Guidance;
-use crate::metrics::{bone_length_range, foot_skate_ratio, ground_penetration, max_acceleration};
+use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
+use crate::metrics::{bone_length_range, foot_skate_ratio, ground_penetration, max_acceleration, pace, root_travel};
 use crate::prior::{Prior, PriorError};
 use crate::representation::{recover_from_ric, RIC};
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
@@ -24,6 +25,10 @@ pub struct MetricMeans {
     pub ground_penetration_m: f64,
     /// Mean head height, m.
     pub head_height_m: f64,
+    /// Horizontal pelvis travel from first to last frame, m.
+    pub travel_m: f64,
+    /// Steps per second ([`crate::metrics::pace`]).
+    pub steps_per_second: f64,
     /// Motions measured.
     pub count: usize,
 }
@@ -41,6 +46,8 @@ impl MetricMeans {
             head_height_m: mean(&|m: &[Pose]| {
                 m.iter().map(|p| p[Joint::Head.index()].y).sum::<f64>() / m.len().max(1) as f64
             }),
+            travel_m: mean(&root_travel),
+            steps_per_second: mean(&|m: &[Pose]| pace(m).0),
             count: motions.len(),
         }
     }
@@ -78,11 +85,13 @@ pub struct QualityConfig {
     pub guidance: f64,
     /// Seed of the first label's noise; label i uses seed + i.
     pub seed: u64,
+    /// Only these labels (all of the database's when empty).
+    pub labels: Vec<String>,
 }
 
 impl Default for QualityConfig {
     fn default() -> Self {
-        Self { samples_per_label: 32, frames: 120, ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0 }
+        Self { samples_per_label: 32, frames: 120, ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0, labels: Vec::new() }
     }
 }
 
@@ -129,8 +138,17 @@ pub fn quality_report(
         .collect::<candle_core::Result<_>>()
         .map_err(fail)?;
     let train_desc = descriptors(&crops.iter().map(|c| c.2.clone()).collect::<Vec<_>>()).map_err(fail)?;
+    if let Some(unknown) = config.labels.iter().find(|l| !db.labels().contains(l)) {
+        return Err(PriorError::Format {
+            path: "<quality report>".into(),
+            message: format!("label `{unknown}` is not in the database (labels: {})", db.labels().join("; ")),
+        });
+    }
     let mut rows = Vec::new();
     for (i, label) in db.labels().iter().enumerate() {
+        if !config.labels.is_empty() && !config.labels.contains(label) {
+            continue;
+        }
         let x = prior.sample(
             label,
             t,
@@ -186,6 +204,73 @@ pub fn quality_report(
         rows.push(row);
     }
     Ok(rows)
+}
+
+/// How well inversion followed by sampling reproduces training windows.
+#[derive(Debug, Clone, Serialize)]
+pub struct RoundTrip {
+    /// Windows inverted.
+    pub windows: usize,
+    /// Frames per window.
+    pub frames: usize,
+    /// DDIM steps, fixed-point iterations and polish steps used.
+    pub ddim_steps: usize,
+    /// Fixed-point iterations per inversion step (0 = classic DDIM inversion).
+    pub fixed_point_iterations: usize,
+    /// DNO polish steps (0 = none).
+    pub polish_steps: usize,
+    /// Mean over windows, frames and joints of the world-frame joint error, m (the whole
+    /// motion, trajectory included).
+    pub mean_joint_error_m: f64,
+    /// The same with each frame's pelvis subtracted: the poses alone, m.
+    pub pelvis_relative_error_m: f64,
+}
+
+/// Inverts the first `windows` training windows of `label` (their first `frames` frames,
+/// conditioned on the label) with [`invert_motion`] and samples them back.
+pub fn inversion_round_trip(
+    prior: &Prior,
+    db: &MotionDatabase,
+    label: &str,
+    (windows, frames): (usize, usize),
+    config: &InversionConfig,
+    device: &Device,
+) -> Result<RoundTrip, PriorError> {
+    let fail = |e: candle_core::Error| PriorError::Format { path: "<inversion round trip>".into(), message: e.to_string() };
+    let crops = db
+        .windows()
+        .iter()
+        .filter(|w| db.label(w) == label && w.frames >= frames)
+        .take(windows)
+        .map(|w| db.window_tensor(w, device)?.narrow(0, 0, frames))
+        .collect::<candle_core::Result<Vec<_>>>()
+        .map_err(fail)?;
+    if crops.is_empty() {
+        return Err(PriorError::Format {
+            path: "<inversion round trip>".into(),
+            message: format!("no window of `{label}` has {frames} frames"),
+        });
+    }
+    let raw = Tensor::stack(&crops, 0).map_err(fail)?;
+    let x0 = prior.mean_std.normalize(&raw).map_err(fail)?;
+    let text = prior.encode_text(&vec![label; crops.len()], device).map_err(fail)?;
+    let back = invert_motion(prior, &x0, &text, config, |_| {}).map_err(fail)?.x;
+    let original = recover_from_ric(&raw).map_err(fail)?;
+    let rebuilt = prior.to_joints(&back).map_err(fail)?;
+    let error = |a: &Tensor, b: &Tensor| -> candle_core::Result<f64> {
+        mean_joint_distance(a, b)?.mean_all()?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()
+    };
+    let relative = |j: &Tensor| j.broadcast_sub(&j.narrow(2, 0, 1)?);
+    Ok(RoundTrip {
+        windows: crops.len(),
+        frames,
+        ddim_steps: config.ddim_steps,
+        fixed_point_iterations: config.fixed_point_iterations,
+        polish_steps: config.polish_steps,
+        mean_joint_error_m: error(&original, &rebuilt).map_err(fail)?,
+        pelvis_relative_error_m: error(&relative(&original).map_err(fail)?, &relative(&rebuilt).map_err(fail)?)
+            .map_err(fail)?,
+    })
 }
 
 /// Heading-free pose descriptors `[n, frames·63]`: the root-relative joint positions (ric) of

@@ -6,7 +6,8 @@ use anyhow::Context;
 use clap::Args;
 use motion_core::database::MotionDatabase;
 use motion_core::prior::Prior;
-use motion_core::quality::{quality_report, QualityConfig};
+use motion_core::inversion::InversionConfig;
+use motion_core::quality::{inversion_round_trip, quality_report, QualityConfig};
 use motion_core::render::{motion_strip, StripRow};
 
 use crate::paths;
@@ -28,9 +29,25 @@ pub struct ReportArgs {
     /// DDIM steps.
     #[arg(long, default_value_t = QualityConfig::default().ddim_steps)]
     steps: usize,
+    /// Classifier-free guidance scale (1 = conditional model alone).
+    #[arg(long, default_value_t = QualityConfig::default().guidance)]
+    guidance: f64,
+    /// Only this label (repeatable; all labels when absent), e.g. "a person walks forward".
+    #[arg(long = "label")]
+    labels: Vec<String>,
     /// Seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// DDIM steps of the inversion round trips (the sampler the noise is for).
+    #[arg(long, default_value_t = InversionConfig::default().ddim_steps)]
+    invert_steps: usize,
+    /// Fixed-point iterations per inversion step (the first round trip uses 0, the classic
+    /// DDIM inversion).
+    #[arg(long, default_value_t = InversionConfig::default().fixed_point_iterations)]
+    invert_iterations: usize,
+    /// DNO steps polishing the inverted noise in the third round trip.
+    #[arg(long, default_value_t = InversionConfig::default().polish_steps)]
+    polish_steps: usize,
     /// Output folder (report.json, report.md, samples.png).
     #[arg(long, short, default_value = "out/report")]
     out: PathBuf,
@@ -45,15 +62,16 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         samples_per_label: args.samples,
         frames: args.frames,
         ddim_steps: args.steps,
+        guidance: args.guidance,
         seed: args.seed,
-        ..QualityConfig::default()
+        labels: args.labels,
     };
-    let header = "| label | skate gen / data | max acc gen / data (m/frame²) | bone range gen (m) | penetration gen / data (m) | head y gen / data (m) | nearest train (m) | data spacing (m) | diversity (m) |";
-    let mut lines = vec![header.to_owned(), "|---|---|---|---|---|---|---|---|---|".to_owned()];
+    let header = "| label | skate gen / data | max acc gen / data (m/frame²) | bone range gen (m) | penetration gen / data (m) | head y gen / data (m) | travel gen / data (m) | steps/s gen / data | nearest train (m) | data spacing (m) | diversity (m) |";
+    let mut lines = vec![header.to_owned(), "|---|---|---|---|---|---|---|---|---|---|---|".to_owned()];
     println!("{header}");
     let rows = quality_report(&prior, &db, &config, &device, |r| {
         let line = format!(
-            "| {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.3} / {:.3} | {:.2} / {:.2} | {:.3} | {:.3} | {:.3} |",
+            "| {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.3} / {:.3} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {:.3} | {:.3} | {:.3} |",
             r.label,
             r.samples.foot_skate_ratio,
             r.training.foot_skate_ratio,
@@ -64,6 +82,10 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
             r.training.ground_penetration_m,
             r.samples.head_height_m,
             r.training.head_height_m,
+            r.samples.travel_m,
+            r.training.travel_m,
+            r.samples.steps_per_second,
+            r.training.steps_per_second,
             r.nearest_training_m,
             r.training_spacing_m,
             r.sample_diversity_m
@@ -71,6 +93,21 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         println!("{line}");
         lines.push(line);
     })?;
+    lines.push(String::new());
+    let walk = "a person walks forward";
+    if db.labels().iter().any(|l| l == walk) {
+        let base = InversionConfig { ddim_steps: args.invert_steps, ..InversionConfig::default() };
+        for (iterations, polish) in [(0, 0), (args.invert_iterations, 0), (args.invert_iterations, args.polish_steps)] {
+            let config = InversionConfig { fixed_point_iterations: iterations, polish_steps: polish, ..base.clone() };
+            let r = inversion_round_trip(&prior, &db, walk, (8, 120), &config, &device)?;
+            let line = format!(
+                "DDIM-{} inversion ({} fixed-point iterations, {} polish steps) then sampling of {} `{walk}` windows ({} frames): mean joint error {:.4} m, pelvis-relative {:.4} m",
+                r.ddim_steps, r.fixed_point_iterations, r.polish_steps, r.windows, r.frames, r.mean_joint_error_m, r.pelvis_relative_error_m
+            );
+            println!("{line}");
+            lines.push(line + "  ");
+        }
+    }
     std::fs::create_dir_all(&args.out)?;
     std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
     std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&rows)?)?;
@@ -90,7 +127,7 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
                 1,
                 1000 + 10 * i as u64 + seed,
                 args.steps,
-                Default::default(),
+                motion_core::diffusion::Guidance { scale: args.guidance },
                 &device,
             )?;
             motions.push((
@@ -107,7 +144,7 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
 
 #[derive(Debug, Args)]
 pub struct LossArgs {
-    /// Loss CSV written by `mogen train --loss-csv` (step,loss,lr,frames,seconds).
+    /// Loss CSV written by `mogen train --loss-csv` (step,loss,... ; the first two columns are read).
     #[arg(long, default_value = "out/train/loss.csv")]
     csv: PathBuf,
     /// Output PNG.

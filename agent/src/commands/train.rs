@@ -35,6 +35,12 @@ pub struct TrainArgs {
     /// Longest crop in frames (20 fps).
     #[arg(long, default_value_t = TrainConfig::default().max_frames)]
     max_frames: usize,
+    /// Weight of the joint-velocity loss on the recovered joints ((m/s)²; 0 = off).
+    #[arg(long, default_value_t = TrainConfig::default().velocity_weight)]
+    velocity_weight: f64,
+    /// Weight of the planted-foot loss ((m/s)²; 0 = off).
+    #[arg(long, default_value_t = TrainConfig::default().foot_contact_weight)]
+    foot_contact_weight: f64,
     /// Steps between checkpoints.
     #[arg(long, default_value_t = TrainConfig::default().checkpoint_every)]
     checkpoint_every: usize,
@@ -48,7 +54,7 @@ pub struct TrainArgs {
     ff_size: Option<usize>,
     #[arg(long)]
     layers: Option<usize>,
-    /// Write the loss of every step as CSV (step,loss,lr,frames,seconds).
+    /// Write the losses of every step as CSV (step,loss,velocity,foot_contact,lr,frames,seconds).
     #[arg(long)]
     loss_csv: Option<PathBuf>,
 }
@@ -69,6 +75,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         lr: args.lr,
         max_frames: args.max_frames,
         checkpoint_every: args.checkpoint_every,
+        velocity_weight: args.velocity_weight,
+        foot_contact_weight: args.foot_contact_weight,
         seed: args.seed,
         ..TrainConfig::default()
     };
@@ -101,7 +109,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("opening {}", p.display()))?;
             if !exists {
                 use std::io::Write;
-                writeln!(f, "step,loss,lr,frames,seconds")?;
+                writeln!(f, "step,loss,velocity,foot_contact,lr,frames,seconds")?;
             }
             Some(f)
         }
@@ -117,9 +125,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         if !bar.is_hidden() || r.step % 100 == 0 {
             if bar.is_hidden() {
                 eprintln!(
-                    "step {}/{} loss {s:.4} lr {:.1e} ({:.0} s)",
+                    "step {}/{} loss {s:.4} velocity {:.4} foot contact {:.4} lr {:.1e} ({:.0} s)",
                     r.step,
                     r.steps,
+                    r.velocity,
+                    r.foot_contact,
                     r.lr,
                     start.elapsed().as_secs_f64()
                 );
@@ -127,7 +137,17 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         if let Some(f) = csv.as_mut() {
             use std::io::Write;
-            let _ = writeln!(f, "{},{},{},{},{:.2}", r.step, r.loss, r.lr, r.frames, start.elapsed().as_secs_f64());
+            let _ = writeln!(
+                f,
+                "{},{},{},{},{},{},{:.2}",
+                r.step,
+                r.loss,
+                r.velocity,
+                r.foot_contact,
+                r.lr,
+                r.frames,
+                start.elapsed().as_secs_f64()
+            );
         }
     })?;
     bar.finish();

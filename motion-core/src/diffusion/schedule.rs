@@ -101,7 +101,7 @@ impl NoiseSchedule {
     }
 
     /// `f(ᾱ_t)` per sample as a `[batch, 1, …, 1]` tensor that broadcasts against `like`.
-    fn per_sample(&self, timesteps: &Tensor, like: &Tensor, f: impl Fn(f64) -> f64) -> Result<Tensor> {
+    pub(crate) fn per_sample(&self, timesteps: &Tensor, like: &Tensor, f: impl Fn(f64) -> f64) -> Result<Tensor> {
         let ts = timesteps.to_dtype(DType::U32)?.to_vec1::<u32>()?;
         let batch = like.dim(0)?;
         if ts.len() != batch {

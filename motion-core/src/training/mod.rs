@@ -5,10 +5,12 @@
 mod adamw;
 mod batches;
 mod checkpoint;
+mod geometric;
 
 pub use adamw::AdamW;
 pub use batches::{Batch, BatchSampler};
 pub use checkpoint::TrainState;
+pub use geometric::{GeometricLoss, GeometricTerms, CONTACT_SPEED_M_PER_S};
 
 use std::path::{Path, PathBuf};
 
@@ -27,6 +29,7 @@ use crate::text::vocabulary::VocabularyEncoder;
 
 /// Training settings; every default is documented on its field.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct TrainConfig {
     /// Optimiser steps; default 6000.
     pub steps: usize,
@@ -49,6 +52,11 @@ pub struct TrainConfig {
     /// Sample labels uniformly instead of by seconds of data; default true (the CMU clips
     /// would otherwise dominate).
     pub balance_labels: bool,
+    /// Weight of the joint-velocity term of [`GeometricLoss`] ((m/s)², added to the x0 MSE);
+    /// default 1.0.
+    pub velocity_weight: f64,
+    /// Weight of the planted-foot term of [`GeometricLoss`] ((m/s)²); default 1.0.
+    pub foot_contact_weight: f64,
     /// Steps between checkpoints; default 500.
     pub checkpoint_every: usize,
     /// Seed of initialisation, batches, noise and dropout; default 0.
@@ -68,6 +76,8 @@ impl Default for TrainConfig {
             min_frames: 40,
             max_frames: 196,
             balance_labels: true,
+            velocity_weight: 1.0,
+            foot_contact_weight: 1.0,
             checkpoint_every: 500,
             seed: 0,
         }
@@ -95,6 +105,10 @@ pub struct StepReport {
     pub steps: usize,
     /// Mean squared error of x̂0 in normalised feature space.
     pub loss: f64,
+    /// Joint-velocity term, (m/s)² (0 when its weight is 0).
+    pub velocity: f64,
+    /// Planted-foot term, (m/s)² (0 when its weight is 0).
+    pub foot_contact: f64,
     /// Learning rate used.
     pub lr: f64,
     /// Frames of this batch's crops.
@@ -140,6 +154,8 @@ pub struct Trainer {
     ema: Vec<Tensor>,
     optimizer: AdamW,
     sampler: BatchSampler,
+    /// The geometric terms, absent when both of their weights are 0.
+    geometric: Option<GeometricLoss>,
     encoder: VocabularyEncoder,
     schedule: NoiseSchedule,
     step: usize,
@@ -164,6 +180,11 @@ impl Trainer {
             vars.iter().map(|(_, v)| Ok(v.as_tensor().copy()?.detach())).collect::<candle_core::Result<Vec<_>>>()?;
         let optimizer = AdamW::new(vars.iter().map(|(_, v)| v.clone()).collect(), config.weight_decay)?;
         let sampler = BatchSampler::new(db, &encoder, &config, device)?;
+        let geometric = if config.velocity_weight > 0.0 || config.foot_contact_weight > 0.0 {
+            Some(GeometricLoss::new(db.mean_std().to_device(device)?)?)
+        } else {
+            None
+        };
         Ok(Self {
             config,
             model_config,
@@ -172,6 +193,7 @@ impl Trainer {
             ema,
             optimizer,
             sampler,
+            geometric,
             encoder,
             schedule: NoiseSchedule::mdm(),
             step: 0,
@@ -218,10 +240,22 @@ impl Trainer {
         let noise = gaussian_from_rng(batch.x0.shape(), &mut rng, &self.device)?;
         let x_t = self.schedule.q_sample(&batch.x0, &t, &noise)?;
         let x0_hat = self.model.forward_train(&x_t, &t, &text, &mut rng)?;
-        let loss = (x0_hat - &batch.x0)?.sqr()?.mean_all()?;
-        let loss_value = f64::from(loss.to_scalar::<f32>()?);
-        if !loss_value.is_finite() {
-            return Err(TrainError::Diverged { step: self.step + 1, loss: loss_value });
+        let mse = (&x0_hat - &batch.x0)?.sqr()?.mean_all()?;
+        let loss_value = f64::from(mse.to_scalar::<f32>()?);
+        let (loss, velocity, foot_contact) = match &self.geometric {
+            Some(geometric) => {
+                let signal = self.schedule.per_sample(&t, &batch.x0, |abar| abar)?.flatten_all()?;
+                let terms = geometric.terms(&x0_hat, &batch.x0, &signal)?;
+                let loss = ((mse + (&terms.velocity * self.config.velocity_weight)?)?
+                    + (&terms.foot_contact * self.config.foot_contact_weight)?)?;
+                let value = |t: &Tensor| t.to_scalar::<f32>().map(f64::from);
+                (loss, value(&terms.velocity)?, value(&terms.foot_contact)?)
+            }
+            None => (mse, 0.0, 0.0),
+        };
+        let total = f64::from(loss.to_scalar::<f32>()?);
+        if !total.is_finite() {
+            return Err(TrainError::Diverged { step: self.step + 1, loss: total });
         }
         let lr = self.config.lr_at(self.step);
         let grads = loss.backward()?;
@@ -233,7 +267,7 @@ impl Trainer {
             *ema = ((&*ema * d)? + (var.as_tensor().detach() * (1.0 - d))?)?;
         }
         self.step += 1;
-        Ok(StepReport { step: self.step, steps: self.config.steps, loss: loss_value, lr, frames })
+        Ok(StepReport { step: self.step, steps: self.config.steps, loss: loss_value, velocity, foot_contact, lr, frames })
     }
 
     /// Writes the EMA weights as a shippable prior.
@@ -322,6 +356,19 @@ mod tests {
         let prior_path = dir.path().join("prior.safetensors");
         resumed.save_prior(&prior_path, db.mean_std()).unwrap();
         assert!(Prior::load(&prior_path, &dev).is_ok());
+    }
+
+    #[test]
+    fn geometric_terms_are_trained_and_reported_unless_switched_off() {
+        let (db, model, train) = tiny_run();
+        let dev = Device::Cpu;
+        let mut on = Trainer::new(&db, model.clone(), train.clone(), &dev).unwrap();
+        let r = on.train_step().unwrap();
+        assert!(r.velocity > 0.0 && r.foot_contact >= 0.0, "velocity {} foot contact {}", r.velocity, r.foot_contact);
+        let off = TrainConfig { velocity_weight: 0.0, foot_contact_weight: 0.0, ..train };
+        let mut off = Trainer::new(&db, model, off, &dev).unwrap();
+        let r = off.train_step().unwrap();
+        assert_eq!((r.velocity, r.foot_contact), (0.0, 0.0));
     }
 
     #[test]
