@@ -35,6 +35,10 @@ pub struct TrainArgs {
     /// Longest crop in frames (20 fps).
     #[arg(long, default_value_t = TrainConfig::default().max_frames)]
     max_frames: usize,
+    /// Weight of the root features (yaw velocity, x/z velocity, height) in the x0 MSE
+    /// (1 = MDM's plain MSE; 25 = HumanML3D's feat_bias 5).
+    #[arg(long, default_value_t = TrainConfig::default().root_weight)]
+    root_weight: f64,
     /// Weight of the joint-velocity loss on the recovered joints ((m/s)²; 0 = off).
     #[arg(long, default_value_t = TrainConfig::default().velocity_weight)]
     velocity_weight: f64,
@@ -75,6 +79,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         lr: args.lr,
         max_frames: args.max_frames,
         checkpoint_every: args.checkpoint_every,
+        root_weight: args.root_weight,
         velocity_weight: args.velocity_weight,
         foot_contact_weight: args.foot_contact_weight,
         seed: args.seed,
