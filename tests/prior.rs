@@ -44,13 +44,17 @@ fn the_same_seed_gives_the_same_motion() {
 /// mean pelvis-relative joint error), metres.
 fn inversion_round_trip(config: &InversionConfig) -> (f64, f64) {
     let r = quality::inversion_round_trip(&prior(), &database(), WALK, (1, 120), config, &Device::Cpu).unwrap();
-    println!("{config:?}: mean joint error {:.4} m, pelvis-relative {:.4} m", r.mean_joint_error_m, r.pelvis_relative_error_m);
+    println!(
+        "{config:?}: mean joint error {:.4} m, pelvis-relative {:.4} m",
+        r.mean_joint_error_m, r.pelvis_relative_error_m
+    );
     (r.mean_joint_error_m, r.pelvis_relative_error_m)
 }
 
 #[test]
 fn classic_ddim100_inversion_then_sampling_reproduces_the_pose_of_a_database_window() {
-    let classic = InversionConfig { ddim_steps: 100, fixed_point_iterations: 0, polish_steps: 0, ..InversionConfig::default() };
+    let classic =
+        InversionConfig { ddim_steps: 100, fixed_point_iterations: 0, polish_steps: 0, ..InversionConfig::default() };
     let (_, relative) = inversion_round_trip(&classic);
     assert!(relative <= 0.05, "pelvis-relative joint error {relative} m");
 }

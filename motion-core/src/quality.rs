@@ -91,7 +91,14 @@ pub struct QualityConfig {
 
 impl Default for QualityConfig {
     fn default() -> Self {
-        Self { samples_per_label: 32, frames: 120, ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0, labels: Vec::new() }
+        Self {
+            samples_per_label: 32,
+            frames: 120,
+            ddim_steps: 50,
+            guidance: Guidance::MDM_SCALE,
+            seed: 0,
+            labels: Vec::new(),
+        }
     }
 }
 
@@ -236,7 +243,8 @@ pub fn inversion_round_trip(
     config: &InversionConfig,
     device: &Device,
 ) -> Result<RoundTrip, PriorError> {
-    let fail = |e: candle_core::Error| PriorError::Format { path: "<inversion round trip>".into(), message: e.to_string() };
+    let fail =
+        |e: candle_core::Error| PriorError::Format { path: "<inversion round trip>".into(), message: e.to_string() };
     let crops = db
         .windows()
         .iter()

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use motion_core::database::MotionDatabase;
-use motion_core::prior::Prior;
 use motion_core::inversion::InversionConfig;
+use motion_core::prior::Prior;
 use motion_core::quality::{inversion_round_trip, quality_report, QualityConfig};
 use motion_core::render::{motion_strip, StripRow};
 

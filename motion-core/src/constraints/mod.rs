@@ -26,7 +26,7 @@ pub use body::{bone_radius_m, surface_points, HEAD_RADIUS_M, SURFACE_POINTS};
 pub use geometry::NORM_EPS;
 pub use probe::{probe_motion, GradientCheck, STANDING};
 pub use scene::{is_obstacle, primitive_error};
-pub use signal::{centre_of_mass_weights, point, root_relative, second_difference, signal};
+pub use signal::{centre_of_mass_weights, point, root_relative, second_difference, signal, velocity};
 pub use support::FOOT_HALF_WIDTH_M;
 
 use crate::program::{

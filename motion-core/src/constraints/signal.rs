@@ -132,7 +132,8 @@ fn frame_error(frame: FrameRef, frames: usize) -> candle_core::Error {
     candle_core::Error::Msg(format!("frame {frame:?} is outside a motion of {frames} frames"))
 }
 
-/// Forward difference × fps (m/s), `[B, T − 1, 3]`.
+/// Forward difference along axis 1 (frames) × fps: positions `[B, T, ..]` (m) → velocities
+/// `[B, T − 1, ..]` (m/s).
 pub fn velocity(p: &Tensor) -> Result<Tensor> {
     let frames = p.dim(1)?;
     if frames < 2 {

@@ -147,8 +147,9 @@ impl DdimSampler {
     ) -> Result<Tensor> {
         let guidance = guidance.for_text(text)?;
         check_batch(x0, text)?;
-        let predict =
-            |x: &Tensor, t: usize| -> Result<Tensor> { Ok(guidance.predict_x0(denoiser, x, &timestep_tensor(t, x)?, text)?.detach()) };
+        let predict = |x: &Tensor, t: usize| -> Result<Tensor> {
+            Ok(guidance.predict_x0(denoiser, x, &timestep_tensor(t, x)?, text)?.detach())
+        };
         let target = x0.detach();
         let mut x = target.clone();
         for _ in 0..fixed_point_iterations {
@@ -161,7 +162,8 @@ impl DdimSampler {
             let b = (1.0 - abar_next).sqrt() - a * (1.0 - abar).sqrt();
             for _ in 0..fixed_point_iterations {
                 let x0_hat = predict(&next, self.timesteps[k + 1])?;
-                let eps = (&next - x0_hat.affine(abar_next.sqrt(), 0.0)?)?.affine(1.0 / (1.0 - abar_next).sqrt(), 0.0)?;
+                let eps =
+                    (&next - x0_hat.affine(abar_next.sqrt(), 0.0)?)?.affine(1.0 / (1.0 - abar_next).sqrt(), 0.0)?;
                 next = (x.affine(a, 0.0)? + eps.affine(b, 0.0)?)?;
             }
             x = next;

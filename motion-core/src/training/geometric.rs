@@ -8,7 +8,7 @@
 //! [`recover_from_ric`], so they tie the root velocity to the limbs:
 //!
 //! - **velocity**: mean over batch, frames, joints and axes of w·(v̂ − v)², where v is the joint
-//!   velocity in m/s (frame difference × [`FPS`]);
+//!   velocity in m/s ([`velocity`]: frame difference × fps);
 //! - **foot contact**: Σ w·‖v̂‖² / Σ 1 (m²/s²) over the (frame, foot joint) pairs whose *training*
 //!   foot joint moves slower than [`CONTACT_SPEED_M_PER_S`]: a foot that is planted in the data
 //!   must be planted in the prediction. The feet are HumanML3D's ankles and toes.
@@ -20,8 +20,9 @@
 
 use candle_core::{DType, Result, Tensor, D};
 
+use crate::constraints::velocity;
 use crate::representation::{recover_from_ric, MeanStd};
-use crate::skeleton::{CONTACT_JOINTS, FPS};
+use crate::skeleton::CONTACT_JOINTS;
 
 /// A training foot joint slower than this is planted (m/s; MDM's 0.01 m/frame at 20 fps).
 pub const CONTACT_SPEED_M_PER_S: f64 = 0.2;
@@ -73,12 +74,7 @@ impl GeometricLoss {
 
     /// World-frame joint velocities (m/s) of normalised features: `[B, T, 263]` → `[B, T−1, 22, 3]`.
     fn velocities(&self, x: &Tensor) -> Result<Tensor> {
-        let joints = recover_from_ric(&self.mean_std.denormalize(x)?)?;
-        let frames = joints.dim(1)?;
-        if frames < 2 {
-            candle_core::bail!("geometric loss: need at least 2 frames, got {frames}");
-        }
-        (joints.narrow(1, 1, frames - 1)? - joints.narrow(1, 0, frames - 1)?)? * FPS
+        velocity(&recover_from_ric(&self.mean_std.denormalize(x)?)?)
     }
 }
 
@@ -117,7 +113,9 @@ mod tests {
         // A person standing still: the walk's first frame held, no root motion.
         let (x, loss) = walk();
         let mut still = x.narrow(1, 0, 1).unwrap().repeat((1, 30, 1)).unwrap();
-        still = still.slice_assign(&[0..1, 0..30, 0..3], &Tensor::zeros((1, 30, 3), DType::F32, &Device::Cpu).unwrap()).unwrap();
+        still = still
+            .slice_assign(&[0..1, 0..30, 0..3], &Tensor::zeros((1, 30, 3), DType::F32, &Device::Cpu).unwrap())
+            .unwrap();
         // Add 0.01 m/frame of sideways root velocity on every frame. Frame t's root is the
         // sum of the velocities of the frames before it, so every joint of every frame pair
         // moves 0.2 m/s: (0.2 m/s)² spread over 3 axes, and every foot is planted in the target.

@@ -289,7 +289,15 @@ impl Trainer {
             *ema = ((&*ema * d)? + (var.as_tensor().detach() * (1.0 - d))?)?;
         }
         self.step += 1;
-        Ok(StepReport { step: self.step, steps: self.config.steps, loss: loss_value, velocity, foot_contact, lr, frames })
+        Ok(StepReport {
+            step: self.step,
+            steps: self.config.steps,
+            loss: loss_value,
+            velocity,
+            foot_contact,
+            lr,
+            frames,
+        })
     }
 
     /// Writes the EMA weights as a shippable prior.
