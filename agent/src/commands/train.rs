@@ -39,6 +39,10 @@ pub struct TrainArgs {
     /// (1 = MDM's plain MSE; 25 = HumanML3D's feat_bias 5).
     #[arg(long, default_value_t = TrainConfig::default().root_weight)]
     root_weight: f64,
+    /// Min-SNR-γ loss weighting: each sample's x0 MSE weighted by min(SNR_t, γ)
+    /// (0 = off, MDM's uniform weighting; 5 is the paper's value).
+    #[arg(long, default_value_t = TrainConfig::default().snr_gamma)]
+    snr_gamma: f64,
     /// Weight of the joint-velocity loss on the recovered joints ((m/s)²; 0 = off).
     #[arg(long, default_value_t = TrainConfig::default().velocity_weight)]
     velocity_weight: f64,
@@ -80,6 +84,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         max_frames: args.max_frames,
         checkpoint_every: args.checkpoint_every,
         root_weight: args.root_weight,
+        snr_gamma: args.snr_gamma,
         velocity_weight: args.velocity_weight,
         foot_contact_weight: args.foot_contact_weight,
         seed: args.seed,
