@@ -12,7 +12,7 @@ use motion_core::diffusion::Guidance;
 use motion_core::inversion::InversionConfig;
 use motion_core::metrics::{foot_skate_ratio, pace, root_travel};
 use motion_core::prior::Prior;
-use motion_core::quality::{self, joints_of, tensor_to_poses};
+use motion_core::quality::{self, denoising_fidelity, joints_of, tensor_to_poses};
 use motion_core::representation::recover_from_ric;
 use motion_core::skeleton::{Joint, Pose};
 
@@ -38,6 +38,29 @@ fn the_same_seed_gives_the_same_motion() {
     let diff = |x: &Tensor, y: &Tensor| (x - y).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
     assert_eq!(diff(&a, &b), 0.0);
     assert!(diff(&a, &c) > 0.1);
+}
+
+#[test]
+fn denoising_fidelity_compares_with_copying_and_names_a_bad_timestep() {
+    let (p, db) = (prior(), database());
+    let rows = denoising_fidelity(&p, &db, WALK, (2, 60), &[50, 800], &Device::Cpu).unwrap();
+    assert_eq!(rows.iter().map(|r| r.timestep).collect::<Vec<_>>(), [50, 800]);
+    // Copying x_t/√ᾱ costs (1 − ᾱ)/ᾱ: about 0.008 at t = 50 and 9.5 at t = 800 (cosine schedule).
+    assert!((0.005..0.012).contains(&rows[0].identity_mse), "{}", rows[0].identity_mse);
+    assert!(rows[1].identity_mse > 5.0, "{}", rows[1].identity_mse);
+    for r in &rows {
+        assert!(r.mse.is_finite() && r.mse > 0.0, "t {}: MSE {}", r.timestep, r.mse);
+        assert!(
+            r.mse < r.identity_mse.max(1.0),
+            "t {}: x̂0 MSE {} is worse than copying or the mean",
+            r.timestep,
+            r.mse
+        );
+    }
+    let err = denoising_fidelity(&p, &db, WALK, (2, 60), &[1000], &Device::Cpu).unwrap_err().to_string();
+    assert!(err.contains("timestep 1000"), "{err}");
+    let err = denoising_fidelity(&p, &db, "a person flies", (2, 60), &[50], &Device::Cpu).unwrap_err().to_string();
+    assert!(err.contains("a person flies"), "{err}");
 }
 
 /// Inverts the first walk window of 120 frames and samples it back; returns (mean joint error,

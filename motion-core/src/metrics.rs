@@ -52,6 +52,18 @@ pub fn max_acceleration(poses: &[Pose]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Mean norm of the second time difference of the left and right foot joints, m/frame²:
+/// how much the feet jitter (0 for fewer than 3 frames).
+pub fn mean_foot_acceleration(poses: &[Pose]) -> f64 {
+    let feet = [Joint::LeftFoot.index(), Joint::RightFoot.index()];
+    let n = poses.len().saturating_sub(2) * feet.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let total: f64 = poses.windows(3).flat_map(|w| feet.map(|j| (w[2][j] - 2.0 * w[1][j] + w[0][j]).length())).sum();
+    total / n as f64
+}
+
 /// Horizontal (x–z) distance of the pelvis from the first to the last frame, m (0 when empty).
 pub fn root_travel(poses: &[Pose]) -> f64 {
     match (poses.first(), poses.last()) {
@@ -224,6 +236,20 @@ mod tests {
         // The same slide 10 cm up is a swing, not a skate.
         let lifted: Vec<Pose> = poses.iter().map(|p| p.map(|v| v + DVec3::Y * 0.1)).collect();
         assert_eq!(foot_skate_ratio(&lifted), 0.0);
+    }
+
+    #[test]
+    fn foot_jitter_is_the_mean_second_difference_of_the_feet() {
+        assert_eq!(mean_foot_acceleration(&still(5)), 0.0);
+        assert_eq!(mean_foot_acceleration(&still(2)), 0.0);
+        // The left foot flips ±1 cm every frame: each second difference is 4 cm; the right
+        // foot and every other joint stay still.
+        let mut poses = still(6);
+        for (t, p) in poses.iter_mut().enumerate() {
+            p[Joint::LeftFoot.index()].x = if t % 2 == 0 { 0.01 } else { -0.01 };
+            p[Joint::Head.index()].y = t as f64;
+        }
+        assert!((mean_foot_acceleration(&poses) - 0.02).abs() < 1e-12, "{}", mean_foot_acceleration(&poses));
     }
 
     #[test]

@@ -5,9 +5,14 @@ use candle_core::{Device, Tensor};
 use serde::Serialize;
 
 use crate::database::MotionDatabase;
+use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
+use crate::diffusion::NoiseSchedule;
 use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
-use crate::metrics::{bone_length_range, foot_skate_ratio, ground_penetration, max_acceleration, pace, root_travel};
+use crate::metrics::{
+    bone_length_range, foot_skate_ratio, ground_penetration, max_acceleration, mean_foot_acceleration, pace,
+    root_travel,
+};
 use crate::prior::{Prior, PriorError};
 use crate::representation::{recover_from_ric, RIC};
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
@@ -19,6 +24,9 @@ pub struct MetricMeans {
     pub foot_skate_ratio: f64,
     /// Max acceleration, m/frame².
     pub max_acceleration: f64,
+    /// Mean acceleration of the two foot joints, m/frame² ([`mean_foot_acceleration`]):
+    /// frame-to-frame jitter of the feet, which the skate ratio punishes.
+    pub foot_acceleration: f64,
     /// Largest bone-length range within a motion, m.
     pub bone_length_range_m: f64,
     /// Deepest ground penetration, m.
@@ -41,6 +49,7 @@ impl MetricMeans {
         Self {
             foot_skate_ratio: mean(&foot_skate_ratio),
             max_acceleration: mean(&max_acceleration),
+            foot_acceleration: mean(&mean_foot_acceleration),
             bone_length_range_m: mean(&bone_length_range),
             ground_penetration_m: mean(&ground_penetration),
             head_height_m: mean(&|m: &[Pose]| {
@@ -245,6 +254,94 @@ pub fn inversion_round_trip(
 ) -> Result<RoundTrip, PriorError> {
     let fail =
         |e: candle_core::Error| PriorError::Format { path: "<inversion round trip>".into(), message: e.to_string() };
+    let x0 = label_crops(prior, db, label, (windows, frames), device)?;
+    let count = x0.dim(0).map_err(fail)?;
+    let text = prior.encode_text(&vec![label; count], device).map_err(fail)?;
+    let back = invert_motion(prior, &x0, &text, config, |_| {}).map_err(fail)?.x;
+    let original = prior.to_joints(&x0).map_err(fail)?;
+    let rebuilt = prior.to_joints(&back).map_err(fail)?;
+    let error = |a: &Tensor, b: &Tensor| -> candle_core::Result<f64> {
+        mean_joint_distance(a, b)?.mean_all()?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()
+    };
+    let relative = |j: &Tensor| j.broadcast_sub(&j.narrow(2, 0, 1)?);
+    Ok(RoundTrip {
+        windows: count,
+        frames,
+        ddim_steps: config.ddim_steps,
+        fixed_point_iterations: config.fixed_point_iterations,
+        polish_steps: config.polish_steps,
+        mean_joint_error_m: error(&original, &rebuilt).map_err(fail)?,
+        pelvis_relative_error_m: error(&relative(&original).map_err(fail)?, &relative(&rebuilt).map_err(fail)?)
+            .map_err(fail)?,
+    })
+}
+
+/// How well the denoiser restores noised training windows in one step, at one timestep.
+#[derive(Debug, Clone, Serialize)]
+pub struct DenoisingFidelity {
+    /// Diffusion timestep t (0..999).
+    pub timestep: usize,
+    /// Mean squared error of x̂0 in normalised feature space.
+    pub mse: f64,
+    /// The same error of the trivial estimate x_t/√ᾱ_t, (1 − ᾱ_t)/ᾱ_t: a denoiser that does
+    /// not beat it has learned to copy its input, not to remove noise.
+    pub identity_mse: f64,
+    /// Motion metrics of the x̂0 motions.
+    pub metrics: MetricMeans,
+}
+
+/// Noises the first `windows` training windows of `label` (their first `frames` frames) to
+/// each of `timesteps` with seeded noise, predicts x̂0 in one conditional denoiser call, and
+/// measures it. The training windows' own metrics are [`LabelQuality::training`].
+pub fn denoising_fidelity(
+    prior: &Prior,
+    db: &MotionDatabase,
+    label: &str,
+    (windows, frames): (usize, usize),
+    timesteps: &[usize],
+    device: &Device,
+) -> Result<Vec<DenoisingFidelity>, PriorError> {
+    let fail =
+        |e: candle_core::Error| PriorError::Format { path: "<denoising fidelity>".into(), message: e.to_string() };
+    let x0 = label_crops(prior, db, label, (windows, frames), device)?;
+    let batch = x0.dim(0).map_err(fail)?;
+    let text = prior.encode_text(&vec![label; batch], device).map_err(fail)?;
+    let noise = gaussian(x0.shape(), 0, device).map_err(fail)?;
+    let schedule = NoiseSchedule::mdm();
+    timesteps
+        .iter()
+        .map(|&t| {
+            let abar = *schedule.alphas_cumprod().get(t).ok_or_else(|| PriorError::Format {
+                path: "<denoising fidelity>".into(),
+                message: format!("timestep {t} outside 0..{}", schedule.num_timesteps()),
+            })?;
+            let run = || -> candle_core::Result<DenoisingFidelity> {
+                let ts = Tensor::full(t as u32, batch, device)?;
+                let x_t = schedule.q_sample(&x0, &ts, &noise)?;
+                let x0_hat = crate::diffusion::Denoiser::predict_x0(&prior.mdm, &x_t, &ts, &text)?;
+                let mse = (&x0_hat - &x0)?.sqr()?.mean_all()?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?;
+                Ok(DenoisingFidelity {
+                    timestep: t,
+                    mse,
+                    identity_mse: (1.0 - abar) / abar,
+                    metrics: MetricMeans::of(&joints_of(prior, &x0_hat)?),
+                })
+            };
+            run().map_err(fail)
+        })
+        .collect()
+}
+
+/// The first `windows` windows of `label` with at least `frames` frames, cropped to their
+/// first `frames` frames and normalised: `[windows, frames, 263]`.
+fn label_crops(
+    prior: &Prior,
+    db: &MotionDatabase,
+    label: &str,
+    (windows, frames): (usize, usize),
+    device: &Device,
+) -> Result<Tensor, PriorError> {
+    let fail = |e: candle_core::Error| PriorError::Format { path: "<training crops>".into(), message: e.to_string() };
     let crops = db
         .windows()
         .iter()
@@ -255,30 +352,11 @@ pub fn inversion_round_trip(
         .map_err(fail)?;
     if crops.is_empty() {
         return Err(PriorError::Format {
-            path: "<inversion round trip>".into(),
+            path: "<training crops>".into(),
             message: format!("no window of `{label}` has {frames} frames"),
         });
     }
-    let raw = Tensor::stack(&crops, 0).map_err(fail)?;
-    let x0 = prior.mean_std.normalize(&raw).map_err(fail)?;
-    let text = prior.encode_text(&vec![label; crops.len()], device).map_err(fail)?;
-    let back = invert_motion(prior, &x0, &text, config, |_| {}).map_err(fail)?.x;
-    let original = recover_from_ric(&raw).map_err(fail)?;
-    let rebuilt = prior.to_joints(&back).map_err(fail)?;
-    let error = |a: &Tensor, b: &Tensor| -> candle_core::Result<f64> {
-        mean_joint_distance(a, b)?.mean_all()?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()
-    };
-    let relative = |j: &Tensor| j.broadcast_sub(&j.narrow(2, 0, 1)?);
-    Ok(RoundTrip {
-        windows: crops.len(),
-        frames,
-        ddim_steps: config.ddim_steps,
-        fixed_point_iterations: config.fixed_point_iterations,
-        polish_steps: config.polish_steps,
-        mean_joint_error_m: error(&original, &rebuilt).map_err(fail)?,
-        pelvis_relative_error_m: error(&relative(&original).map_err(fail)?, &relative(&rebuilt).map_err(fail)?)
-            .map_err(fail)?,
-    })
+    prior.mean_std.normalize(&Tensor::stack(&crops, 0).map_err(fail)?).map_err(fail)
 }
 
 /// Heading-free pose descriptors `[n, frames·63]`: the root-relative joint positions (ric) of

@@ -7,7 +7,7 @@ use clap::Args;
 use motion_core::database::MotionDatabase;
 use motion_core::inversion::InversionConfig;
 use motion_core::prior::Prior;
-use motion_core::quality::{inversion_round_trip, quality_report, QualityConfig};
+use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, QualityConfig};
 use motion_core::render::{motion_strip, StripRow};
 
 use crate::paths;
@@ -66,17 +66,19 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         seed: args.seed,
         labels: args.labels,
     };
-    let header = "| label | skate gen / data | max acc gen / data (m/frame²) | bone range gen (m) | penetration gen / data (m) | head y gen / data (m) | travel gen / data (m) | steps/s gen / data | nearest train (m) | data spacing (m) | diversity (m) |";
-    let mut lines = vec![header.to_owned(), "|---|---|---|---|---|---|---|---|---|---|---|".to_owned()];
+    let header = "| label | skate gen / data | max acc gen / data (m/frame²) | foot acc gen / data (m/frame²) | bone range gen (m) | penetration gen / data (m) | head y gen / data (m) | travel gen / data (m) | steps/s gen / data | nearest train (m) | data spacing (m) | diversity (m) |";
+    let mut lines = vec![header.to_owned(), "|---|---|---|---|---|---|---|---|---|---|---|---|".to_owned()];
     println!("{header}");
     let rows = quality_report(&prior, &db, &config, &device, |r| {
         let line = format!(
-            "| {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.3} / {:.3} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {:.3} | {:.3} | {:.3} |",
+            "| {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.4} / {:.4} | {:.3} | {:.3} / {:.3} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {:.3} | {:.3} | {:.3} |",
             r.label,
             r.samples.foot_skate_ratio,
             r.training.foot_skate_ratio,
             r.samples.max_acceleration,
             r.training.max_acceleration,
+            r.samples.foot_acceleration,
+            r.training.foot_acceleration,
             r.samples.bone_length_range_m,
             r.samples.ground_penetration_m,
             r.training.ground_penetration_m,
@@ -103,6 +105,15 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
             let line = format!(
                 "DDIM-{} inversion ({} fixed-point iterations, {} polish steps) then sampling of {} `{walk}` windows ({} frames): mean joint error {:.4} m, pelvis-relative {:.4} m",
                 r.ddim_steps, r.fixed_point_iterations, r.polish_steps, r.windows, r.frames, r.mean_joint_error_m, r.pelvis_relative_error_m
+            );
+            println!("{line}");
+            lines.push(line + "  ");
+        }
+        for f in denoising_fidelity(&prior, &db, walk, (16, 120), &[50, 200, 400, 600, 800], &device)? {
+            let m = &f.metrics;
+            let line = format!(
+                "One-step x̂0 of 16 `{walk}` windows noised to t = {}: MSE {:.4} (copying x_t/√ᾱ: {:.4}), skate {:.3}, foot acc {:.4} m/frame², travel {:.2} m, {:.2} steps/s",
+                f.timestep, f.mse, f.identity_mse, m.foot_skate_ratio, m.foot_acceleration, m.travel_m, m.steps_per_second
             );
             println!("{line}");
             lines.push(line + "  ");
