@@ -64,7 +64,7 @@ pub struct TrainConfig {
     /// (MDM's uniform weighting, the default).
     pub snr_gamma: f64,
     /// Weight of the joint-velocity term of [`GeometricLoss`] ((m/s)², added to the x0 MSE);
-    /// default 1.0.
+    /// default 0 (off).
     pub velocity_weight: f64,
     /// Weight of the planted-foot term of [`GeometricLoss`] ((m/s)²); default 0 (off: at 1.0 a
     /// fine-tune taught the walks to stand still).
