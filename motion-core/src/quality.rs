@@ -286,6 +286,10 @@ pub struct DenoisingFidelity {
     /// The same error of the trivial estimate x_t/√ᾱ_t, (1 − ᾱ_t)/ᾱ_t: a denoiser that does
     /// not beat it has learned to copy its input, not to remove noise.
     pub identity_mse: f64,
+    /// The same error when the frames of x_t enter in a seeded random order (x̂0 put back in
+    /// order): as large as `mse` for a denoiser that ignores temporal context and denoises each
+    /// frame on its own, larger the more it uses its neighbours.
+    pub shuffled_mse: f64,
     /// Motion metrics of the x̂0 motions.
     pub metrics: MetricMeans,
 }
@@ -308,6 +312,7 @@ pub fn denoising_fidelity(
     let text = prior.encode_text(&vec![label; batch], device).map_err(fail)?;
     let noise = gaussian(x0.shape(), 0, device).map_err(fail)?;
     let schedule = NoiseSchedule::mdm();
+    let (order, restore) = shuffled_frames(frames, device).map_err(fail)?;
     timesteps
         .iter()
         .map(|&t| {
@@ -318,18 +323,35 @@ pub fn denoising_fidelity(
             let run = || -> candle_core::Result<DenoisingFidelity> {
                 let ts = Tensor::full(t as u32, batch, device)?;
                 let x_t = schedule.q_sample(&x0, &ts, &noise)?;
-                let x0_hat = crate::diffusion::Denoiser::predict_x0(&prior.mdm, &x_t, &ts, &text)?;
-                let mse = (&x0_hat - &x0)?.sqr()?.mean_all()?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?;
+                let denoise = |x: &Tensor| crate::diffusion::Denoiser::predict_x0(&prior.mdm, x, &ts, &text);
+                let mse =
+                    |x: &Tensor| (x - &x0)?.sqr()?.mean_all()?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>();
+                let x0_hat = denoise(&x_t)?;
+                let shuffled = denoise(&x_t.index_select(&order, 1)?)?.index_select(&restore, 1)?;
                 Ok(DenoisingFidelity {
                     timestep: t,
-                    mse,
+                    mse: mse(&x0_hat)?,
                     identity_mse: (1.0 - abar) / abar,
+                    shuffled_mse: mse(&shuffled)?,
                     metrics: MetricMeans::of(&joints_of(prior, &x0_hat)?),
                 })
             };
             run().map_err(fail)
         })
         .collect()
+}
+
+/// A seeded random permutation of `frames` frame indices and its inverse, `[frames]` u32 each.
+fn shuffled_frames(frames: usize, device: &Device) -> candle_core::Result<(Tensor, Tensor)> {
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    let mut order: Vec<u32> = (0..frames as u32).collect();
+    order.shuffle(&mut rand::rngs::StdRng::seed_from_u64(0));
+    let mut restore = vec![0u32; frames];
+    for (position, &frame) in order.iter().enumerate() {
+        restore[frame as usize] = position as u32;
+    }
+    Ok((Tensor::new(order, device)?, Tensor::new(restore, device)?))
 }
 
 /// The first `windows` windows of `label` with at least `frames` frames, cropped to their

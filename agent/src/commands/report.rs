@@ -109,12 +109,12 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
             println!("{line}");
             lines.push(line + "  ");
         }
-        for f in denoising_fidelity(&prior, &db, walk, (16, 120), &[50, 200, 400, 600, 800], &device)? {
+        for f in denoising_fidelity(&prior, &db, walk, (16, 120), &[50, 200, 400, 600, 800, 900, 950], &device)? {
             let m = &f.metrics;
             let line = format!(
-                "One-step x̂0 of {} `{walk}` windows noised to t = {}: MSE {:.4} (copying x_t/√ᾱ: {:.4}), skate {:.3}, foot acc {:.4} m/frame², travel {:.2} m, {:.2} steps/s",
+                "One-step x̂0 of {} `{walk}` windows noised to t = {}: MSE {:.4} (copying x_t/√ᾱ: {:.4}; frames shuffled: {:.4}), skate {:.3}, foot acc {:.4} m/frame², travel {:.2} m, {:.2} steps/s",
                 m.count,
-                f.timestep, f.mse, f.identity_mse, m.foot_skate_ratio, m.foot_acceleration, m.travel_m, m.steps_per_second
+                f.timestep, f.mse, f.identity_mse, f.shuffled_mse, m.foot_skate_ratio, m.foot_acceleration, m.travel_m, m.steps_per_second
             );
             println!("{line}");
             lines.push(line + "  ");

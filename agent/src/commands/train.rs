@@ -43,6 +43,14 @@ pub struct TrainArgs {
     /// (0 = off, MDM's uniform weighting; 5 is the paper's value).
     #[arg(long, default_value_t = TrainConfig::default().snr_gamma)]
     snr_gamma: f64,
+    /// Fraction of timesteps drawn from the noisiest 30 % of the schedule (0 = MDM's uniform
+    /// sampling); high-noise steps teach the denoiser to tie frames together.
+    #[arg(long, default_value_t = TrainConfig::default().high_noise_fraction)]
+    high_noise_fraction: f64,
+    /// Fraction of frames whose noisy input is replaced by pure noise, target unchanged, so the
+    /// denoiser learns to restore frames from their neighbours (0 = off).
+    #[arg(long, default_value_t = TrainConfig::default().frame_corruption)]
+    frame_corruption: f64,
     /// Weight of the joint-velocity loss on the recovered joints ((m/s)²; 0 = off).
     #[arg(long, default_value_t = TrainConfig::default().velocity_weight)]
     velocity_weight: f64,
@@ -85,6 +93,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         checkpoint_every: args.checkpoint_every,
         root_weight: args.root_weight,
         snr_gamma: args.snr_gamma,
+        high_noise_fraction: args.high_noise_fraction,
+        frame_corruption: args.frame_corruption,
         velocity_weight: args.velocity_weight,
         foot_contact_weight: args.foot_contact_weight,
         seed: args.seed,

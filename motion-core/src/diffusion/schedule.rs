@@ -91,12 +91,25 @@ impl NoiseSchedule {
         x0.broadcast_mul(&signal)? + noise.broadcast_mul(&sigma)?
     }
 
-    /// `batch` training timesteps drawn uniformly from `0..T` (MDM's `UniformSampler`), as a
-    /// `[batch]` u32 tensor.
-    pub fn sample_timesteps<R: Rng + ?Sized>(&self, batch: usize, rng: &mut R, device: &Device) -> Result<Tensor> {
+    /// `batch` training timesteps as a `[batch]` u32 tensor: uniform over `0..T` (MDM's
+    /// `UniformSampler`), except that each is drawn from the noisiest 30 % of the schedule
+    /// (t ≥ 0.7 T) with probability `high_noise_fraction` (0 = uniform, draws no extra numbers).
+    pub fn sample_timesteps<R: Rng + ?Sized>(
+        &self,
+        batch: usize,
+        high_noise_fraction: f64,
+        rng: &mut R,
+        device: &Device,
+    ) -> Result<Tensor> {
         let max = u32::try_from(self.num_timesteps())
             .map_err(|_| candle_core::Error::Msg("schedule too long for u32 timesteps".into()))?;
-        let values: Vec<u32> = (0..batch).map(|_| rng.random_range(0..max)).collect();
+        let high = max - max * 3 / 10;
+        let values: Vec<u32> = (0..batch)
+            .map(|_| {
+                let noisy = high_noise_fraction > 0.0 && rng.random::<f64>() < high_noise_fraction;
+                rng.random_range(if noisy { high } else { 0 }..max)
+            })
+            .collect();
         Tensor::from_vec(values, batch, device)
     }
 
@@ -193,11 +206,18 @@ mod tests {
     fn training_timesteps_are_seeded_and_in_range() -> Result<()> {
         let dev = Device::Cpu;
         let s = NoiseSchedule::mdm();
-        let draw = |seed| s.sample_timesteps(64, &mut StdRng::seed_from_u64(seed), &dev)?.to_vec1::<u32>();
-        let (a, b, c) = (draw(1)?, draw(1)?, draw(2)?);
+        let draw = |seed, high| s.sample_timesteps(400, high, &mut StdRng::seed_from_u64(seed), &dev)?.to_vec1::<u32>();
+        let (a, b, c) = (draw(1, 0.0)?, draw(1, 0.0)?, draw(2, 0.0)?);
         assert_eq!(a, b);
         assert_ne!(a, c);
         assert!(a.iter().all(|&t| t < 1000));
+        let noisy = |ts: &[u32]| ts.iter().filter(|&&t| t >= 700).count() as f64 / ts.len() as f64;
+        // Uniform: 30 % land in the noisiest 30 %; with half the draws forced there, 65 %.
+        assert!((noisy(&a) - 0.3).abs() < 0.08, "{}", noisy(&a));
+        let h = draw(1, 0.5)?;
+        assert!((noisy(&h) - 0.65).abs() < 0.08, "{}", noisy(&h));
+        assert!(h.iter().all(|&t| t < 1000));
+        assert_eq!(noisy(&draw(1, 1.0)?), 1.0);
         Ok(())
     }
 }

@@ -42,7 +42,10 @@ pub struct TrainConfig {
     pub warmup_steps: usize,
     /// Decoupled weight decay; default 0.0 (MDM's).
     pub weight_decay: f64,
-    /// EMA decay of the weights that are shipped; default 0.999.
+    /// EMA decay of the weights that are shipped; default 0.999. The decay of step k is
+    /// min(ema_decay, (1 + k)/(10 + k)) (the warm-up of timm's and diffusers' EMA), so the
+    /// random initial weights do not linger: with a constant 0.999 they would still make up
+    /// 0.999^1500 = 22 % of the EMA after 1,500 steps.
     pub ema_decay: f64,
     /// Probability of replacing a condition by zeros (unconditional), MDM's 0.1.
     pub cond_drop_prob: f64,
@@ -63,6 +66,16 @@ pub struct TrainConfig {
     /// nearly pure-noise steps to the low- and mid-noise steps that decide the details; 0 = off
     /// (MDM's uniform weighting, the default).
     pub snr_gamma: f64,
+    /// Fraction of each batch's timesteps drawn from the noisiest 30 % of the schedule
+    /// (t ≥ 0.7 T), the rest uniformly from 0..T; default 0 (MDM's uniform sampling). At high
+    /// noise one frame says little about its pose, so these steps are the ones that teach the
+    /// denoiser to tie frames together.
+    pub high_noise_fraction: f64,
+    /// Fraction of frames whose noisy input is replaced by pure noise while their target stays
+    /// the clean frame (the token masking of Gao et al. 2023's Masked Diffusion Transformer):
+    /// the denoiser must restore them from their neighbours, so it learns to use temporal
+    /// context instead of denoising each frame on its own; default 0 (off).
+    pub frame_corruption: f64,
     /// Weight of the joint-velocity term of [`GeometricLoss`] ((m/s)², added to the x0 MSE);
     /// default 0 (off).
     pub velocity_weight: f64,
@@ -90,6 +103,8 @@ impl Default for TrainConfig {
             balance_labels: true,
             root_weight: 1.0,
             snr_gamma: 0.0,
+            high_noise_fraction: 0.0,
+            frame_corruption: 0.0,
             velocity_weight: 0.0,
             foot_contact_weight: 0.0,
             checkpoint_every: 500,
@@ -260,9 +275,18 @@ impl Trainer {
             (0..b).map(|_| if rng.random::<f64>() < self.config.cond_drop_prob { 0.0 } else { 1.0 }).collect();
         let keep = Tensor::from_vec(keep, (b, 1), &self.device)?;
         let text = batch.text.broadcast_mul(&keep)?;
-        let t = self.schedule.sample_timesteps(b, &mut rng, &self.device)?;
+        let t = self.schedule.sample_timesteps(b, self.config.high_noise_fraction, &mut rng, &self.device)?;
         let noise = gaussian_from_rng(batch.x0.shape(), &mut rng, &self.device)?;
         let x_t = self.schedule.q_sample(&batch.x0, &t, &noise)?;
+        let x_t = if self.config.frame_corruption > 0.0 {
+            let p = self.config.frame_corruption;
+            let keep: Vec<f32> = (0..b * frames).map(|_| if rng.random::<f64>() < p { 0.0 } else { 1.0 }).collect();
+            let keep = Tensor::from_vec(keep, (b, frames, 1), &self.device)?;
+            let replacement = gaussian_from_rng(batch.x0.shape(), &mut rng, &self.device)?;
+            (x_t.broadcast_mul(&keep)? + replacement.broadcast_mul(&(1.0 - &keep)?)?)?
+        } else {
+            x_t
+        };
         let x0_hat = self.model.forward_train(&x_t, &t, &text, &mut rng)?;
         let squared = (&x0_hat - &batch.x0)?.sqr()?;
         let loss_value = f64::from(squared.mean_all()?.to_scalar::<f32>()?);
@@ -295,7 +319,7 @@ impl Trainer {
         let lr = self.config.lr_at(self.step);
         let grads = loss.backward()?;
         self.optimizer.step(&grads, lr)?;
-        let d = self.config.ema_decay;
+        let d = self.config.ema_decay.min((1 + self.step) as f64 / (10 + self.step) as f64);
         for (ema, (_, var)) in self.ema.iter_mut().zip(&self.vars) {
             // Detached: an EMA computed from a Var would otherwise chain every past step's
             // graph and grow without bound.
@@ -413,6 +437,38 @@ mod tests {
         let mut off = Trainer::new(&db, model, off, &dev).unwrap();
         let r = off.train_step().unwrap();
         assert_eq!((r.velocity, r.foot_contact), (0.0, 0.0));
+    }
+
+    #[test]
+    fn noisier_timesteps_and_corrupted_frames_change_what_the_denoiser_sees() {
+        let (db, model, train) = tiny_run();
+        let dev = Device::Cpu;
+        let a = Trainer::new(&db, model.clone(), train.clone(), &dev).unwrap().train_step().unwrap();
+        for (name, config) in [
+            ("high-noise fraction", TrainConfig { high_noise_fraction: 1.0, ..train.clone() }),
+            ("frame corruption", TrainConfig { frame_corruption: 0.5, ..train.clone() }),
+        ] {
+            let b = Trainer::new(&db, model.clone(), config, &dev).unwrap().train_step().unwrap();
+            assert!(b.loss.is_finite(), "{name}");
+            assert_ne!(a.loss, b.loss, "{name}: other inputs, another x0 MSE");
+        }
+    }
+
+    #[test]
+    fn the_ema_forgets_the_random_initial_weights_within_a_few_steps() {
+        let (db, model, train) = tiny_run();
+        let mut t = Trainer::new(&db, model, TrainConfig { ema_decay: 0.999, ..train }, &Device::Cpu).unwrap();
+        let flat = |x: &Tensor| x.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let init = flat(t.vars[0].1.as_tensor());
+        for _ in 0..3 {
+            t.train_step().unwrap();
+        }
+        let (raw, ema) = (flat(t.vars[0].1.as_tensor()), flat(&t.ema[0]));
+        let dist = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f32>().sqrt();
+        // Warm-up decays 1/10, 2/11, 3/12 leave the initial weights 0.45 % of the EMA, the rest
+        // is steps 1–3; a constant 0.999 would leave 99.7 % and the EMA would not move.
+        let (moved, travelled) = (dist(&ema, &init), dist(&raw, &init));
+        assert!(moved > 0.5 * travelled, "EMA moved {moved}, the weights {travelled}");
     }
 
     #[test]
