@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use motion_core::database::MotionDatabase;
-use motion_core::model::MdmConfig;
+use motion_core::model::{MdmConfig, Prediction};
 use motion_core::training::{TrainConfig, Trainer};
 
 use crate::paths;
@@ -70,6 +70,10 @@ pub struct TrainArgs {
     ff_size: Option<usize>,
     #[arg(long)]
     layers: Option<usize>,
+    /// What the network's output head predicts: `x0` (MDM) or `velocity` (v = √ᾱ·ε − √(1−ᾱ)·x0;
+    /// x̂0 stays close to a lightly noised input).
+    #[arg(long, default_value_t = MdmConfig::small().prediction)]
+    prediction: Prediction,
     /// Write the losses of every step as CSV (step,loss,velocity,foot_contact,lr,frames,seconds).
     #[arg(long)]
     loss_csv: Option<PathBuf>,
@@ -83,6 +87,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         latent_dim: args.latent_dim.unwrap_or(small.latent_dim),
         ff_size: args.ff_size.unwrap_or(small.ff_size),
         num_layers: args.layers.unwrap_or(small.num_layers),
+        prediction: args.prediction,
         ..small
     };
     let config = TrainConfig {

@@ -3,6 +3,42 @@
 use candle_core::{bail, Result};
 use serde::{Deserialize, Serialize};
 
+/// What the output head (`poseFinal`) predicts. The model returns x̂0 either way.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Prediction {
+    /// The clean sample x0 itself (MDM).
+    #[default]
+    X0,
+    /// The velocity v = √ᾱ_t·ε − √(1−ᾱ_t)·x0 of Salimans & Ho ("Progressive Distillation",
+    /// 2022), under MDM's cosine schedule; x̂0 = √ᾱ_t·x_t − √(1−ᾱ_t)·v̂. At low noise x̂0 is
+    /// x_t plus a small correction, so a small network keeps the detail of its input instead
+    /// of re-synthesising every feature (which costs foot contacts their precision).
+    Velocity,
+}
+
+impl std::str::FromStr for Prediction {
+    type Err = String;
+
+    /// `x0` or `velocity` (as in the prior file's config).
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "x0" => Ok(Self::X0),
+            "velocity" => Ok(Self::Velocity),
+            other => Err(format!("unknown prediction {other:?}: expected \"x0\" or \"velocity\"")),
+        }
+    }
+}
+
+impl std::fmt::Display for Prediction {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::X0 => "x0",
+            Self::Velocity => "velocity",
+        })
+    }
+}
+
 /// Sizes of the MDM `trans_enc` denoiser (`model/mdm.py`; anchors §1.2).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MdmConfig {
@@ -20,6 +56,9 @@ pub struct MdmConfig {
     pub text_dim: usize,
     /// Dropout probability of the training path (official: 0.1; inactive at inference).
     pub dropout: f64,
+    /// What the output head predicts (official: x0; absent from older prior files = x0).
+    #[serde(default)]
+    pub prediction: Prediction,
 }
 
 impl MdmConfig {
@@ -33,6 +72,7 @@ impl MdmConfig {
             num_heads: 4,
             text_dim: 512,
             dropout: 0.1,
+            prediction: Prediction::X0,
         }
     }
 
@@ -88,5 +128,18 @@ mod tests {
         assert!(MdmConfig::official().validate().is_ok());
         assert!(MdmConfig::small().validate().is_ok());
         assert!(MdmConfig { num_heads: 3, ..MdmConfig::small() }.validate().is_err());
+    }
+
+    #[test]
+    fn prediction_names_round_trip_and_older_files_mean_x0() {
+        for p in [Prediction::X0, Prediction::Velocity] {
+            assert_eq!(p.to_string().parse::<Prediction>(), Ok(p));
+            let json = serde_json::to_string(&p).unwrap();
+            assert_eq!(json, format!("\"{p}\""));
+        }
+        assert!("eps".parse::<Prediction>().unwrap_err().contains("\"eps\""));
+        let mut old = serde_json::to_value(MdmConfig::small()).unwrap();
+        old.as_object_mut().unwrap().remove("prediction");
+        assert_eq!(serde_json::from_value::<MdmConfig>(old).unwrap().prediction, Prediction::X0);
     }
 }

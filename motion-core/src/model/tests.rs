@@ -23,7 +23,7 @@ fn parity_config() -> MdmConfig {
 
 /// A tiny f64 model for finite differences.
 fn tiny_config() -> MdmConfig {
-    MdmConfig { input_feats: 7, latent_dim: 8, ff_size: 12, num_layers: 2, num_heads: 2, text_dim: 5, dropout: 0.1 }
+    MdmConfig { input_feats: 7, latent_dim: 8, ff_size: 12, num_layers: 2, num_heads: 2, text_dim: 5, dropout: 0.1, prediction: Prediction::X0 }
 }
 
 struct Inputs {
@@ -219,6 +219,32 @@ fn training_mode_has_seeded_dropout_and_weight_gradients(dev: &Device) -> Result
     Ok(())
 }
 
+fn velocity_prediction_scales_input_and_output(dev: &Device) -> Result<()> {
+    let x0_cfg = tiny_config();
+    let v_cfg = MdmConfig { prediction: Prediction::Velocity, ..tiny_config() };
+    // Same seed, same weights: only the reading of the output head differs.
+    let head = Mdm::random(x0_cfg.clone(), DType::F64, dev, 11)?;
+    let model = Mdm::random(v_cfg.clone(), DType::F64, dev, 11)?;
+    let inp = tiny_inputs(&v_cfg, dev)?;
+    let out = head.predict_x0(&inp.x, &inp.t, &inp.text)?;
+    let got = model.predict_x0(&inp.x, &inp.t, &inp.text)?;
+    let ab = NoiseSchedule::mdm().alphas_cumprod().to_vec();
+    for (b, t) in inp.t.to_vec1::<u32>()?.into_iter().enumerate() {
+        let a = ab[t as usize];
+        let want = ((inp.x.i(b)? * a.sqrt())? - (out.i(b)? * (1.0 - a).sqrt())?)?;
+        assert!(max_abs_diff(&got.i(b)?, &want)? < 1e-12, "sample {b} at t = {t}");
+    }
+    // At t = 3 x̂0 is within a few per cent of x_t whatever the head says; at t = 999 it is the head.
+    assert!(max_abs_diff(&got.i(1)?, &inp.x.i(1)?)? < 0.1 * max_abs_diff(&out.i(1)?, &inp.x.i(1)?)?);
+    assert!(max_abs_diff(&model.forward_eval(&inp.x, &inp.t, &inp.text)?, &got)? < 1e-12);
+    let w = randn(inp.x.dims(), 56, dev)?;
+    finite_difference_check(&inp.x, |x| loss(&model.predict_x0(x, &inp.t, &inp.text)?, &w), 1e-5, 1e-6)?;
+    // The schedule has 1000 steps: a later timestep is an error, not a silent wrap.
+    let late = Tensor::new(&[1000u32, 3], dev)?;
+    assert!(model.predict_x0(&inp.x, &late, &inp.text).is_err());
+    Ok(())
+}
+
 fn bad_inputs_are_errors(dev: &Device) -> Result<()> {
     let cfg = tiny_config();
     let model = Mdm::random(cfg.clone(), DType::F64, dev, 10)?;
@@ -242,6 +268,7 @@ mod cpu {
         frozen_gradient_equals_primitive_gradient,
         fused_layer_gradient_matches_finite_differences,
         training_mode_has_seeded_dropout_and_weight_gradients,
+        velocity_prediction_scales_input_and_output,
         bad_inputs_are_errors,
     );
 }

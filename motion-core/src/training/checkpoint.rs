@@ -7,6 +7,7 @@ use std::path::Path;
 
 use candle_core::Tensor;
 
+use crate::model::MdmConfig;
 use crate::tensor_file::{read_metadata, write_safetensors};
 
 use super::{TrainError, Trainer};
@@ -48,8 +49,10 @@ impl Trainer {
         let step: usize =
             meta.get("step").and_then(|s| s.parse().ok()).ok_or_else(|| err("no step in metadata".into()))?;
         let saved_cfg = meta.get("mdm_config").ok_or_else(|| err("no mdm_config in metadata".into()))?;
-        if serde_json::to_string(&self.model_config).map_err(|e| err(e.to_string()))? != *saved_cfg {
-            return Err(err(format!("model sizes differ: checkpoint {saved_cfg}")));
+        // Parsed, not compared as text, so fields added later with defaults still match.
+        let saved: MdmConfig = serde_json::from_str(saved_cfg).map_err(|e| err(format!("mdm_config: {e}")))?;
+        if saved != self.model_config {
+            return Err(err(format!("the model differs: checkpoint {saved_cfg}")));
         }
         let tensors = candle_core::safetensors::load_buffer(&bytes, &self.device).map_err(|e| err(e.to_string()))?;
         let get = |prefix: &str, name: &str| {

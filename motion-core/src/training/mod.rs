@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use crate::database::MotionDatabase;
 use crate::diffusion::noise::gaussian_from_rng;
 use crate::diffusion::NoiseSchedule;
-use crate::model::{Mdm, MdmConfig};
+use crate::model::{Mdm, MdmConfig, Prediction};
 use crate::prior::{Prior, PriorError};
 use crate::representation::{FEATURE_DIM, ROOT_Y};
 use crate::text::vocabulary::VocabularyEncoder;
@@ -64,7 +64,8 @@ pub struct TrainConfig {
     /// Min-SNR-γ loss weighting (Hang et al. 2023): each sample's x0 MSE is weighted by
     /// min(SNR_t, γ) with SNR_t = ᾱ_t/(1 − ᾱ_t), which shifts the training signal from the
     /// nearly pure-noise steps to the low- and mid-noise steps that decide the details; 0 = off
-    /// (MDM's uniform weighting, the default).
+    /// (the default: MDM's uniform weighting for x0 prediction; for
+    /// [`Prediction::Velocity`] the MSE of v, i.e. weight 1/(1 − ᾱ_t) = SNR_t + 1).
     pub snr_gamma: f64,
     /// Fraction of each batch's timesteps drawn from the noisiest 30 % of the schedule
     /// (t ≥ 0.7 T), the rest uniformly from 0..T; default 0 (MDM's uniform sampling). At high
@@ -298,6 +299,10 @@ impl Trainer {
             let gamma = self.config.snr_gamma;
             let weights = self.schedule.per_sample(&t, &squared, |abar| (abar / (1.0 - abar)).min(gamma))?;
             squared.broadcast_mul(&weights)?.mean_all()?
+        } else if self.model_config.prediction == Prediction::Velocity {
+            // ‖x̂0 − x0‖² = (1 − ᾱ)·‖v̂ − v‖²: the v-MSE, whose weight does not vanish at low noise.
+            let weights = self.schedule.per_sample(&t, &squared, |abar| 1.0 / (1.0 - abar))?;
+            squared.broadcast_mul(&weights)?.mean_all()?
         } else {
             squared.mean_all()?
         };
@@ -488,6 +493,14 @@ mod tests {
             assert_eq!(a.loss, b.loss, "{name}: the same batch and weights give the same plain MSE");
             assert_ne!(moved(&plain), moved(&weighted), "{name}: the weighted loss must change the step");
         }
+        // Velocity prediction: the default weighting is the v-MSE, not the x0 MSE of the same head.
+        let velocity = MdmConfig { prediction: Prediction::Velocity, ..model };
+        let mut v_mse = Trainer::new(&db, velocity.clone(), train.clone(), &dev).unwrap();
+        let a = v_mse.train_step().unwrap();
+        let mut min_snr = Trainer::new(&db, velocity, TrainConfig { snr_gamma: 5.0, ..train }, &dev).unwrap();
+        let b = min_snr.train_step().unwrap();
+        assert_eq!(a.loss, b.loss);
+        assert_ne!(moved(&v_mse), moved(&min_snr), "the v-MSE must weight the steps differently");
     }
 
     #[test]
