@@ -39,6 +39,10 @@ pub struct TrainArgs {
     /// (1 = MDM's plain MSE; 25 = HumanML3D's feat_bias 5).
     #[arg(long, default_value_t = TrainConfig::default().root_weight)]
     root_weight: f64,
+    /// Weight of the ric features (root-relative joint positions, from which the joints are
+    /// recovered) in the x0 MSE (1 = MDM's plain MSE).
+    #[arg(long, default_value_t = TrainConfig::default().ric_weight)]
+    ric_weight: f64,
     /// Min-SNR-γ loss weighting: each sample's x0 MSE weighted by min(SNR_t, γ)
     /// (0 = off, MDM's uniform weighting; 5 is the paper's value).
     #[arg(long, default_value_t = TrainConfig::default().snr_gamma)]
@@ -97,6 +101,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         max_frames: args.max_frames,
         checkpoint_every: args.checkpoint_every,
         root_weight: args.root_weight,
+        ric_weight: args.ric_weight,
         snr_gamma: args.snr_gamma,
         high_noise_fraction: args.high_noise_fraction,
         frame_corruption: args.frame_corruption,
