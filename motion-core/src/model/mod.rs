@@ -67,8 +67,8 @@ pub struct Mdm {
     output_process: Linear,
     /// Recomputed sinusoidal table `[MAX_LEN, d]` in the model dtype (not a parameter).
     pe: Tensor,
-    /// For [`Prediction::Velocity`]: √ᾱ_t and √(1−ᾱ_t) of MDM's schedule, `[1000]` each.
-    velocity_scales: Option<(Tensor, Tensor)>,
+    /// For [`Prediction::Velocity`]: MDM's schedule, whose ᾱ_t turns v̂ into x̂0.
+    velocity_schedule: Option<NoiseSchedule>,
     params: Vec<(String, Tensor)>,
 }
 
@@ -91,18 +91,8 @@ impl Mdm {
             .collect::<Result<Vec<_>>>()?;
         let output_process = loader.linear(&vb.pp("output_process").pp("poseFinal"), d, cfg.input_feats)?;
         let pe = sinusoidal_table(MAX_LEN, d, vb.device())?.to_dtype(vb.dtype())?;
-        let velocity_scales = match cfg.prediction {
-            Prediction::X0 => None,
-            Prediction::Velocity => {
-                let alphas_cumprod = NoiseSchedule::mdm().alphas_cumprod().to_vec();
-                let scale = |f: fn(f64) -> f64| {
-                    let v: Vec<f64> = alphas_cumprod.iter().map(|&a| f(a)).collect();
-                    Tensor::new(v, vb.device())?.to_dtype(vb.dtype())
-                };
-                Some((scale(f64::sqrt)?, scale(|a| (1.0 - a).sqrt())?))
-            }
-        };
-        Ok(Self { cfg, input_process, time_embed, embed_text, layers, output_process, pe, velocity_scales, params })
+        let velocity_schedule = (cfg.prediction == Prediction::Velocity).then(NoiseSchedule::mdm);
+        Ok(Self { cfg, input_process, time_embed, embed_text, layers, output_process, pe, velocity_schedule, params })
     }
 
     /// Loads a safetensors checkpoint by name (e.g. one converted from `model000475000.pt`).
@@ -191,10 +181,9 @@ impl Mdm {
     /// x̂0 from the output head's `out` `[batch, frames, 263]` (see [`Prediction`]); gradients
     /// flow to both `out` and `x_t`.
     fn to_x0(&self, out: Tensor, x_t: &Tensor, timesteps: &Tensor) -> Result<Tensor> {
-        let Some((signal, noise)) = &self.velocity_scales else { return Ok(out) };
-        let batch = timesteps.dims1()?;
-        let signal = signal.index_select(timesteps, 0)?.reshape((batch, 1, 1))?;
-        let noise = noise.index_select(timesteps, 0)?.reshape((batch, 1, 1))?;
+        let Some(schedule) = &self.velocity_schedule else { return Ok(out) };
+        let signal = schedule.per_sample(timesteps, x_t, f64::sqrt)?;
+        let noise = schedule.per_sample(timesteps, x_t, |abar| (1.0 - abar).sqrt())?;
         x_t.broadcast_mul(&signal)? - out.broadcast_mul(&noise)?
     }
 
@@ -215,12 +204,6 @@ impl Mdm {
         }
         if timesteps.dims1()? != batch {
             bail!("timesteps {:?} do not match batch {batch}", timesteps.shape());
-        }
-        if let Some((signal, _)) = &self.velocity_scales {
-            let max = timesteps.max(0)?.to_dtype(DType::U32)?.to_scalar::<u32>()? as usize;
-            if max >= signal.dim(0)? {
-                bail!("timestep {max} is past the {} of the schedule", signal.dim(0)?);
-            }
         }
         if text.dims2()? != (batch, self.cfg.text_dim) {
             bail!("text {:?} must be [{batch}, {}]", text.shape(), self.cfg.text_dim);

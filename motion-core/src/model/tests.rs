@@ -23,7 +23,16 @@ fn parity_config() -> MdmConfig {
 
 /// A tiny f64 model for finite differences.
 fn tiny_config() -> MdmConfig {
-    MdmConfig { input_feats: 7, latent_dim: 8, ff_size: 12, num_layers: 2, num_heads: 2, text_dim: 5, dropout: 0.1, prediction: Prediction::X0 }
+    MdmConfig {
+        input_feats: 7,
+        latent_dim: 8,
+        ff_size: 12,
+        num_layers: 2,
+        num_heads: 2,
+        text_dim: 5,
+        dropout: 0.1,
+        prediction: Prediction::X0,
+    }
 }
 
 struct Inputs {
