@@ -9,7 +9,7 @@ use e2e_tests::fixtures;
 use motion_core::database::catalog::Catalog;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
 use motion_core::diffusion::Guidance;
-use motion_core::inversion::InversionConfig;
+use motion_core::inversion::{invert_motion, InversionConfig};
 use motion_core::metrics::{foot_skate_ratio, pace, root_travel};
 use motion_core::prior::Prior;
 use motion_core::quality::{self, denoising_fidelity, joints_of, tensor_to_poses};
@@ -78,18 +78,42 @@ fn inversion_round_trip(config: &InversionConfig) -> (f64, f64) {
 
 #[test]
 fn classic_ddim100_inversion_then_sampling_reproduces_the_pose_of_a_database_window() {
-    let classic =
-        InversionConfig { ddim_steps: 100, fixed_point_iterations: 0, polish_steps: 0, ..InversionConfig::default() };
-    let (_, relative) = inversion_round_trip(&classic);
+    let (_, relative) = inversion_round_trip(&InversionConfig::unpolished(100, 0));
     assert!(relative <= 0.05, "pelvis-relative joint error {relative} m");
 }
 
 /// Issue 3's bar for the whole motion, trajectory included, with the default inversion
-/// (ddim10, fixed-point, DNO polish).
+/// (ddim10, fixed-point, feature and joint polish).
 #[test]
 fn inversion_then_sampling_reproduces_a_database_window_within_5cm() {
     let (global, _) = inversion_round_trip(&InversionConfig::default());
     assert!(global <= 0.05, "mean joint error {global} m");
+}
+
+/// The polish starts from the inverted noise put where the sampler's Gaussian noise lies (unit
+/// RMS per sample) and keeps it near there; both polishes report their steps.
+#[test]
+fn the_polish_starts_on_the_unit_rms_shell_and_stays_near_it() {
+    let (p, db) = (prior(), database());
+    let window = db.windows().iter().find(|w| w.frames >= 60).unwrap();
+    let x0 = p.mean_std.normalize(&db.window_tensor(window, &Device::Cpu).unwrap().narrow(0, 0, 60).unwrap()).unwrap();
+    let x0 = Tensor::stack(&[&x0, &x0.flip(&[0]).unwrap()], 0).unwrap();
+    let text = p.encode_text(&[WALK, WALK], &Device::Cpu).unwrap();
+    let rms = |z: &Tensor| z.sqr().unwrap().mean((1, 2)).unwrap().sqrt().unwrap().to_vec1::<f32>().unwrap();
+    let raw = invert_motion(&p, &x0, &text, &InversionConfig::unpolished(10, 0), |_| {}).unwrap();
+    let still =
+        InversionConfig { feature_polish_steps: 1, feature_polish_lr: 0.0, ..InversionConfig::unpolished(10, 0) };
+    let start = invert_motion(&p, &x0, &text, &still, |_| {}).unwrap();
+    for (r, raw) in rms(&start.z).into_iter().zip(rms(&raw.z)) {
+        assert!((r - 1.0).abs() < 1e-4, "RMS {r} at the start of the polish (raw inversion: {raw})");
+    }
+    let polish = InversionConfig { feature_polish_steps: 5, polish_steps: 5, ..InversionConfig::unpolished(10, 0) };
+    let mut losses = Vec::new();
+    let polished = invert_motion(&p, &x0, &text, &polish, |s| losses.push(s.loss[0])).unwrap();
+    assert_eq!(losses.len(), 10, "both polishes report their steps");
+    for r in rms(&polished.z) {
+        assert!((0.8..1.25).contains(&r), "RMS {r} after polishing");
+    }
 }
 
 fn walk_samples_and_data() -> (Vec<Vec<Pose>>, Vec<Vec<Pose>>) {

@@ -1,13 +1,18 @@
 //! Start noise that reproduces a given motion through the prior's sampler: what RG-DNO needs to
 //! start optimising from a retrieved motion, and what editing a motion with DNO starts from.
 //!
-//! Two stages:
+//! Three stages:
 //! 1. [`DdimSampler::invert`] with fixed-point iterations, which inverts the discrete sampler
-//!    rather than the ODE. Alone it leaves a residual, mostly in the root trajectory: the
-//!    integrated root velocity turns small per-frame errors into decimetres;
-//! 2. optional polishing: DNO ([`crate::dno::optimize`]) on the noise, minimising the mean
-//!    world-frame joint error of the sampled motion to the target, which weighs the trajectory
-//!    as the user sees it.
+//!    rather than the ODE;
+//! 2. when polishing, each sample's noise is first rescaled to unit RMS, the shell where
+//!    Gaussian start noise lies. A denoiser whose x̂0 at t ≈ 0 does not reproduce a clean
+//!    input exactly is inverted to noise far off that shell (RMS 183 for a 9,000-step prior
+//!    that uses temporal context), from which the polish cannot recover. Then the feature
+//!    polish: DNO ([`crate::dno::optimize`]) on the noise, minimising the
+//!    MSE of the sampled motion's normalised features to the target's. It is well conditioned
+//!    (no integrated trajectory) and brings the motion close from any start;
+//! 3. the joint polish: DNO on the mean world-frame joint error, which weighs the
+//!    trajectory as the user sees it.
 
 use candle_core::{Result, Tensor};
 
@@ -22,15 +27,35 @@ pub struct InversionConfig {
     pub ddim_steps: usize,
     /// Fixed-point iterations per inversion step (default 8; 0 = classic DDIM inversion).
     pub fixed_point_iterations: usize,
-    /// DNO steps polishing the noise against the joint error (default 100; 0 = none).
+    /// DNO steps polishing the noise against the normalised-feature MSE (default 100; 0 =
+    /// none).
+    pub feature_polish_steps: usize,
+    /// Peak Adam learning rate of the feature polish, decayed along a cosine (default 0.05).
+    pub feature_polish_lr: f64,
+    /// DNO steps polishing the noise against the world-frame joint error, after the feature
+    /// polish (default 100; 0 = none).
     pub polish_steps: usize,
-    /// Peak Adam learning rate of the polish, decayed along a cosine (default 0.02).
+    /// Peak Adam learning rate of the joint polish, decayed along a cosine (default 0.02).
     pub polish_lr: f64,
+}
+
+impl InversionConfig {
+    /// DDIM inversion alone (`fixed_point_iterations` per step, 0 = classic), no polish.
+    pub fn unpolished(ddim_steps: usize, fixed_point_iterations: usize) -> Self {
+        Self { ddim_steps, fixed_point_iterations, feature_polish_steps: 0, polish_steps: 0, ..Self::default() }
+    }
 }
 
 impl Default for InversionConfig {
     fn default() -> Self {
-        Self { ddim_steps: 10, fixed_point_iterations: 8, polish_steps: 100, polish_lr: 0.02 }
+        Self {
+            ddim_steps: 10,
+            fixed_point_iterations: 8,
+            feature_polish_steps: 100,
+            feature_polish_lr: 0.05,
+            polish_steps: 100,
+            polish_lr: 0.02,
+        }
     }
 }
 
@@ -45,36 +70,48 @@ pub struct Inverted {
 
 /// Finds noise z with `sample(z) ≈ x0` for normalised features `x0` `[batch, frames, 263]`
 /// conditioned on `text` `[batch, text_dim]` (no guidance, so the noise is valid for the
-/// conditional model alone). `on_polish_step` reports the polish (its loss is the mean joint
-/// error in metres per sample).
+/// conditional model alone). `on_polish_step` reports both polishes in turn (the feature
+/// polish's loss is the normalised-feature MSE, the joint polish's the mean joint error in
+/// metres, per sample).
 pub fn invert_motion(
     prior: &Prior,
     x0: &Tensor,
     text: &Tensor,
     config: &InversionConfig,
-    on_polish_step: impl FnMut(&DnoStep),
+    mut on_polish_step: impl FnMut(&DnoStep),
 ) -> Result<Inverted> {
     let solver = UnrolledDdim::new(&prior.mdm, text.clone(), Guidance::none(), config.ddim_steps)?;
     let z = solver.sampler.invert(&prior.mdm, x0, text, Guidance::none(), config.fixed_point_iterations)?;
-    if config.polish_steps == 0 {
+    if config.feature_polish_steps == 0 && config.polish_steps == 0 {
         let x = solver.sampler.sample(&prior.mdm, &z, text, Guidance::none())?;
         return Ok(Inverted { z, x });
     }
-    let target = prior.to_joints(&x0.detach())?.detach();
-    let criterion = |x: &Tensor| mean_joint_distance(&prior.to_joints(x)?, &target);
-    let polish = DnoConfig {
-        steps: config.polish_steps,
-        lr: config.polish_lr,
+    let rms = z.sqr()?.mean_keepdim((1, 2))?.sqrt()?;
+    let mut z = z.broadcast_div(&rms)?;
+    let polish = |steps: usize, lr: f64| DnoConfig {
+        steps,
+        lr,
         lr_warmup_steps: 0,
-        lr_decay_steps: Some(config.polish_steps),
+        lr_decay_steps: Some(steps),
         decorrelate_scale: 0.0,
         ddim_steps: config.ddim_steps,
         ..DnoConfig::default()
     };
-    let result = dno::optimize(&solver, criterion, &z, &polish, on_polish_step)?;
+    let target = x0.detach();
+    if config.feature_polish_steps > 0 {
+        let criterion = |x: &Tensor| (x - &target)?.sqr()?.mean((1, 2));
+        let settings = polish(config.feature_polish_steps, config.feature_polish_lr);
+        z = dno::optimize(&solver, criterion, &z, &settings, &mut on_polish_step)?.z;
+    }
+    if config.polish_steps > 0 {
+        let joints = prior.to_joints(&target)?.detach();
+        let criterion = |x: &Tensor| mean_joint_distance(&prior.to_joints(x)?, &joints);
+        z = dno::optimize(&solver, criterion, &z, &polish(config.polish_steps, config.polish_lr), &mut on_polish_step)?
+            .z;
+    }
     // The optimiser reports the motion before its last update; sample the final noise.
-    let x = solver.sampler.sample(&prior.mdm, &result.z, text, Guidance::none())?;
-    Ok(Inverted { z: result.z, x })
+    let x = solver.sampler.sample(&prior.mdm, &z, text, Guidance::none())?;
+    Ok(Inverted { z, x })
 }
 
 /// Mean over frames and joints of the Euclidean distance between joint sets `[B, T, 22, 3]`,

@@ -233,7 +233,9 @@ pub struct RoundTrip {
     pub ddim_steps: usize,
     /// Fixed-point iterations per inversion step (0 = classic DDIM inversion).
     pub fixed_point_iterations: usize,
-    /// DNO polish steps (0 = none).
+    /// DNO steps of the feature polish (0 = none).
+    pub feature_polish_steps: usize,
+    /// DNO steps of the joint polish (0 = none).
     pub polish_steps: usize,
     /// Mean over windows, frames and joints of the world-frame joint error, m (the whole
     /// motion, trajectory included).
@@ -269,6 +271,7 @@ pub fn inversion_round_trip(
         frames,
         ddim_steps: config.ddim_steps,
         fixed_point_iterations: config.fixed_point_iterations,
+        feature_polish_steps: config.feature_polish_steps,
         polish_steps: config.polish_steps,
         mean_joint_error_m: error(&original, &rebuilt).map_err(fail)?,
         pelvis_relative_error_m: error(&relative(&original).map_err(fail)?, &relative(&rebuilt).map_err(fail)?)

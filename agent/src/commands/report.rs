@@ -45,7 +45,11 @@ pub struct ReportArgs {
     /// DDIM inversion).
     #[arg(long, default_value_t = InversionConfig::default().fixed_point_iterations)]
     invert_iterations: usize,
-    /// DNO steps polishing the inverted noise in the third round trip.
+    /// DNO steps polishing the inverted noise against the feature MSE in the third round trip.
+    #[arg(long, default_value_t = InversionConfig::default().feature_polish_steps)]
+    feature_polish_steps: usize,
+    /// DNO steps polishing the inverted noise against the joint error in the third round trip,
+    /// after the feature polish.
     #[arg(long, default_value_t = InversionConfig::default().polish_steps)]
     polish_steps: usize,
     /// Output folder (report.json, report.md, samples.png).
@@ -98,13 +102,23 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     lines.push(String::new());
     let walk = "a person walks forward";
     if db.labels().iter().any(|l| l == walk) {
-        let base = InversionConfig { ddim_steps: args.invert_steps, ..InversionConfig::default() };
-        for (iterations, polish) in [(0, 0), (args.invert_iterations, 0), (args.invert_iterations, args.polish_steps)] {
-            let config = InversionConfig { fixed_point_iterations: iterations, polish_steps: polish, ..base.clone() };
-            let r = inversion_round_trip(&prior, &db, walk, (8, 120), &config, &device)?;
+        let polished = InversionConfig {
+            ddim_steps: args.invert_steps,
+            fixed_point_iterations: args.invert_iterations,
+            feature_polish_steps: args.feature_polish_steps,
+            polish_steps: args.polish_steps,
+            ..InversionConfig::default()
+        };
+        let round_trips = [
+            InversionConfig::unpolished(args.invert_steps, 0),
+            InversionConfig::unpolished(args.invert_steps, args.invert_iterations),
+            polished,
+        ];
+        for config in &round_trips {
+            let r = inversion_round_trip(&prior, &db, walk, (8, 120), config, &device)?;
             let line = format!(
-                "DDIM-{} inversion ({} fixed-point iterations, {} polish steps) then sampling of {} `{walk}` windows ({} frames): mean joint error {:.4} m, pelvis-relative {:.4} m",
-                r.ddim_steps, r.fixed_point_iterations, r.polish_steps, r.windows, r.frames, r.mean_joint_error_m, r.pelvis_relative_error_m
+                "DDIM-{} inversion ({} fixed-point iterations, rescaled to unit RMS; {} feature-polish and {} joint-polish steps) then sampling of {} `{walk}` windows ({} frames): mean joint error {:.4} m, pelvis-relative {:.4} m",
+                r.ddim_steps, r.fixed_point_iterations, r.feature_polish_steps, r.polish_steps, r.windows, r.frames, r.mean_joint_error_m, r.pelvis_relative_error_m
             );
             println!("{line}");
             lines.push(line + "  ");

@@ -14,10 +14,12 @@ pub use geometric::{GeometricLoss, GeometricTerms, CONTACT_SPEED_M_PER_S};
 
 use std::path::{Path, PathBuf};
 
+use candle_core::backprop::GradStore;
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::VarMap;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::database::MotionDatabase;
@@ -92,6 +94,10 @@ pub struct TrainConfig {
     pub checkpoint_every: usize,
     /// Seed of initialisation, batches, noise and dropout; default 0.
     pub seed: u64,
+    /// Shards of each batch whose forward and backward passes run in parallel, one per core,
+    /// their gradients summed; default 2. The result depends on the shard count, not on the
+    /// number of threads. The planted-foot term is normalised per shard.
+    pub shards: usize,
 }
 
 impl Default for TrainConfig {
@@ -116,6 +122,7 @@ impl Default for TrainConfig {
             foot_contact_weight: 0.0,
             checkpoint_every: 500,
             seed: 0,
+            shards: 2,
         }
     }
 }
@@ -298,41 +305,60 @@ impl Trainer {
         } else {
             x_t
         };
-        let x0_hat = self.model.forward_train(&x_t, &t, &text, &mut rng)?;
-        let squared = (&x0_hat - &batch.x0)?.sqr()?;
-        let loss_value = f64::from(squared.mean_all()?.to_scalar::<f32>()?);
-        let squared = match &self.feature_weights {
-            Some(w) => squared.broadcast_mul(w)?,
-            None => squared,
+        // The batch is cut into shards whose losses and gradients are computed in parallel
+        // (rayon) and summed in shard order, so the result depends on the shard count but not
+        // on how many threads run them.
+        let shards = self.config.shards.clamp(1, b);
+        let parts: Vec<(usize, usize, u64)> = (0..shards)
+            .map(|k| {
+                let (start, end) = (k * b / shards, (k + 1) * b / shards);
+                (start, end - start, rng.random::<u64>())
+            })
+            .collect();
+        let objective = Objective {
+            model: &self.model,
+            config: &self.config,
+            prediction: self.model_config.prediction,
+            schedule: &self.schedule,
+            feature_weights: self.feature_weights.as_ref(),
+            geometric: self.geometric.as_ref(),
         };
-        let mse = if self.config.snr_gamma > 0.0 {
-            let gamma = self.config.snr_gamma;
-            let weights = self.schedule.per_sample(&t, &squared, |abar| (abar / (1.0 - abar)).min(gamma))?;
-            squared.broadcast_mul(&weights)?.mean_all()?
-        } else if self.model_config.prediction == Prediction::Velocity {
-            // ‖x̂0 − x0‖² = (1 − ᾱ)·‖v̂ − v‖²: the v-MSE, whose weight does not vanish at low noise.
-            let weights = self.schedule.per_sample(&t, &squared, |abar| 1.0 / (1.0 - abar))?;
-            squared.broadcast_mul(&weights)?.mean_all()?
-        } else {
-            squared.mean_all()?
-        };
-        let (loss, velocity, foot_contact) = match &self.geometric {
-            Some(geometric) => {
-                let signal = self.schedule.per_sample(&t, &batch.x0, |abar| abar)?.flatten_all()?;
-                let terms = geometric.terms(&x0_hat, &batch.x0, &signal)?;
-                let loss = ((mse + (&terms.velocity * self.config.velocity_weight)?)?
-                    + (&terms.foot_contact * self.config.foot_contact_weight)?)?;
-                let value = |t: &Tensor| t.to_scalar::<f32>().map(f64::from);
-                (loss, value(&terms.velocity)?, value(&terms.foot_contact)?)
-            }
-            None => (mse, 0.0, 0.0),
-        };
-        let total = f64::from(loss.to_scalar::<f32>()?);
+        let losses = parts
+            .par_iter()
+            .map(|&(start, len, seed)| {
+                let rows = |x: &Tensor| x.narrow(0, start, len);
+                let shard = Shard { x0: rows(&batch.x0)?, x_t: rows(&x_t)?, t: rows(&t)?, text: rows(&text)? };
+                objective.loss(&shard, len as f64 / b as f64, &mut StdRng::seed_from_u64(seed))
+            })
+            .collect::<candle_core::Result<Vec<ShardLoss>>>()?;
+        let (mut loss_value, mut velocity, mut foot_contact, mut total) = (0.0, 0.0, 0.0, 0.0);
+        let mut grads: Option<GradStore> = None;
+        for part in losses {
+            loss_value += part.mse;
+            velocity += part.velocity;
+            foot_contact += part.foot_contact;
+            total += part.total;
+            grads = Some(match grads {
+                None => part.grads,
+                Some(mut sum) => {
+                    for (_, var) in &self.vars {
+                        if let Some(g) = part.grads.get(var.as_tensor()) {
+                            let added = match sum.get(var.as_tensor()) {
+                                Some(s) => (s + g)?,
+                                None => g.clone(),
+                            };
+                            sum.insert(var.as_tensor(), added);
+                        }
+                    }
+                    sum
+                }
+            });
+        }
         if !total.is_finite() {
             return Err(TrainError::Diverged { step: self.step + 1, loss: total });
         }
+        let grads = grads.ok_or_else(|| TrainError::Data("empty batch".into()))?;
         let lr = self.config.lr_at(self.step);
-        let grads = loss.backward()?;
         self.optimizer.step(&grads, lr)?;
         let d = self.config.ema_decay.min((1 + self.step) as f64 / (10 + self.step) as f64);
         for (ema, (_, var)) in self.ema.iter_mut().zip(&self.vars) {
@@ -358,6 +384,80 @@ impl Trainer {
             self.vars.iter().zip(&self.ema).map(|((name, _), ema)| (name.clone(), ema.clone())).collect();
         Prior::write(path, &params, &self.model_config, &self.encoder, mean_std)?;
         Ok(())
+    }
+}
+
+/// One shard of a batch: rows of the clean target, the denoiser's input, timesteps `[rows]`
+/// and (possibly dropped) text condition `[rows, text_dim]`.
+struct Shard {
+    x0: Tensor,
+    x_t: Tensor,
+    t: Tensor,
+    text: Tensor,
+}
+
+/// A shard's share of the batch loss: the gradients of `weight ×` its loss and the values of
+/// its terms, each already multiplied by `weight` (its fraction of the batch's rows), so the
+/// shards' values sum to the batch's.
+struct ShardLoss {
+    grads: GradStore,
+    mse: f64,
+    velocity: f64,
+    foot_contact: f64,
+    total: f64,
+}
+
+/// The training loss: the (weighted) x0 MSE plus the optional geometric terms.
+struct Objective<'a> {
+    model: &'a Mdm,
+    config: &'a TrainConfig,
+    prediction: Prediction,
+    schedule: &'a NoiseSchedule,
+    feature_weights: Option<&'a Tensor>,
+    geometric: Option<&'a GeometricLoss>,
+}
+
+impl Objective<'_> {
+    /// Forward and backward pass on one shard; `dropout` drives the denoiser's dropout.
+    fn loss(&self, shard: &Shard, weight: f64, dropout: &mut StdRng) -> candle_core::Result<ShardLoss> {
+        let Shard { x0, x_t, t, text } = shard;
+        let x0_hat = self.model.forward_train(x_t, t, text, dropout)?;
+        let squared = (&x0_hat - x0)?.sqr()?;
+        let mse_value = f64::from(squared.mean_all()?.to_scalar::<f32>()?);
+        let squared = match self.feature_weights {
+            Some(w) => squared.broadcast_mul(w)?,
+            None => squared,
+        };
+        let mse = if self.config.snr_gamma > 0.0 {
+            let gamma = self.config.snr_gamma;
+            let weights = self.schedule.per_sample(t, &squared, |abar| (abar / (1.0 - abar)).min(gamma))?;
+            squared.broadcast_mul(&weights)?.mean_all()?
+        } else if self.prediction == Prediction::Velocity {
+            // ‖x̂0 − x0‖² = (1 − ᾱ)·‖v̂ − v‖²: the v-MSE, whose weight does not vanish at low noise.
+            let weights = self.schedule.per_sample(t, &squared, |abar| 1.0 / (1.0 - abar))?;
+            squared.broadcast_mul(&weights)?.mean_all()?
+        } else {
+            squared.mean_all()?
+        };
+        let (loss, velocity, foot_contact) = match self.geometric {
+            Some(geometric) => {
+                let signal = self.schedule.per_sample(t, x0, |abar| abar)?.flatten_all()?;
+                let terms = geometric.terms(&x0_hat, x0, &signal)?;
+                let loss = ((mse + (&terms.velocity * self.config.velocity_weight)?)?
+                    + (&terms.foot_contact * self.config.foot_contact_weight)?)?;
+                let value = |t: &Tensor| t.to_scalar::<f32>().map(f64::from);
+                (loss, value(&terms.velocity)?, value(&terms.foot_contact)?)
+            }
+            None => (mse, 0.0, 0.0),
+        };
+        let loss = (loss * weight)?;
+        Ok(ShardLoss {
+            total: f64::from(loss.to_scalar::<f32>()?),
+            grads: loss.backward()?,
+            mse: mse_value * weight,
+            velocity: velocity * weight,
+            foot_contact: foot_contact * weight,
+        })
     }
 }
 
@@ -438,6 +538,37 @@ mod tests {
         let prior_path = dir.path().join("prior.safetensors");
         resumed.save_prior(&prior_path, db.mean_std()).unwrap();
         assert!(Prior::load(&prior_path, &dev).is_ok());
+    }
+
+    /// Sharding splits the batch, not the objective: without dropout (the only draw made per
+    /// shard) one shard and three uneven ones give the same training, and the number of
+    /// threads does not change a sharded run at all.
+    #[test]
+    fn shards_give_the_whole_batch_update_on_any_number_of_threads() {
+        let (db, model, train) = tiny_run();
+        let model = MdmConfig { dropout: 0.0, ..model };
+        let train = TrainConfig { batch_size: 4, steps: 3, ..train };
+        let run = |shards: usize, threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                let config = TrainConfig { shards, ..train.clone() };
+                let mut trainer = Trainer::new(&db, model.clone(), config, &Device::Cpu).unwrap();
+                let mut losses = Vec::new();
+                trainer.run(None, |r| losses.push(r.loss)).unwrap();
+                let weights: Vec<Vec<f32>> =
+                    trainer.vars.iter().map(|(_, v)| v.as_tensor().flatten_all().unwrap().to_vec1().unwrap()).collect();
+                (losses, weights)
+            })
+        };
+        let (whole_losses, whole) = run(1, 1);
+        let (sharded_losses, sharded) = run(3, 2);
+        for (a, b) in whole_losses.iter().zip(&sharded_losses) {
+            assert!((a - b).abs() < 1e-5 * a.abs(), "losses {whole_losses:?} against {sharded_losses:?}");
+        }
+        let largest =
+            whole.iter().flatten().zip(sharded.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        assert!(largest < 1e-5, "weights differ by up to {largest}");
+        assert_eq!(run(3, 1), (sharded_losses, sharded), "the thread count changed a sharded run");
     }
 
     #[test]
