@@ -117,8 +117,21 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         for config in &round_trips {
             let r = inversion_round_trip(&prior, &db, walk, (8, 120), config, &device)?;
             let line = format!(
-                "DDIM-{} inversion ({} fixed-point iterations, rescaled to unit RMS; {} feature-polish and {} joint-polish steps) then sampling of {} `{walk}` windows ({} frames): mean joint error {:.4} m, pelvis-relative {:.4} m",
-                r.ddim_steps, r.fixed_point_iterations, r.feature_polish_steps, r.polish_steps, r.windows, r.frames, r.mean_joint_error_m, r.pelvis_relative_error_m
+                "DDIM-{} inversion ({} fixed-point iterations{}) then sampling of {} `{walk}` windows ({} frames): mean joint error {:.4} m, pelvis-relative {:.4} m",
+                r.ddim_steps,
+                r.fixed_point_iterations,
+                if r.feature_polish_steps + r.polish_steps > 0 {
+                    format!(
+                        "; rescaled to unit RMS, {} feature-polish and {} joint-polish steps",
+                        r.feature_polish_steps, r.polish_steps
+                    )
+                } else {
+                    String::new()
+                },
+                r.windows,
+                r.frames,
+                r.mean_joint_error_m,
+                r.pelvis_relative_error_m
             );
             println!("{line}");
             lines.push(line + "  ");
