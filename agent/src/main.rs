@@ -35,8 +35,7 @@ enum Command {
     /// Motion data: import mocap, build the training/retrieval database.
     #[command(subcommand)]
     Data(commands::data::DataCommand),
-    /// Train the motion prior on a database (resumable; progress and loss on stderr); the
-    /// defaults are the shipped prior's recipe.
+    /// Train the motion prior on a database (resumable; progress and loss on stderr).
     Train(commands::train::TrainArgs),
     /// Unconstrained motions from the prior for a text prompt (npy + PNG strip).
     Sample(commands::sample::SampleArgs),
