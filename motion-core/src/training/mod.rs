@@ -34,7 +34,7 @@ use crate::text::vocabulary::VocabularyEncoder;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct TrainConfig {
-    /// Optimiser steps; default 5000 (about 52 minutes on 2 cores).
+    /// Optimiser steps; default 5000 (about 23 minutes on 2 cores with 2 shards).
     pub steps: usize,
     /// Windows per batch; default 24.
     pub batch_size: usize,
