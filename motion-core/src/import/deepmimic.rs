@@ -308,7 +308,7 @@ impl DeepMimicClip {
         key.root = origin + heading * (straighten * rel) + DVec3::Y * (w * cycle.height_seam_m);
         key.rot[0] = heading * straighten * key.rot[0] * DQuat::IDENTITY.slerp(cycle.root_seam, w);
         for j in 1..DM_JOINTS {
-            key.rot[j] = key.rot[j] * DQuat::IDENTITY.slerp(cycle.joint_seam[j], w);
+            key.rot[j] *= DQuat::IDENTITY.slerp(cycle.joint_seam[j], w);
         }
         key
     }

@@ -318,7 +318,6 @@ impl Trainer {
         let objective = Objective {
             model: &self.model,
             config: &self.config,
-            prediction: self.model_config.prediction,
             schedule: &self.schedule,
             feature_weights: self.feature_weights.as_ref(),
             geometric: self.geometric.as_ref(),
@@ -331,33 +330,17 @@ impl Trainer {
                 objective.loss(&shard, len as f64 / b as f64, &mut StdRng::seed_from_u64(seed))
             })
             .collect::<candle_core::Result<Vec<ShardLoss>>>()?;
-        let (mut loss_value, mut velocity, mut foot_contact, mut total) = (0.0, 0.0, 0.0, 0.0);
-        let mut grads: Option<GradStore> = None;
+        let mut losses = losses.into_iter();
+        let Some(mut sum) = losses.next() else {
+            return Err(TrainError::Data("empty batch".into()));
+        };
         for part in losses {
-            loss_value += part.mse;
-            velocity += part.velocity;
-            foot_contact += part.foot_contact;
-            total += part.total;
-            grads = Some(match grads {
-                None => part.grads,
-                Some(mut sum) => {
-                    for (_, var) in &self.vars {
-                        if let Some(g) = part.grads.get(var.as_tensor()) {
-                            let added = match sum.get(var.as_tensor()) {
-                                Some(s) => (s + g)?,
-                                None => g.clone(),
-                            };
-                            sum.insert(var.as_tensor(), added);
-                        }
-                    }
-                    sum
-                }
-            });
+            sum.absorb(part, self.vars.iter().map(|(_, v)| v))?;
         }
+        let ShardLoss { grads, mse: loss_value, velocity, foot_contact, total } = sum;
         if !total.is_finite() {
             return Err(TrainError::Diverged { step: self.step + 1, loss: total });
         }
-        let grads = grads.ok_or_else(|| TrainError::Data("empty batch".into()))?;
         let lr = self.config.lr_at(self.step);
         self.optimizer.step(&grads, lr)?;
         let d = self.config.ema_decay.min((1 + self.step) as f64 / (10 + self.step) as f64);
@@ -407,11 +390,27 @@ struct ShardLoss {
     total: f64,
 }
 
+impl ShardLoss {
+    /// Adds `other`'s values and its gradients of `vars` to this one's.
+    fn absorb<'v>(&mut self, other: ShardLoss, vars: impl Iterator<Item = &'v Var>) -> candle_core::Result<()> {
+        self.mse += other.mse;
+        self.velocity += other.velocity;
+        self.foot_contact += other.foot_contact;
+        self.total += other.total;
+        for var in vars {
+            if let (Some(sum), Some(g)) = (self.grads.get(var.as_tensor()), other.grads.get(var.as_tensor())) {
+                let added = (sum + g)?;
+                self.grads.insert(var.as_tensor(), added);
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The training loss: the (weighted) x0 MSE plus the optional geometric terms.
 struct Objective<'a> {
     model: &'a Mdm,
     config: &'a TrainConfig,
-    prediction: Prediction,
     schedule: &'a NoiseSchedule,
     feature_weights: Option<&'a Tensor>,
     geometric: Option<&'a GeometricLoss>,
@@ -432,7 +431,7 @@ impl Objective<'_> {
             let gamma = self.config.snr_gamma;
             let weights = self.schedule.per_sample(t, &squared, |abar| (abar / (1.0 - abar)).min(gamma))?;
             squared.broadcast_mul(&weights)?.mean_all()?
-        } else if self.prediction == Prediction::Velocity {
+        } else if self.model.config().prediction == Prediction::Velocity {
             // ‖x̂0 − x0‖² = (1 − ᾱ)·‖v̂ − v‖²: the v-MSE, whose weight does not vanish at low noise.
             let weights = self.schedule.per_sample(t, &squared, |abar| 1.0 / (1.0 - abar))?;
             squared.broadcast_mul(&weights)?.mean_all()?
