@@ -11,7 +11,7 @@ use motion_core::database::{DatabaseConfig, MotionDatabase};
 use motion_core::diffusion::Guidance;
 use motion_core::inversion::{invert_motion, InversionConfig};
 use motion_core::metrics::{foot_skate_ratio, pace, root_travel};
-use motion_core::prior::Prior;
+use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::{self, denoising_fidelity, joints_of, tensor_to_poses};
 use motion_core::representation::recover_from_ric;
 use motion_core::skeleton::{Joint, Pose};
@@ -127,7 +127,9 @@ fn walk_samples_and_data() -> (Vec<Vec<Pose>>, Vec<Vec<Pose>>) {
         .filter(|w| w.frames >= 120)
         .map(|w| db.window_tensor(w, &Device::Cpu).unwrap().narrow(0, 0, 120).unwrap())
         .collect();
-    let data = tensor_to_poses(&recover_from_ric(&Tensor::stack(&crops, 0).unwrap()).unwrap()).unwrap();
+    // The data's root goes through the same decode as the samples' (planted feet by default).
+    let data = p.root_decode.apply(&Tensor::stack(&crops, 0).unwrap()).unwrap();
+    let data = tensor_to_poses(&recover_from_ric(&data).unwrap()).unwrap();
     (samples, data)
 }
 
@@ -150,12 +152,12 @@ fn walks_stand_tall_and_differ_across_seeds() {
     assert!(spread > 0.1, "all samples end within {spread} m of each other");
 }
 
-/// Issue 3's bar: unconstrained walks skate at most 1.5x as much as the training walks. A walk
+/// Issue 3's bar: unconstrained walks skate at most 1.5x as much as the training walks, both
+/// decoded with the prior's default root decode (the root follows the planted feet). A walk
 /// that stands still, or glides with its legs together, cannot pass by not stepping: the
 /// samples must also travel 0.5–1.5x as far as the training walks and step at least half as
-/// often.
+/// often. `the_predicted_root_velocity_alone_glides` keeps the raw decode's figures in view.
 #[test]
-#[ignore = "acceptance target not yet met by the shipped prior (samples skate more); run with --ignored"]
 fn walks_skate_at_most_one_and_a_half_times_the_training_walks() {
     let (samples, data) = walk_samples_and_data();
     let skate_gen = mean(&samples, &foot_skate_ratio);
@@ -170,4 +172,23 @@ fn walks_skate_at_most_one_and_a_half_times_the_training_walks() {
     assert!(skate_gen <= 1.5 * skate_data, "samples skate {skate_gen}, data {skate_data}");
     assert!((0.5..=1.5).contains(&(travel_gen / travel_data)), "samples travel {travel_gen} m, data {travel_data} m");
     assert!(pace_gen >= 0.5 * pace_data, "samples step {pace_gen}/s, data {pace_data}/s");
+}
+
+/// The denoiser's own root velocity, decoded as it is (HumanML3D's decode), runs ahead of its
+/// legs: the planted feet slide and the walk covers more ground than the planted-feet decode
+/// gives. This is what the default decode corrects; when a retrained prior no longer needs it,
+/// this test says so.
+#[test]
+fn the_predicted_root_velocity_alone_glides() {
+    let mut p = prior();
+    let x = p.sample(WALK, 120, 8, 0, 50, Guidance::default(), &Device::Cpu).unwrap();
+    let planted = joints_of(&p, &x).unwrap();
+    p.root_decode = RootDecode::Velocity;
+    let raw = joints_of(&p, &x).unwrap();
+    let (skate_planted, skate_raw) = (mean(&planted, &foot_skate_ratio), mean(&raw, &foot_skate_ratio));
+    let (travel_planted, travel_raw) = (mean(&planted, &root_travel), mean(&raw, &root_travel));
+    println!("skate: planted feet {skate_planted:.3}, velocity {skate_raw:.3}");
+    println!("travel: planted feet {travel_planted:.2} m, velocity {travel_raw:.2} m");
+    assert!(skate_raw > 2.0 * skate_planted, "skate {skate_raw} with the raw velocity, {skate_planted} planted");
+    assert!(travel_raw > 1.5 * travel_planted, "travel {travel_raw} m raw, {travel_planted} m planted");
 }

@@ -14,7 +14,7 @@ use candle_nn::VarBuilder;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{DdimSampler, Guidance, NoiseSchedule};
 use crate::model::{Mdm, MdmConfig};
-use crate::representation::{recover_from_ric, MeanStd, NormalizationError};
+use crate::representation::{recover_from_ric, root_velocity_from_planted_feet, MeanStd, NormalizationError};
 use crate::tensor_file::{read_metadata, write_safetensors};
 use crate::text::vocabulary::VocabularyEncoder;
 use crate::text::TextEncoder;
@@ -51,6 +51,52 @@ pub enum PriorError {
     },
 }
 
+/// How the root's x/z motion is read from generated features, which carry it twice: as the
+/// root velocity and through the planted feet (root-relative foot positions plus contacts).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RootDecode {
+    /// The root velocity is re-derived from the feet whose contact is on, so they stay where
+    /// they were planted ([`root_velocity_from_planted_feet`]); frames without a planted foot
+    /// keep the predicted velocity. The default: the denoiser's root velocity can run ahead of
+    /// its legs, and the feet then slide.
+    #[default]
+    PlantedFeet,
+    /// The predicted root velocity as it is (HumanML3D's `recover_from_ric`).
+    Velocity,
+}
+
+impl RootDecode {
+    /// De-normalised features `[batch, frames, 263]` with the root velocity decoded this way.
+    pub fn apply(self, raw: &Tensor) -> candle_core::Result<Tensor> {
+        match self {
+            Self::PlantedFeet => root_velocity_from_planted_feet(raw),
+            Self::Velocity => Ok(raw.clone()),
+        }
+    }
+}
+
+impl std::str::FromStr for RootDecode {
+    type Err = String;
+
+    /// `planted-feet` or `velocity`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "planted-feet" => Ok(Self::PlantedFeet),
+            "velocity" => Ok(Self::Velocity),
+            other => Err(format!("unknown root decode {other:?}: expected \"planted-feet\" or \"velocity\"")),
+        }
+    }
+}
+
+impl std::fmt::Display for RootDecode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::PlantedFeet => "planted-feet",
+            Self::Velocity => "velocity",
+        })
+    }
+}
+
 /// A trained denoiser with everything needed to use it.
 #[derive(Debug, Clone)]
 pub struct Prior {
@@ -60,6 +106,9 @@ pub struct Prior {
     pub encoder: VocabularyEncoder,
     /// Normalisation of its features.
     pub mean_std: MeanStd,
+    /// How generated features become a root trajectory (not stored in the file; default
+    /// [`RootDecode::PlantedFeet`]).
+    pub root_decode: RootDecode,
 }
 
 impl Prior {
@@ -93,7 +142,7 @@ impl Prior {
             .map_err(|source| PriorError::Normalization { path: path.into(), source })?;
         let mdm =
             Mdm::new(cfg, VarBuilder::from_tensors(tensors, DType::F32, device)).map_err(|e| format(e.to_string()))?;
-        Ok(Self { mdm, encoder, mean_std })
+        Ok(Self { mdm, encoder, mean_std, root_decode: RootDecode::default() })
     }
 
     /// Writes the prior as one safetensors file.
@@ -147,15 +196,30 @@ impl Prior {
         sampler.sample(&self.mdm, &x_t, &text, guidance).map_err(|e| fail(e.to_string()))
     }
 
-    /// Joint positions `[batch, frames, 22, 3]` of normalised features `[batch, frames, 263]`.
+    /// De-normalised features `[batch, frames, 263]` of normalised ones, the root velocity
+    /// decoded by [`Self::root_decode`]: what is exported and what the joints come from.
+    pub fn to_features(&self, normalized: &Tensor) -> candle_core::Result<Tensor> {
+        self.root_decode.apply(&self.mean_std.denormalize(normalized)?)
+    }
+
+    /// Joint positions `[batch, frames, 22, 3]` (m, y up) of normalised features
+    /// `[batch, frames, 263]`; differentiable.
     pub fn to_joints(&self, normalized: &Tensor) -> candle_core::Result<Tensor> {
-        recover_from_ric(&self.mean_std.denormalize(normalized)?)
+        recover_from_ric(&self.to_features(normalized)?)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn root_decode_names_round_trip() {
+        for d in [RootDecode::PlantedFeet, RootDecode::Velocity] {
+            assert_eq!(d.to_string().parse::<RootDecode>(), Ok(d));
+        }
+        assert!("feet".parse::<RootDecode>().unwrap_err().contains("\"feet\""));
+    }
 
     #[test]
     fn saves_and_loads_with_metadata_and_names_missing_parts() {
@@ -170,7 +234,7 @@ mod tests {
         };
         let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
         let mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
-        let prior = Prior { mdm, encoder, mean_std };
+        let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::Velocity };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("prior.safetensors");
         prior.save(&path).unwrap();
@@ -178,6 +242,7 @@ mod tests {
         assert_eq!(back.encoder, prior.encoder);
         assert_eq!(back.mdm.config(), prior.mdm.config());
         assert_eq!(back.mean_std.std().to_vec1::<f32>().unwrap()[5], 2.0);
+        assert_eq!(back.root_decode, RootDecode::PlantedFeet, "the default decode");
 
         std::fs::write(&path, b"not a prior").unwrap();
         assert!(Prior::load(&path, &Device::Cpu).unwrap_err().to_string().contains("prior.safetensors"));

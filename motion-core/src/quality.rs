@@ -174,7 +174,7 @@ pub fn quality_report(
             Guidance { scale: config.guidance },
             device,
         )?;
-        let raw = prior.mean_std.denormalize(&x).map_err(fail)?;
+        let raw = prior.to_features(&x).map_err(fail)?;
         let samples = tensor_to_poses(&recover_from_ric(&raw).map_err(fail)?).map_err(fail)?;
         let sample_desc = descriptors(
             &raw.chunk(raw.dim(0).map_err(fail)?, 0)
@@ -191,7 +191,8 @@ pub fn quality_report(
         let training = if own_crops.is_empty() {
             MetricMeans::default()
         } else {
-            let stacked = Tensor::cat(&own_crops, 0).map_err(fail)?;
+            // The data's root goes through the same decode as the samples'.
+            let stacked = prior.root_decode.apply(&Tensor::cat(&own_crops, 0).map_err(fail)?).map_err(fail)?;
             MetricMeans::of(&tensor_to_poses(&recover_from_ric(&stacked).map_err(fail)?).map_err(fail)?)
         };
         let nearest = nearest_distances(&sample_desc, &train_desc, |_, _| true).map_err(fail)?;

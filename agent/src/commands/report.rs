@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::Args;
 use motion_core::database::MotionDatabase;
 use motion_core::inversion::InversionConfig;
-use motion_core::prior::Prior;
+use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, QualityConfig};
 use motion_core::render::{motion_strip, StripRow};
 
@@ -52,6 +52,11 @@ pub struct ReportArgs {
     /// after the feature polish.
     #[arg(long, default_value_t = InversionConfig::default().polish_steps)]
     polish_steps: usize,
+    /// How the root trajectory is read from the features, for samples and training data alike:
+    /// `planted-feet` (the root velocity follows the feet whose contact is on, so they stay
+    /// put) or `velocity` (the root velocity as predicted, HumanML3D's decode).
+    #[arg(long, default_value_t = RootDecode::default())]
+    root_decode: RootDecode,
     /// Output folder (report.json, report.md, samples.png).
     #[arg(long, short, default_value = "out/report")]
     out: PathBuf,
@@ -59,7 +64,8 @@ pub struct ReportArgs {
 
 pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
-    let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
+    let mut prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
+    prior.root_decode = args.root_decode;
     let db = MotionDatabase::load(&args.database)
         .with_context(|| format!("reading {} (build it with `mogen data build`)", args.database.display()))?;
     let config = QualityConfig {
@@ -71,7 +77,10 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         labels: args.labels,
     };
     let header = "| label | skate gen / data | max acc gen / data (m/frame²) | foot acc gen / data (m/frame²) | bone range gen (m) | penetration gen / data (m) | head y gen / data (m) | travel gen / data (m) | steps/s gen / data | nearest train (m) | data spacing (m) | diversity (m) |";
-    let mut lines = vec![header.to_owned(), "|---|---|---|---|---|---|---|---|---|---|---|---|".to_owned()];
+    let decode = format!("Root decode: `{}` (samples and training data alike).", args.root_decode);
+    println!("{decode}\n");
+    let mut lines =
+        vec![decode, String::new(), header.to_owned(), "|---|---|---|---|---|---|---|---|---|---|---|---|".to_owned()];
     println!("{header}");
     let rows = quality_report(&prior, &db, &config, &device, |r| {
         let line = format!(

@@ -141,7 +141,7 @@ pub fn run_program(
     bar.finish_and_clear();
     let report = report(program, &compiled, &generated, config)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    prior.mean_std.denormalize(&generated.features)?.write_npy(out.join("features.npy"))?;
+    prior.to_features(&generated.features)?.write_npy(out.join("features.npy"))?;
     generated.joints.write_npy(out.join("joints.npy"))?;
     let json = serde_json::to_string_pretty(&report)?;
     std::fs::write(out.join("report.json"), json).with_context(|| format!("writing {}/report.json", out.display()))?;

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use motion_core::diffusion::Guidance;
-use motion_core::prior::Prior;
+use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
 
@@ -33,6 +33,10 @@ pub struct SampleArgs {
     /// Trained prior file.
     #[arg(long, default_value_os_t = paths::default_prior())]
     prior: PathBuf,
+    /// How the root trajectory is read from the features: `planted-feet` (the root velocity
+    /// follows the feet whose contact is on, so they stay put) or `velocity` (as predicted).
+    #[arg(long, default_value_t = RootDecode::default())]
+    root_decode: RootDecode,
     /// Output folder: joints.npy [n, frames, 22, 3] (m, y up), features.npy [n, frames, 263]
     /// (de-normalised), strip.png.
     #[arg(long, short, default_value = "out/sample")]
@@ -44,8 +48,9 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.samples >= 1, "--samples must be at least 1");
     anyhow::ensure!(args.guidance.is_finite(), "--guidance must be a finite number");
     let device = candle_core::Device::Cpu;
-    let prior =
+    let mut prior =
         Prior::load(&args.prior, &device).with_context(|| format!("loading the prior {}", args.prior.display()))?;
+    prior.root_decode = args.root_decode;
     let heard = prior.encoder.known_words(&args.prompt);
     if heard.is_empty() {
         eprintln!("note: the prior knows none of the words of {:?}; sampling unconditionally", args.prompt);
@@ -61,7 +66,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         Guidance { scale: args.guidance },
         &device,
     )?;
-    let raw = prior.mean_std.denormalize(&x)?;
+    let raw = prior.to_features(&x)?;
     let joints = prior.to_joints(&x)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     joints.write_npy(args.out.join("joints.npy"))?;

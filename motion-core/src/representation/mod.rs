@@ -17,10 +17,12 @@
 
 mod extract;
 mod normalization;
+mod planted_feet;
 mod recover;
 
 pub use extract::{canonicalize, extract_features, ExtractedMotion, FOOT_CONTACT_THRESHOLD_M2};
 pub use normalization::{MeanStd, NormalizationError};
+pub use planted_feet::{root_velocity_from_planted_feet, PLANTED_CONTACT};
 pub use recover::recover_from_ric;
 
 use std::ops::Range;
