@@ -38,7 +38,7 @@ pub struct SampleArgs {
     #[arg(long, default_value_t = RootDecode::default())]
     root_decode: RootDecode,
     /// Output folder: joints.npy [n, frames, 22, 3] (m, y up), features.npy [n, frames, 263]
-    /// (de-normalised), strip.png.
+    /// (de-normalised, the root velocity as decoded), strip.png.
     #[arg(long, short, default_value = "out/sample")]
     out: PathBuf,
 }
