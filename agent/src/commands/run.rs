@@ -92,7 +92,8 @@ pub struct RunArgs {
     #[command(flatten)]
     generation: GenerationArgs,
     /// Output folder: features.npy [n, frames, 263] (de-normalised HumanML3D features, the root
-    /// velocity re-derived from the planted feet), joints.npy [n, frames, 22, 3] (m, y up, 20 fps), report.json, strip.png.
+    /// velocity re-derived from the planted feet), joints.npy [n, frames, 22, 3] (m, y up,
+    /// 20 fps), report.json, strip.png.
     #[arg(long, short, default_value = "out/run")]
     out: PathBuf,
 }

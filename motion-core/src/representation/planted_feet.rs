@@ -21,14 +21,16 @@ pub const PLANTED_CONTACT: f64 = 0.5;
 const PLANTED_SHARPNESS: f64 = 0.05;
 
 /// Replaces the root x/z velocity of every frame t−1 whose next frame t keeps a foot joint
-/// planted (contact > [`PLANTED_CONTACT`] in both frames) by the velocity that holds the planted
-/// joints still in the world, averaged over them:
+/// planted (contact above [`PLANTED_CONTACT`] in both frames) by the velocity that holds the
+/// planted joints still in the world, averaged over them:
 ///
 /// v_{t−1} = mean over planted j of [R(−2·ω_{t−1})·ric_{t−1, j} − ric_{t, j}] (x and z)
 ///
 /// with ω the root yaw velocity (a half angle, feature `[0]`) and R a rotation about y; this is
 /// what [`super::recover_from_ric`] needs to place the planted joints at the same world x/z in
-/// both frames. Frames without a planted joint, and the last frame, keep their velocity.
+/// both frames. Frames without a planted joint, and the last frame, keep their velocity. "Planted"
+/// is a weight in [0, 1] (see below), which both the mean and the blend with the predicted
+/// velocity use.
 ///
 /// - input and output: **de-normalised** features `[batch, frames, 263]`;
 /// - differentiable in the features, the contacts included: each joint's weight is a steep
@@ -56,7 +58,10 @@ pub fn root_velocity_from_planted_feet(features: &Tensor) -> Result<Tensor> {
     let on = (((contacts - PLANTED_CONTACT)? / -PLANTED_SHARPNESS)?.exp()? + 1.0)?.recip()?; // [B, T, 4]
     let planted = (on.narrow(1, 0, pairs)? * on.narrow(1, 1, pairs)?)?; // [B, T−1, 4]
 
+    // A weighted mean over the planted joints, blended with the given velocity by how likely
+    // any joint is planted: 1 − Π(1 − w).
     let mut sum = Tensor::zeros((batch, pairs, 2), features.dtype(), features.device())?;
+    let mut none = Tensor::ones((batch, pairs, 1), features.dtype(), features.device())?;
     for (c, &joint) in CONTACT_JOINTS.iter().enumerate() {
         let at = RIC.start + 3 * (joint - 1);
         let (px, pz) = (prev.narrow(D::Minus1, at, 1)?, prev.narrow(D::Minus1, at + 2, 1)?);
@@ -65,13 +70,9 @@ pub fn root_velocity_from_planted_feet(features: &Tensor) -> Result<Tensor> {
         let dz = (((&px * &sin)? + (&pz * &cos)?)? - nz)?;
         let weight = planted.narrow(D::Minus1, c, 1)?;
         sum = (sum + Tensor::cat(&[dx, dz], D::Minus1)?.broadcast_mul(&weight)?)?;
+        none = (none * (1.0 - &weight)?)?;
     }
-    // A weighted mean over the planted joints, blended with the given velocity by how likely
-    // any joint is planted: 1 − Π(1 − w).
     let count = (planted.sum_keepdim(D::Minus1)? + 1e-6)?; // [B, T−1, 1]
-    let free = (1.0 - &planted)?;
-    let none = (((free.narrow(D::Minus1, 0, 1)? * free.narrow(D::Minus1, 1, 1)?)? * free.narrow(D::Minus1, 2, 1)?)?
-        * free.narrow(D::Minus1, 3, 1)?)?;
     let any = (1.0 - none)?;
     let from_feet = sum.broadcast_div(&count)?;
     let given = prev.narrow(D::Minus1, ROOT_LIN_VEL.start, 2)?;
