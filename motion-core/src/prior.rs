@@ -3,7 +3,8 @@
 //!
 //! File layout: the denoiser's tensors under their official MDM names, `normalization.mean`
 //! and `normalization.std` (`[263]`), and header metadata `mdm_config` (JSON of
-//! [`MdmConfig`]) and `vocabulary` (JSON of [`VocabularyEncoder`]).
+//! [`MdmConfig`]), `vocabulary` (JSON of [`VocabularyEncoder`]) and `rest_skeleton` (JSON of
+//! [`RestSkeleton`], the training data's bone lengths; absent in files written before it existed).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -14,13 +15,16 @@ use candle_nn::VarBuilder;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{DdimSampler, Guidance, NoiseSchedule};
 use crate::model::{Mdm, MdmConfig};
-use crate::representation::{recover_from_ric, root_velocity_from_planted_feet, MeanStd, NormalizationError};
+use crate::representation::{
+    recover_from_ric, rigid_bones, root_velocity_from_planted_feet, MeanStd, NormalizationError, RestSkeleton,
+};
 use crate::tensor_file::{read_metadata, write_safetensors};
 use crate::text::vocabulary::VocabularyEncoder;
 use crate::text::TextEncoder;
 
 const MEAN_KEY: &str = "normalization.mean";
 const STD_KEY: &str = "normalization.std";
+const REST_KEY: &str = "rest_skeleton";
 
 /// Errors loading or saving a prior.
 #[derive(Debug, thiserror::Error)]
@@ -109,6 +113,9 @@ pub struct Prior {
     /// How generated features become a root trajectory (not stored in the file; default
     /// [`RootDecode::PlantedFeet`]).
     pub root_decode: RootDecode,
+    /// Bone lengths of the training data: generated joints are re-derived on them, so bones are
+    /// rigid by construction ([`rigid_bones`]); `None` for files without it (joints as decoded).
+    pub rest: Option<RestSkeleton>,
 }
 
 impl Prior {
@@ -140,14 +147,25 @@ impl Prior {
         };
         let mean_std = MeanStd::from_vecs(stat(MEAN_KEY)?, stat(STD_KEY)?, device)
             .map_err(|source| PriorError::Normalization { path: path.into(), source })?;
+        let rest = meta
+            .get(REST_KEY)
+            .map(|json| serde_json::from_str(json).map_err(|e| format(format!("bad {REST_KEY}: {e}"))))
+            .transpose()?;
         let mdm =
             Mdm::new(cfg, VarBuilder::from_tensors(tensors, DType::F32, device)).map_err(|e| format(e.to_string()))?;
-        Ok(Self { mdm, encoder, mean_std, root_decode: RootDecode::default() })
+        Ok(Self { mdm, encoder, mean_std, root_decode: RootDecode::default(), rest })
     }
 
     /// Writes the prior as one safetensors file.
     pub fn save(&self, path: &Path) -> Result<(), PriorError> {
-        Self::write(path, self.mdm.named_parameters(), self.mdm.config(), &self.encoder, &self.mean_std)
+        Self::write(
+            path,
+            self.mdm.named_parameters(),
+            self.mdm.config(),
+            &self.encoder,
+            &self.mean_std,
+            self.rest.as_ref(),
+        )
     }
 
     /// Writes a prior from named denoiser tensors (e.g. EMA weights during training).
@@ -157,15 +175,19 @@ impl Prior {
         cfg: &MdmConfig,
         encoder: &VocabularyEncoder,
         mean_std: &MeanStd,
+        rest: Option<&RestSkeleton>,
     ) -> Result<(), PriorError> {
         let format = |message: String| PriorError::Format { path: path.into(), message };
         let mut tensors: Vec<(String, Tensor)> = params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
         tensors.push((MEAN_KEY.into(), mean_std.mean().clone()));
         tensors.push((STD_KEY.into(), mean_std.std().clone()));
-        let metadata = HashMap::from([
+        let mut metadata = HashMap::from([
             ("mdm_config".to_owned(), serde_json::to_string(cfg).map_err(|e| format(e.to_string()))?),
             ("vocabulary".to_owned(), serde_json::to_string(encoder).map_err(|e| format(e.to_string()))?),
         ]);
+        if let Some(rest) = rest {
+            metadata.insert(REST_KEY.to_owned(), serde_json::to_string(rest).map_err(|e| format(e.to_string()))?);
+        }
         write_safetensors(path, &tensors, metadata).map_err(format)
     }
 
@@ -203,9 +225,14 @@ impl Prior {
     }
 
     /// Joint positions `[batch, frames, 22, 3]` (m, y up) of normalised features
-    /// `[batch, frames, 263]`; differentiable.
+    /// `[batch, frames, 263]`, on the rest skeleton's bone lengths when the file has one;
+    /// differentiable.
     pub fn to_joints(&self, normalized: &Tensor) -> candle_core::Result<Tensor> {
-        recover_from_ric(&self.to_features(normalized)?)
+        let joints = recover_from_ric(&self.to_features(normalized)?)?;
+        match &self.rest {
+            Some(rest) => rigid_bones(&joints, rest),
+            None => Ok(joints),
+        }
     }
 }
 
@@ -234,7 +261,8 @@ mod tests {
         };
         let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
         let mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
-        let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::Velocity };
+        let rest = RestSkeleton::of_pose(&crate::import::deepmimic::rest_pose());
+        let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::Velocity, rest: Some(rest) };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("prior.safetensors");
         prior.save(&path).unwrap();
@@ -243,6 +271,7 @@ mod tests {
         assert_eq!(back.mdm.config(), prior.mdm.config());
         assert_eq!(back.mean_std.std().to_vec1::<f32>().unwrap()[5], 2.0);
         assert_eq!(back.root_decode, RootDecode::PlantedFeet, "the default decode");
+        assert_eq!(back.rest, Some(rest));
 
         std::fs::write(&path, b"not a prior").unwrap();
         assert!(Prior::load(&path, &Device::Cpu).unwrap_err().to_string().contains("prior.safetensors"));

@@ -193,7 +193,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
     })?;
     bar.finish();
-    trainer.save_prior(&args.out, db.mean_std()).context("writing the prior")?;
+    trainer.save_prior(&args.out, &db).context("writing the prior")?;
     println!("wrote {} after {:.0} s", args.out.display(), start.elapsed().as_secs_f64());
     Ok(())
 }

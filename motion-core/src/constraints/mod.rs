@@ -400,6 +400,21 @@ impl Compiler<'_> {
 }
 
 /// The tested points `[B, T, P, 3]`: the listed joints, then the surface points if asked for.
+/// A scene constraint's error per sample `[B]` from per-point errors `[B, T, P]`: each frame's
+/// worst point (m, the deepest penetration), then `how` over the frames; `mean` averages over
+/// the frames that violate (a mask without gradient), so a violation keeps its depth however
+/// few frames it lasts and cannot be averaged away by the frames that are clear.
+fn scene_reduce(errors: &Tensor, how: Reduce) -> Result<Tensor> {
+    let worst = errors.max(D::Minus1)?; // [B, T]
+    match how {
+        Reduce::Mean => {
+            let violating = worst.detach().gt(0.0)?.to_dtype(worst.dtype())?;
+            reduce(&worst, Some(&violating), Reduce::Mean)
+        }
+        other => reduce(&worst, None, other),
+    }
+}
+
 fn body_points(joints: &Tensor, set: &Tensor, surface: bool) -> Result<Tensor> {
     let listed = joints.index_select(set, 2)?;
     if surface {
@@ -490,7 +505,7 @@ impl Node {
             }
             Node::Scene { joints: set, surface, primitive, frames, reduce: how } => {
                 let points = frames.select(&body_points(joints, set, *surface)?)?;
-                reduce(&primitive_error(&points, primitive, false)?, None, *how)?
+                scene_reduce(&primitive_error(&points, primitive, false)?, *how)?
             }
             Node::BoneDirection { joint: j, parent, direction, frames, reduce: how } => {
                 let bone = frames.select(&(joint(joints, *j)? - joint(joints, *parent)?)?)?;

@@ -265,11 +265,16 @@ fn scene_primitives_on_joints() {
     let wrists = r#"{"only": ["left_wrist", "right_wrist"]}"#;
     close(&scene(wrists, r#"{"kind": "gap", "centre_x_m": 0.0, "width_m": 0.4}"#, "mean"), &m, 0.02);
     close(&scene(wrists, r#"{"kind": "gap", "centre_x_m": 0.0, "width_m": 0.4, "margin_m": 0.05}"#, "mean"), &m, 0.07);
-    // Walls only for 0.07 < z < 0.17: frames 2 and 3 of 5.
+    // Walls only for 0.07 < z < 0.17: frames 2 and 3 of 5, the mean over those two.
     close(
         &scene(wrists, r#"{"kind": "gap", "centre_x_m": 0.0, "width_m": 0.4, "z_range_m": [0.07, 0.17]}"#, "mean"),
         &m,
-        0.008,
+        0.02,
+    );
+    close(
+        &scene(wrists, r#"{"kind": "gap", "centre_x_m": 0.0, "width_m": 0.4, "z_range_m": [0.07, 0.17]}"#, "sum"),
+        &m,
+        0.04,
     );
     close(
         &scene(
@@ -299,7 +304,8 @@ fn scene_primitives_on_joints() {
             "mean",
         ),
         &m,
-        0.03,
+        // Behind the wall by 0.1 and 0.05 m on frames 0 and 1, clear after.
+        0.075,
     );
     let beam = (0.1f64.hypot(0.02) - 0.05).powi(2);
     close(
@@ -311,6 +317,35 @@ fn scene_primitives_on_joints() {
         &m,
         beam,
     );
+}
+
+/// The scene error is the depth of the worst point, whatever the number of clear points and
+/// frames around it: a head 0.3 m into a barrier for 2 frames of 100 costs 0.3, more than a
+/// head 0.1 m in for all 100, and a deeper violation always costs more.
+#[test]
+fn the_scene_loss_grows_with_the_worst_penetration_and_cannot_be_averaged_away() {
+    let barrier = r#"{"op": "scene", "body": {"joints": "all", "surface": true}, "primitive": {"kind": "overhead_barrier", "underside_height_m": 1.8, "z_range_m": [-1.0, 100.0]}}"#;
+    // The standing pose's head-sphere top is at 1.7 m; lift frames to push it in.
+    let lifted = |frames: usize, lifted_frames: usize, lift: f64| {
+        let mut m = glide(frames);
+        for pose in m.iter_mut().take(lifted_frames) {
+            for p in pose.iter_mut() {
+                p[1] += lift;
+            }
+        }
+        m
+    };
+    let brief_deep = error_of(barrier, &lifted(100, 2, 0.4));
+    let long_shallow = error_of(barrier, &lifted(100, 100, 0.2));
+    assert!((brief_deep - 0.3).abs() < 1e-6, "{brief_deep}");
+    assert!((long_shallow - 0.1).abs() < 1e-6, "{long_shallow}");
+    let mut last = 0.0;
+    for lift in [0.15, 0.2, 0.3, 0.5, 0.8] {
+        let e = error_of(barrier, &lifted(100, 3, lift));
+        assert!(e > last, "lift {lift}: {e} after {last}");
+        last = e;
+    }
+    assert_eq!(error_of(barrier, &glide(100)), 0.0);
 }
 
 #[test]

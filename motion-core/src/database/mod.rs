@@ -19,7 +19,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::import::{resample, MocapClip};
 use crate::motion::mirror;
-use crate::representation::{extract_features, FeatureFrame, MeanStd, NormalizationError, FEATURE_DIM};
+use crate::representation::{
+    extract_features, recover_from_ric, FeatureFrame, MeanStd, NormalizationError, RestSkeleton, FEATURE_DIM,
+};
 use crate::skeleton::{Pose, FPS};
 use crate::tensor_file::{read_metadata, write_safetensors};
 use crate::MotionError;
@@ -240,6 +242,19 @@ impl MotionDatabase {
             .window_slice(window, 0, window.frames)
             .ok_or_else(|| candle_core::Error::Msg(format!("window {window:?} is out of range")))?;
         Tensor::from_slice(data, (window.frames, FEATURE_DIM), device)
+    }
+
+    /// The mean bone lengths of the first frame of every window (the importers retarget every
+    /// clip to one skeleton, so they agree); `None` for an empty database.
+    pub fn rest_skeleton(&self) -> candle_core::Result<Option<RestSkeleton>> {
+        let firsts: Vec<f32> =
+            self.windows.iter().filter_map(|w| self.window_slice(w, 0, 1)).flatten().copied().collect();
+        let rows = firsts.len() / FEATURE_DIM;
+        if rows == 0 {
+            return Ok(None);
+        }
+        let features = Tensor::from_vec(firsts, (rows, 1, FEATURE_DIM), &Device::Cpu)?;
+        RestSkeleton::mean_of(&recover_from_ric(&features)?)
     }
 
     /// Seconds of motion per label (whole sequences, all augmentations), sorted by label.

@@ -35,8 +35,8 @@ pub enum Expr {
     Not(Not),
     /// Counting (RG-DNO eqs. 15–16): `(n − target_count)²` with `n` a soft count of extrema.
     Count(Count),
-    /// Body points against a scene primitive: the primitive's per-point error, reduced over the
-    /// selected frames and the points.
+    /// Body points against a scene primitive: the primitive's per-point error; each frame's worst
+    /// point, reduced over the selected frames.
     Scene(SceneConstraint),
     /// Bone direction (ProgMoGen `loss_directional`): per frame `‖u − d/‖d‖‖²` with `u` the unit
     /// vector from the joint's parent to the joint (ProgMoGen detaches the norm of `u`; we keep
@@ -226,7 +226,8 @@ pub struct SceneConstraint {
     /// Frames the constraint applies to (default: all).
     #[serde(default)]
     pub frames: FrameSelection,
-    /// Reduction over frames and points (default: mean).
+    /// Reduction over frames of each frame's worst point (default: mean, over the frames that
+    /// violate, so a short violation is not averaged away by the clear frames).
     #[serde(default)]
     pub reduce: Reduce,
 }

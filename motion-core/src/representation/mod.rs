@@ -1,5 +1,5 @@
 //! The HumanML3D 263-d motion representation: layout, extraction from joint positions, the
-//! differentiable recovery of joint positions, and Mean/Std normalisation.
+//! differentiable recovery of joint positions on a rigid rest skeleton, and Mean/Std normalisation.
 //!
 //! Per feature frame (J = 22 joints; see `reference/anchors.md` §1.7):
 //!
@@ -19,11 +19,13 @@ mod extract;
 mod normalization;
 mod planted_feet;
 mod recover;
+mod rigid;
 
 pub use extract::{canonicalize, extract_features, ExtractedMotion, FOOT_CONTACT_THRESHOLD_M2};
 pub use normalization::{MeanStd, NormalizationError};
 pub use planted_feet::{root_velocity_from_planted_feet, PLANTED_CONTACT};
 pub use recover::recover_from_ric;
+pub use rigid::{rigid_bones, RestSkeleton};
 
 use std::ops::Range;
 

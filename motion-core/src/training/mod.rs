@@ -362,10 +362,11 @@ impl Trainer {
     }
 
     /// Writes the EMA weights as a shippable prior.
-    pub fn save_prior(&self, path: &Path, mean_std: &crate::representation::MeanStd) -> Result<(), TrainError> {
+    pub fn save_prior(&self, path: &Path, db: &MotionDatabase) -> Result<(), TrainError> {
         let params: Vec<(String, Tensor)> =
             self.vars.iter().zip(&self.ema).map(|((name, _), ema)| (name.clone(), ema.clone())).collect();
-        Prior::write(path, &params, &self.model_config, &self.encoder, mean_std)?;
+        let rest = db.rest_skeleton()?;
+        Prior::write(path, &params, &self.model_config, &self.encoder, db.mean_std(), rest.as_ref())?;
         Ok(())
     }
 }
@@ -535,7 +536,7 @@ mod tests {
             assert!(!ea.track_op(), "{}: EMA tensor tracks a graph", a.0);
         }
         let prior_path = dir.path().join("prior.safetensors");
-        resumed.save_prior(&prior_path, db.mean_std()).unwrap();
+        resumed.save_prior(&prior_path, &db).unwrap();
         assert!(Prior::load(&prior_path, &dev).is_ok());
     }
 
