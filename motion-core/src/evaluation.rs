@@ -4,7 +4,7 @@
 use candle_core::{DType, Tensor};
 use serde::{Deserialize, Serialize};
 
-use crate::constraints::CompiledProgram;
+use crate::constraints::{Check, CompiledProgram};
 use crate::generation::{Generated, GenerationConfig};
 use crate::metrics::{foot_skate_ratio, hands_raised, head_neck_incorrect, max_acceleration, pace, step_count};
 use crate::program::TaskProgram;
@@ -19,8 +19,13 @@ pub struct ConstraintReport {
     pub description: Option<String>,
     /// Its weight in the total.
     pub weight: f64,
-    /// Unweighted error per sample, in the constraint's own unit.
+    /// Unweighted loss per sample, in the constraint's own unit (squared, margined or averaged
+    /// as the optimiser sees it).
     pub error: Vec<f64>,
+    /// Its figures in natural units (worst frame, worst point) with their tolerances.
+    pub checks: Vec<Check>,
+    /// Whether each sample meets it within the tolerances.
+    pub pass: Vec<bool>,
 }
 
 /// Step counting against a counting constraint's target.
@@ -51,9 +56,13 @@ pub struct TaskReport {
     pub constraint_error_per_sample: Vec<f64>,
     /// Every constraint's errors.
     pub constraints: Vec<ConstraintReport>,
-    /// Mean over samples of the deepest penetration into an obstacle (m; margins ignored;
-    /// RG-DNO's Max SP); `None` without obstacles.
+    /// The deepest penetration of any sample into an obstacle (m; margins ignored; RG-DNO's Max
+    /// SP); `None` without obstacles.
     pub max_scene_penetration_m: Option<f64>,
+    /// Each sample's deepest penetration into an obstacle, m.
+    pub scene_penetration_per_sample_m: Option<Vec<f64>>,
+    /// Fraction of samples that meet every constraint within its tolerance.
+    pub success_rate: f64,
     /// Mean foot skate ratio ([`crate::metrics::foot_skate_ratio`]).
     pub foot_skate_ratio: f64,
     /// Mean over samples of the maximum joint acceleration, m/frame² (ProgMoGen's Max Acc).
@@ -82,19 +91,27 @@ pub fn report(
     let evaluation =
         compiled.evaluate(&generated.joints, Some(&generated.initial_joints)).map_err(candle_core::Error::wrap)?;
     let per_sample = to_f64(&evaluation.total)?;
+    let satisfaction =
+        compiled.satisfaction(&generated.joints, Some(&generated.initial_joints)).map_err(candle_core::Error::wrap)?;
     let constraints = evaluation
         .per_constraint
         .iter()
-        .map(|(id, error)| {
+        .zip(satisfaction)
+        .map(|((id, error), judged)| {
             let spec = program.constraint(id);
             Ok(ConstraintReport {
                 id: id.clone(),
                 description: spec.and_then(|c| c.description.clone()),
                 weight: spec.map_or(1.0, |c| c.weight()),
                 error: to_f64(error)?,
+                checks: judged.checks,
+                pass: judged.pass,
             })
         })
         .collect::<candle_core::Result<Vec<_>>>()?;
+    let samples = per_sample.len();
+    let successes =
+        (0..samples).filter(|&b| constraints.iter().all(|c| c.pass.get(b).copied().unwrap_or(false))).count();
     let penetration = compiled.max_scene_penetration(&generated.joints)?.map(|t| to_f64(&t)).transpose()?;
     let motions = tensor_to_poses(&generated.joints)?;
     let mean = |values: Vec<f64>| values.iter().sum::<f64>() / values.len().max(1) as f64;
@@ -115,7 +132,9 @@ pub fn report(
         constraint_error: mean(per_sample.clone()),
         constraint_error_per_sample: per_sample,
         constraints,
-        max_scene_penetration_m: penetration.map(mean),
+        max_scene_penetration_m: penetration.as_ref().map(|p| p.iter().copied().fold(0.0, f64::max)),
+        scene_penetration_per_sample_m: penetration,
+        success_rate: successes as f64 / samples.max(1) as f64,
         foot_skate_ratio: mean(motions.iter().map(|m| foot_skate_ratio(m)).collect()),
         max_acceleration: mean(motions.iter().map(|m| max_acceleration(m)).collect()),
         steps,

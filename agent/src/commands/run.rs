@@ -171,8 +171,27 @@ pub fn print_summary(report: &TaskReport) {
     );
     for c in &report.constraints {
         let mean = c.error.iter().sum::<f64>() / c.error.len().max(1) as f64;
-        println!("  {} (weight {}): {:.6}  {}", c.id, c.weight, mean, c.description.as_deref().unwrap_or(""));
+        let passed = c.pass.iter().filter(|p| **p).count();
+        println!(
+            "  {} (weight {}): loss {:.6}, met by {passed}/{} samples  {}",
+            c.id,
+            c.weight,
+            mean,
+            c.pass.len(),
+            c.description.as_deref().unwrap_or("")
+        );
+        for check in &c.checks {
+            let worst = check.value.iter().copied().fold(0.0, f64::max);
+            println!(
+                "      {}: worst {worst:.3} {} (tolerance {}; per sample {:?})",
+                check.what,
+                check.unit,
+                check.tolerance,
+                check.value.iter().map(|v| format!("{v:.3}")).collect::<Vec<_>>()
+            );
+        }
     }
+    println!("  all constraints met by {:.0}% of the samples", 100.0 * report.success_rate);
     let penetration = report.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
     println!(
         "  foot skate {:.3}, max acceleration {:.4} m/frame², max scene penetration {penetration}, head-neck incorrect {:.2}",

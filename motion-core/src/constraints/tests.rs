@@ -554,3 +554,47 @@ proptest! {
         }
     }
 }
+
+/// Natural-unit figures on the hand-built glide (head joint at 1.6 m, head-sphere top at 1.7 m,
+/// pelvis z = 0.05·t m): a barrier at 1.5 m is penetrated by 0.2 m (fails at 5 cm), one at 1.68 m
+/// by 0.02 m (passes); a pelvis target 0.3 m off fails, an `or` with a met branch passes, a `not`
+/// flips the verdict; a bone 90° off its direction reads 90°.
+#[test]
+fn satisfaction_in_natural_units() {
+    let m = glide(5);
+    let judge = |expr: &str| {
+        let s = compile(m.len(), expr).satisfaction(&tensor(&m), None).unwrap();
+        assert_eq!(s.len(), 1);
+        s.into_iter().next().unwrap()
+    };
+    let barrier = |h: f64| {
+        format!(
+            r#"{{"op": "scene", "body": {{"joints": "all", "surface": true}}, "primitive": {{"kind": "overhead_barrier", "underside_height_m": {h}, "z_range_m": [-1.0, 10.0]}}}}"#
+        )
+    };
+    let deep = judge(&barrier(1.5));
+    assert_eq!(deep.checks[0].unit, Unit::M);
+    assert!((deep.checks[0].value[0] - 0.2).abs() < 1e-6, "{:?}", deep.checks);
+    assert!(deep.checks[0].what.contains("overhead_barrier"));
+    assert_eq!(deep.pass, vec![false]);
+    assert_eq!(judge(&barrier(1.68)).pass, vec![true]);
+
+    let target = |z: f64| {
+        format!(
+            r#"{{"op": "equal", "quantity": {{"kind": "position", "of": {{"joint": "pelvis"}}, "axes": "z"}}, "target": [{z}], "frames": {{"keyframes": ["last"]}}}}"#
+        )
+    };
+    let off = judge(&target(0.5));
+    assert!((off.checks[0].value[0] - 0.3).abs() < 1e-9);
+    assert_eq!(off.pass, vec![false]);
+    assert_eq!(judge(&target(0.22)).pass, vec![true]);
+    let either = judge(&format!(r#"{{"op": "or", "args": [{}, {}]}}"#, target(0.5), target(0.2)));
+    assert_eq!((either.checks.len(), either.pass.clone()), (2, vec![true]));
+    let both = judge(&format!(r#"{{"op": "and", "args": [{}, {}]}}"#, target(0.5), target(0.2)));
+    assert_eq!(both.pass, vec![false]);
+    assert_eq!(judge(&format!(r#"{{"op": "not", "margin": 0.01, "arg": {}}}"#, target(0.5))).pass, vec![true]);
+
+    let sideways = judge(r#"{"op": "bone_direction", "joint": "left_elbow", "direction": [0.0, 0.0, 1.0]}"#);
+    assert_eq!(sideways.checks[0].unit, Unit::Deg);
+    assert!(sideways.checks[0].value[0] > 80.0, "{:?}", sideways.checks);
+}

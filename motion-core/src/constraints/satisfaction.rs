@@ -1,0 +1,328 @@
+//! Whether each constraint is met, in natural units: metres of penetration or to a target,
+//! degrees off a direction, counted events against the target. The losses of [`super::Node`]
+//! are squared, margined and averaged for optimisation, which can hide a violation; these
+//! figures take the worst frame and point (or the best frame for "at some frame" constraints)
+//! and are judged against the stated tolerances below.
+
+use candle_core::{Tensor, D};
+use serde::{Deserialize, Serialize};
+
+use super::frames::condition_mask;
+use super::geometry::{constant, joint, norm, select_axes};
+use super::scene::{is_obstacle, primitive_error};
+use super::signal::{point, signal};
+use super::{body_points, support, Comparison, CompiledProgram, ConstraintError, Node};
+use crate::program::{Axes, Point, Primitive, Quantity, Reduce};
+
+/// Tolerance on distances, penetrations and positions, m (the bar for ProgMoGen's HSI
+/// tasks: within 5 cm).
+pub const DISTANCE_TOLERANCE_M: f64 = 0.05;
+/// Tolerance on feet that must be planted and on limbs kept off the torso, m.
+pub const CONTACT_TOLERANCE_M: f64 = 0.02;
+/// Tolerance on velocities and speeds, m/s.
+pub const SPEED_TOLERANCE_M_PER_S: f64 = 0.1;
+/// Tolerance on accelerations, m/s².
+pub const ACCELERATION_TOLERANCE_M_PER_S2: f64 = 0.5;
+/// Tolerance on a bone's direction, degrees.
+pub const ANGLE_TOLERANCE_DEG: f64 = 15.0;
+/// Counts must be exact: |counted − target| below this.
+pub const COUNT_TOLERANCE: f64 = 0.5;
+
+/// Unit of a [`Check`]'s value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Unit {
+    /// Metres.
+    M,
+    /// Metres per second.
+    MPerS,
+    /// Metres per second squared.
+    MPerS2,
+    /// Degrees.
+    Deg,
+    /// A number of events.
+    Count,
+}
+
+impl std::fmt::Display for Unit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Unit::M => "m",
+            Unit::MPerS => "m/s",
+            Unit::MPerS2 => "m/s²",
+            Unit::Deg => "°",
+            Unit::Count => "",
+        })
+    }
+}
+
+/// One measured figure of a constraint, per sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Check {
+    /// What is measured, in words ("penetration into overhead_barrier", "position off target").
+    pub what: String,
+    /// Unit of `value` and `tolerance`.
+    pub unit: Unit,
+    /// The violation per sample (0 = met exactly), in `unit`.
+    pub value: Vec<f64>,
+    /// A sample passes this check when its value is at most this.
+    pub tolerance: f64,
+}
+
+impl Check {
+    fn passes(&self, sample: usize) -> bool {
+        self.value.get(sample).is_some_and(|v| *v <= self.tolerance)
+    }
+}
+
+/// A constraint's checks and its verdict per sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Satisfaction {
+    /// The constraint's id.
+    pub id: String,
+    /// Every leaf's figure.
+    pub checks: Vec<Check>,
+    /// Whether each sample meets the constraint (the logic of `and`/`or`/`not` applied to the
+    /// leaves' verdicts).
+    pub pass: Vec<bool>,
+}
+
+impl CompiledProgram {
+    /// Every constraint's figures in natural units on joints `[B, T, 22, 3]` (no gradient);
+    /// `initial` as for [`CompiledProgram::evaluate`].
+    pub fn satisfaction(
+        &self,
+        joints: &Tensor,
+        initial: Option<&Tensor>,
+    ) -> Result<Vec<Satisfaction>, ConstraintError> {
+        let joints = joints.detach().contiguous()?;
+        let batch = joints.dim(0)?;
+        self.constraints
+            .iter()
+            .map(|c| {
+                let (checks, pass) = c.node.judge(&joints, initial, batch)?;
+                Ok(Satisfaction { id: c.id.clone(), checks, pass })
+            })
+            .collect()
+    }
+}
+
+type Judged = (Vec<Check>, Vec<bool>);
+
+impl Node {
+    fn judge(&self, joints: &Tensor, initial: Option<&Tensor>, batch: usize) -> Result<Judged, ConstraintError> {
+        let combine = |args: &[Node], all: bool| -> Result<Judged, ConstraintError> {
+            let mut checks = Vec::new();
+            let mut pass = vec![all; batch];
+            for arg in args {
+                let (c, p) = arg.judge(joints, initial, batch)?;
+                checks.extend(c);
+                for (acc, p) in pass.iter_mut().zip(p) {
+                    *acc = if all { *acc && p } else { *acc || p };
+                }
+            }
+            Ok((checks, pass))
+        };
+        let leaf = |check: Check| {
+            let pass = (0..batch).map(|b| check.passes(b)).collect();
+            Ok((vec![check], pass))
+        };
+        match self {
+            Node::And(args) => combine(args, true),
+            Node::Or(args) => combine(args, false),
+            Node::Not { arg, .. } => {
+                let (checks, pass) = arg.judge(joints, initial, batch)?;
+                Ok((checks, pass.into_iter().map(|p| !p).collect()))
+            }
+            Node::Compare { quantity, comparison, frames, when, reduce } => {
+                let q = signal(joints, quantity)?; // [B, n, C]
+                let per_frame = match comparison {
+                    Comparison::Equal { target, .. } => {
+                        let target = constant(target, q.dtype(), q.device())?;
+                        norm(&q.broadcast_sub(&target)?)?
+                    }
+                    Comparison::LessThan(max) => (q - *max)?.relu()?.max(D::Minus1)?,
+                    Comparison::GreaterThan(min) => (*min - q)?.relu()?.max(D::Minus1)?,
+                }; // [B, n]
+                let mask = match when {
+                    Some(condition) => Some(frames.select(&condition_mask(joints, condition, per_frame.dim(1)?)?)?),
+                    None => None,
+                };
+                let value = over_frames(&frames.select(&per_frame)?, mask.as_ref(), *reduce == Reduce::Min)?;
+                let (unit, tolerance) = unit_of(quantity);
+                let relation = match comparison {
+                    Comparison::Equal { .. } => "off target".to_owned(),
+                    Comparison::LessThan(max) => format!("above {max}"),
+                    Comparison::GreaterThan(min) => format!("below {min}"),
+                };
+                leaf(Check { what: format!("{} {relation}", kind_name(quantity)), unit, value, tolerance })
+            }
+            Node::Count { target, .. } => {
+                // The node's own soft count: its error is (n − target)².
+                let off = self.eval(joints, initial)?.sqrt()?.to_dtype(candle_core::DType::F64)?.to_vec1::<f64>()?;
+                leaf(Check {
+                    what: format!("count off the target {target}"),
+                    unit: Unit::Count,
+                    value: off,
+                    tolerance: COUNT_TOLERANCE,
+                })
+            }
+            Node::Scene { joints: set, surface, primitive, frames, reduce } => {
+                let points = frames.select(&body_points(joints, set, *surface)?)?;
+                let depth = primitive_error(&points, primitive, true)?.max(D::Minus1)?; // [B, F]
+                let depth = match primitive {
+                    Primitive::BalanceBeam(_) => depth.sqrt()?, // its error is squared
+                    _ => depth,
+                };
+                let value = over_frames(&depth, None, *reduce == Reduce::Min)?;
+                let what = match is_obstacle(primitive) {
+                    true => format!("penetration into {}", primitive_name(primitive)),
+                    false => format!("distance off the {}", primitive_name(primitive)),
+                };
+                leaf(Check { what, unit: Unit::M, value, tolerance: DISTANCE_TOLERANCE_M })
+            }
+            Node::BoneDirection { joint: j, parent, direction, frames, reduce } => {
+                let bone = frames.select(&(joint(joints, *j)? - joint(joints, *parent)?)?)?;
+                let u = bone.broadcast_div(&norm(&bone)?.unsqueeze(D::Minus1)?)?;
+                let target = constant(direction, u.dtype(), u.device())?;
+                // |u − d| = 2 sin(θ/2) for unit vectors.
+                let chord = norm(&u.broadcast_sub(&target)?)?.to_dtype(candle_core::DType::F64)?;
+                let angle = chord.clamp(0.0, 2.0)?.to_vec2::<f64>()?;
+                let angle: Vec<f64> = angle.iter().flatten().map(|c| (c / 2.0).asin().to_degrees() * 2.0).collect();
+                let angle = Tensor::from_vec(angle, chord.shape(), chord.device())?;
+                let value = over_frames(&angle, None, *reduce == Reduce::Min)?;
+                leaf(Check {
+                    what: format!("{j} bone off direction"),
+                    unit: Unit::Deg,
+                    value,
+                    tolerance: ANGLE_TOLERANCE_DEG,
+                })
+            }
+            Node::FootContact { feet, at, max_height, max_speed } => {
+                let frames = joints.dim(1)?;
+                let (mut height, mut speed) = (vec![0f64; batch], vec![0f64; batch]);
+                for &foot in feet {
+                    let p = joint(joints, foot)?.to_dtype(candle_core::DType::F64)?.to_vec3::<f64>()?;
+                    for (b, motion) in p.iter().enumerate() {
+                        for &t in at {
+                            height[b] = height[b].max(motion[t][1] - max_height);
+                            if let (Some(limit), true) = (max_speed, frames >= 2) {
+                                let from = t.min(frames - 2);
+                                let d = [0, 1, 2].map(|a| motion[from + 1][a] - motion[from][a]);
+                                let v = d.iter().map(|x| x * x).sum::<f64>().sqrt() * crate::skeleton::FPS;
+                                speed[b] = speed[b].max(v - limit);
+                            }
+                        }
+                    }
+                }
+                let mut checks = vec![Check {
+                    what: format!("foot above {max_height} m at the contact frames"),
+                    unit: Unit::M,
+                    value: height,
+                    tolerance: CONTACT_TOLERANCE_M,
+                }];
+                if let Some(limit) = max_speed {
+                    checks.push(Check {
+                        what: format!("foot faster than {limit} m/s at the contact frames"),
+                        unit: Unit::MPerS,
+                        value: speed,
+                        tolerance: SPEED_TOLERANCE_M_PER_S,
+                    });
+                }
+                let pass = (0..batch).map(|b| checks.iter().all(|c| c.passes(b))).collect();
+                Ok((checks, pass))
+            }
+            Node::SelfCollision { limbs, torso, min_distance, axes, frames, reduce } => {
+                let a = frames.select(&joints.index_select(limbs, 2)?)?.unsqueeze(3)?;
+                let b = frames.select(&joints.index_select(torso, 2)?)?.unsqueeze(2)?;
+                let distance = norm(&select_axes(&a.broadcast_sub(&b)?, *axes)?)?; // [B, F, L, K]
+                let (bt, f) = (distance.dim(0)?, distance.dim(1)?);
+                let closer = (*min_distance - distance)?.relu()?.reshape((bt, f, ()))?.max(D::Minus1)?;
+                let value = over_frames(&closer, None, *reduce == Reduce::Min)?;
+                leaf(Check {
+                    what: format!("limb closer than {min_distance} m to the torso"),
+                    unit: Unit::M,
+                    value,
+                    tolerance: CONTACT_TOLERANCE_M,
+                })
+            }
+            Node::ComInSupport { support: feet, frames, reduce, .. } => {
+                let com = frames
+                    .select(&select_axes(&point(joints, &Point::CentreOfMass(Default::default()))?, Axes::Xz)?)?;
+                let list = support::support_joints(*feet);
+                let index = Tensor::from_vec(
+                    list.iter().map(|j| j.index() as u32).collect::<Vec<_>>(),
+                    list.len(),
+                    joints.device(),
+                )?;
+                let points = frames.select(&select_axes(&joints.index_select(&index, 2)?, Axes::Xz)?)?;
+                let outside = support::signed_distance(&com, &points)?.relu()?;
+                let value = over_frames(&outside, None, *reduce == Reduce::Min)?;
+                leaf(Check {
+                    what: "centre of mass outside the support".into(),
+                    unit: Unit::M,
+                    value,
+                    tolerance: CONTACT_TOLERANCE_M,
+                })
+            }
+            Node::StayNearInitial { quantities, .. } => {
+                // Its loss is the mean squared change; the natural figure is its root.
+                let rms = self.eval(joints, initial)?.sqrt()?.to_dtype(candle_core::DType::F64)?.to_vec1::<f64>()?;
+                let (unit, tolerance) = quantities.first().map_or((Unit::M, DISTANCE_TOLERANCE_M), unit_of);
+                leaf(Check { what: "RMS change from the initial motion".into(), unit, value: rms, tolerance })
+            }
+        }
+    }
+}
+
+/// The worst (largest) value over the kept frames of `[B, F]` values, or the best (smallest)
+/// with `best`; `mask` `[B, F]` keeps frames; a sample with no kept frame gets 0.
+fn over_frames(values: &Tensor, mask: Option<&Tensor>, best: bool) -> Result<Vec<f64>, ConstraintError> {
+    let values = values.to_dtype(candle_core::DType::F64)?.to_vec2::<f64>()?;
+    let mask = match mask {
+        Some(m) => Some(m.to_dtype(candle_core::DType::F64)?.to_vec2::<f64>()?),
+        None => None,
+    };
+    Ok(values
+        .iter()
+        .enumerate()
+        .map(|(b, row)| {
+            let kept = row.iter().enumerate().filter(|(t, _)| mask.as_ref().is_none_or(|m| m[b][*t] > 0.5));
+            let folded = if best {
+                kept.map(|(_, v)| *v).fold(f64::INFINITY, f64::min)
+            } else {
+                kept.map(|(_, v)| *v).fold(f64::NEG_INFINITY, f64::max)
+            };
+            if folded.is_finite() {
+                folded
+            } else {
+                0.0
+            }
+        })
+        .collect())
+}
+
+/// Unit and tolerance of a quantity's values.
+fn unit_of(quantity: &Quantity) -> (Unit, f64) {
+    match quantity {
+        Quantity::Velocity(_) | Quantity::Speed(_) => (Unit::MPerS, SPEED_TOLERANCE_M_PER_S),
+        Quantity::Acceleration(_) => (Unit::MPerS2, ACCELERATION_TOLERANCE_M_PER_S2),
+        _ => (Unit::M, DISTANCE_TOLERANCE_M),
+    }
+}
+
+/// The quantity's `kind` name as programs spell it.
+fn kind_name(quantity: &Quantity) -> String {
+    serde_json::to_value(quantity)
+        .ok()
+        .and_then(|v| v.get("kind").and_then(|k| k.as_str()).map(str::to_owned))
+        .unwrap_or_else(|| "quantity".into())
+}
+
+/// The primitive's `kind` name as programs spell it.
+fn primitive_name(primitive: &Primitive) -> String {
+    serde_json::to_value(primitive)
+        .ok()
+        .and_then(|v| v.get("kind").and_then(|k| k.as_str()).map(str::to_owned))
+        .unwrap_or_else(|| "obstacle".into())
+}
