@@ -76,31 +76,47 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         seed: args.seed,
         labels: args.labels,
     };
-    let header = "| label | skate gen / data | max acc gen / data (m/frame²) | foot acc gen / data (m/frame²) | bone range gen (m) | penetration gen / data (m) | head y gen / data (m) | travel gen / data (m) | steps/s gen / data | nearest train (m) | data spacing (m) | diversity (m) |";
-    let decode = format!("Root decode: `{}` (samples and training data alike).", args.root_decode);
+    let header = "| label | steps/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | bone range (m) | deepest joint under floor (m) | lower toe y (m) | airborne | turn ° (left / right) | spikes | head y (m) | travel (m) | nearest train (m) | data spacing (m) | diversity (m) |";
+    let decode = format!(
+        "Root decode: `{}` (samples and training data alike). Each cell: generated / training data.",
+        args.root_decode
+    );
     println!("{decode}\n");
-    let mut lines =
-        vec![decode, String::new(), header.to_owned(), "|---|---|---|---|---|---|---|---|---|---|---|---|".to_owned()];
+    let mut lines = vec![decode, String::new(), header.to_owned(), format!("|{}", "---|".repeat(17))];
     println!("{header}");
     let rows = quality_report(&prior, &db, &config, &device, |r| {
+        let (g, d) = (&r.samples, &r.training);
         let line = format!(
-            "| {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.4} / {:.4} | {:.3} | {:.3} / {:.3} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {:.3} | {:.3} | {:.3} |",
+            "| {} | {:.2} / {:.2} | {:.3} / {:.3} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.0}% / {:.0}% | {:+.0} ({:.0}% / {:.0}%) / {:+.0} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {:.3} | {:.3} | {:.3} |",
             r.label,
-            r.samples.foot_skate_ratio,
-            r.training.foot_skate_ratio,
-            r.samples.max_acceleration,
-            r.training.max_acceleration,
-            r.samples.foot_acceleration,
-            r.training.foot_acceleration,
-            r.samples.bone_length_range_m,
-            r.samples.ground_penetration_m,
-            r.training.ground_penetration_m,
-            r.samples.head_height_m,
-            r.training.head_height_m,
-            r.samples.travel_m,
-            r.training.travel_m,
-            r.samples.steps_per_second,
-            r.training.steps_per_second,
+            g.steps_per_second,
+            d.steps_per_second,
+            g.toe_flicker,
+            d.toe_flicker,
+            g.mean_acceleration,
+            d.mean_acceleration,
+            g.max_acceleration,
+            d.max_acceleration,
+            g.foot_skate_ratio,
+            d.foot_skate_ratio,
+            g.bone_length_range_m,
+            d.bone_length_range_m,
+            g.ground_penetration_m,
+            d.ground_penetration_m,
+            g.stance_toe_height_m,
+            d.stance_toe_height_m,
+            100.0 * g.airborne_share,
+            100.0 * d.airborne_share,
+            g.turn_deg,
+            100.0 * g.turn_left_share,
+            100.0 * g.turn_right_share,
+            d.turn_deg,
+            g.spikes,
+            d.spikes,
+            g.head_height_m,
+            d.head_height_m,
+            g.travel_m,
+            d.travel_m,
             r.nearest_training_m,
             r.training_spacing_m,
             r.sample_diversity_m

@@ -54,6 +54,12 @@ pub struct GenerationArgs {
     /// DNO random restarts; the best per sample is kept.
     #[arg(long, default_value_t = 1)]
     pub restarts: usize,
+    /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// DDIM steps of the sampler that DNO differentiates through (default 10).
+    #[arg(long)]
+    pub ddim_steps: Option<usize>,
     /// Classifier-free guidance scale of the prior (1 = conditional only).
     #[arg(long, default_value_t = motion_core::diffusion::Guidance::MDM_SCALE)]
     pub guidance: f64,
@@ -74,6 +80,12 @@ impl GenerationArgs {
         config.guidance = self.guidance;
         config.dno.restarts = self.restarts;
         config.jitter_weight = self.jitter_weight;
+        if let Some(lr) = self.lr {
+            config.dno.lr = lr;
+        }
+        if let Some(ddim_steps) = self.ddim_steps {
+            config.dno.ddim_steps = ddim_steps;
+        }
         if let Some(steps) = self.steps {
             config.dno.steps = steps;
             config.direct.steps = steps;

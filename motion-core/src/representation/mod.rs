@@ -21,6 +21,7 @@ mod planted_feet;
 mod recover;
 mod rigid;
 
+pub(crate) use extract::facing_direction;
 pub use extract::{canonicalize, extract_features, ExtractedMotion, FOOT_CONTACT_THRESHOLD_M2};
 pub use normalization::{MeanStd, NormalizationError};
 pub use planted_feet::{root_velocity_from_planted_feet, PLANTED_CONTACT};

@@ -2,6 +2,13 @@
 //! (`reference/anchors.md` §3.7). Inputs are `[frames]` of [`Pose`]s in metres, y up, ground at
 //! y = 0.
 
+mod gait;
+
+pub use gait::{
+    airborne_frames, alternation_frames, heading_change_rad, mean_acceleration, pace, spike_frames, stance_toe_height,
+    step_count, toe_flicker, toe_separation, AIRBORNE_M, ALTERNATION_HYSTERESIS_M, FLICKER_M, SPIKE_ACCELERATION_M,
+};
+
 use crate::skeleton::{bone_lengths, Joint, Pose, FPS, NUM_JOINTS};
 
 /// A foot is in contact when its height is below this, m (ProgMoGen / DNO).
@@ -105,14 +112,6 @@ pub fn foot_contact_ratio(poses: &[Pose]) -> f64 {
     on as f64 / poses.len() as f64
 }
 
-/// A foot is swinging (a step is under way) while its smoothed horizontal speed exceeds this,
-/// m/s (our choice; RG-DNO counts steps as foot-speed threshold crossings without publishing
-/// the threshold).
-pub const STEP_SPEED_M_PER_S: f64 = 1.0;
-
-/// Width of the centred box filter applied to the foot speed before counting steps, frames.
-pub const STEP_SMOOTHING_FRAMES: usize = 5;
-
 /// Rest length of our head–neck bone, m: 0.1049 in every frame of the training database
 /// (DeepMimic's humanoid scaled to 1.70 m). SMPL's is about 0.08 m.
 pub const HEAD_NECK_REST_M: f64 = 0.105;
@@ -121,62 +120,6 @@ pub const HEAD_NECK_REST_M: f64 = 0.105;
 /// (`main_eval_bone_length.py`) accepts SMPL's 0.08 m ± 0.025; we keep the ± 0.025 m tolerance
 /// around our own rest length [`HEAD_NECK_REST_M`].
 pub const HEAD_NECK_VALID_M: (f64, f64) = (HEAD_NECK_REST_M - 0.025, HEAD_NECK_REST_M + 0.025);
-
-/// Frames at which steps start: for each of the left and right foot joints, the frames where its
-/// horizontal speed (forward difference × fps, smoothed by a centred
-/// [`STEP_SMOOTHING_FRAMES`]-frame box filter, shorter at the ends) rises above
-/// [`STEP_SPEED_M_PER_S`]. A foot already moving at frame 0 starts a step there. Sorted.
-pub fn step_starts(poses: &[Pose]) -> Vec<usize> {
-    if poses.len() < 2 {
-        return Vec::new();
-    }
-    let mut starts = Vec::new();
-    for foot in [Joint::LeftFoot, Joint::RightFoot] {
-        let j = foot.index();
-        let speed: Vec<f64> = poses
-            .windows(2)
-            .map(|w| ((w[1][j].x - w[0][j].x).powi(2) + (w[1][j].z - w[0][j].z).powi(2)).sqrt() * FPS)
-            .collect();
-        let half = STEP_SMOOTHING_FRAMES / 2;
-        let smooth: Vec<f64> = (0..speed.len())
-            .map(|t| {
-                let window = &speed[t.saturating_sub(half)..(t + half + 1).min(speed.len())];
-                window.iter().sum::<f64>() / window.len() as f64
-            })
-            .collect();
-        let mut moving = false;
-        for (t, &v) in smooth.iter().enumerate() {
-            let now = v > STEP_SPEED_M_PER_S;
-            if now && !moving {
-                starts.push(t);
-            }
-            moving = now;
-        }
-    }
-    starts.sort_unstable();
-    starts
-}
-
-/// Number of steps: upward crossings of the foot-speed threshold ([`step_starts`]).
-pub fn step_count(poses: &[Pose]) -> usize {
-    step_starts(poses).len()
-}
-
-/// Pace: steps per second over the clip, and the coefficient of variation (std / mean) of the
-/// intervals between consecutive step starts (0 for a perfectly even pace; `None` with fewer
-/// than 3 steps).
-pub fn pace(poses: &[Pose]) -> (f64, Option<f64>) {
-    let starts = step_starts(poses);
-    let seconds = poses.len().saturating_sub(1).max(1) as f64 / FPS;
-    let rate = starts.len() as f64 / seconds;
-    if starts.len() < 3 {
-        return (rate, None);
-    }
-    let intervals: Vec<f64> = starts.windows(2).map(|w| (w[1] - w[0]) as f64).collect();
-    let mean = intervals.iter().sum::<f64>() / intervals.len() as f64;
-    let var = intervals.iter().map(|i| (i - mean).powi(2)).sum::<f64>() / intervals.len() as f64;
-    (rate, (mean > 0.0).then(|| var.sqrt() / mean))
-}
 
 /// Semantic success of "raise the hands" tasks (RG-DNO Task-3): a wrist is above its shoulder
 /// (y) in at least half of the frames.
@@ -269,28 +212,8 @@ mod tests {
     }
 
     #[test]
-    fn steps_pace_hands_and_neck_by_hand() {
-        // Left foot swings (2 m/s for 5 frames) starting at frames 2 and 16; right at 9 and 23.
-        let mut poses = still(32);
-        let mut left_z = 0.0;
-        let mut right_z = 0.0;
-        for t in 1..32 {
-            let swing = |start: usize| (start..start + 5).contains(&(t - 1));
-            if swing(2) || swing(16) {
-                left_z += 0.1;
-            }
-            if swing(9) || swing(23) {
-                right_z += 0.1;
-            }
-            poses[t][Joint::LeftFoot.index()].z = left_z;
-            poses[t][Joint::RightFoot.index()].z = right_z;
-        }
-        let starts = step_starts(&poses);
-        assert_eq!(starts.len(), 4, "{starts:?}");
-        assert_eq!(step_count(&poses), 4);
-        let (rate, cv) = pace(&poses);
-        assert!((rate - 4.0 / 1.55).abs() < 1e-9);
-        assert!(cv.is_some_and(|cv| cv < 0.05), "even pace: {cv:?}");
+    fn hands_and_neck_by_hand() {
+        let poses = still(32);
         assert!(!hands_raised(&poses));
         let mut up = still(4);
         for p in &mut up[..2] {
