@@ -201,7 +201,7 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         }
     }
     let strip: Vec<StripRow<'_>> = motions.iter().map(|(l, p)| StripRow { label: l.clone(), poses: p }).collect();
-    motion_strip(&strip, 8, &args.out.join("samples.png"))?;
+    motion_strip(&strip, 8, &[], "unconstrained samples of the shipped prior", &args.out.join("samples.png"))?;
     println!("wrote {}/{{report.md,report.json,samples.png}}", args.out.display());
     Ok(())
 }

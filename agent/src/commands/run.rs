@@ -162,12 +162,9 @@ pub fn run_program(
     let rows: Vec<StripRow<'_>> = poses
         .iter()
         .enumerate()
-        .map(|(i, p)| StripRow {
-            label: format!("{} - {} (seed {}, sample {i})", program.text, config.method, config.seed),
-            poses: p,
-        })
+        .map(|(i, p)| StripRow { label: format!("{} sample {i} (seed {})", config.method, config.seed), poses: p })
         .collect();
-    motion_strip(&rows, 8, &out.join("strip.png"))?;
+    motion_strip(&rows, 8, &program.scene_primitives(), &program.text, &out.join("strip.png"))?;
     eprintln!("wrote {}/{{features.npy,joints.npy,report.json,strip.png}}", out.display());
     Ok(report)
 }

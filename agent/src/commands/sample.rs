@@ -76,9 +76,9 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     let rows: Vec<StripRow<'_>> = poses
         .iter()
         .enumerate()
-        .map(|(i, p)| StripRow { label: format!("{} (seed {}, sample {i})", args.prompt, args.seed), poses: p })
+        .map(|(i, p)| StripRow { label: format!("sample {i} (seed {})", args.seed), poses: p })
         .collect();
-    motion_strip(&rows, 8, &args.out.join("strip.png"))?;
+    motion_strip(&rows, 8, &[], &args.prompt, &args.out.join("strip.png"))?;
     println!("wrote {}/{{joints.npy,features.npy,strip.png}}", args.out.display());
     Ok(())
 }

@@ -123,6 +123,22 @@ pub struct ConstraintGroups {
 }
 
 impl TaskProgram {
+    /// The scene primitives of every scene constraint, in program order (under `and`, `or` and
+    /// `not` too): what a picture of the task draws.
+    pub fn scene_primitives(&self) -> Vec<Primitive> {
+        fn visit(expr: &Expr, out: &mut Vec<Primitive>) {
+            match expr {
+                Expr::Scene(scene) => out.push(scene.primitive.clone()),
+                Expr::And(args) | Expr::Or(args) => args.args.iter().for_each(|a| visit(a, out)),
+                Expr::Not(not) => visit(&not.arg, out),
+                _ => {}
+            }
+        }
+        let mut out = Vec::new();
+        self.constraints.iter().for_each(|c| visit(&c.expr, &mut out));
+        out
+    }
+
     /// Parses a program from JSON text (types only; see [`TaskProgram::validate`]). The error names
     /// the path of the first bad field, and for an unknown name lists the valid ones.
     pub fn from_json(text: &str) -> Result<TaskProgram, ProgramError> {

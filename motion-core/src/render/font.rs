@@ -65,6 +65,8 @@ pub fn char_width(scale: f32) -> f32 {
 pub fn draw_text(pixmap: &mut Pixmap, text: &str, x: f32, y: f32, scale: f32, color: Color) {
     let mut paint = Paint::default();
     paint.set_color(color);
+    // Crisp pixels; tiny-skia's anti-aliased fill also asserts on sub-pixel rectangles.
+    paint.anti_alias = false;
     for (i, c) in text.chars().enumerate() {
         let Some((_, rows)) = GLYPHS.iter().find(|(g, _)| *g == c.to_ascii_uppercase()) else { continue };
         let x0 = x + i as f32 * char_width(scale);
