@@ -3,6 +3,7 @@
 //! Conventions for every module are stated once in [`skeleton`]: y up, metres, +x is the
 //! character's left, a canonical motion starts facing +z, 20 frames per second.
 
+pub mod cleanup;
 pub mod constraints;
 pub mod database;
 pub mod diffusion;

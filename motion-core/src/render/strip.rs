@@ -168,7 +168,7 @@ pub fn motion_strip(
     while k <= x.1 {
         let y = px_x(k);
         line(&mut pixmap, (MARGIN_PX - 6.0, y), (MARGIN_PX, y), grey, 1.0);
-        draw_text(&mut pixmap, &format!("{k:.0}"), MARGIN_PX - 22.0, y - 4.0, 1.0, grey);
+        draw_text(&mut pixmap, &format!("{}", k.round() as i64), MARGIN_PX - 22.0, y - 4.0, 1.0, grey);
         k += 1.0;
     }
     draw_text(&mut pixmap, "X LEFT", 2.0, top + LABEL_PX, 1.0, grey);
@@ -191,7 +191,7 @@ fn axis(pixmap: &mut Pixmap, z: (f64, f64), scale: f64, y_px: f32, px_z: &dyn Fn
     let mut k = (z.0 / step).ceil() * step;
     while k <= z.1 {
         line(pixmap, (px_z(k), y_px), (px_z(k), y_px + 6.0), grey, 1.0);
-        draw_text(pixmap, &format!("{k:.0}"), px_z(k) - 3.0, y_px + 8.0, 1.0, grey);
+        draw_text(pixmap, &format!("{}", k.round() as i64), px_z(k) - 3.0, y_px + 8.0, 1.0, grey);
         if scale >= 80.0 && k + 0.5 <= z.1 {
             line(pixmap, (px_z(k + 0.5), y_px), (px_z(k + 0.5), y_px + 3.0), grey, 1.0);
         }
