@@ -61,11 +61,12 @@ pub enum PriorError {
 pub enum RootDecode {
     /// The root velocity is re-derived from the feet whose contact is on, so they stay where
     /// they were planted ([`root_velocity_from_planted_feet`]); frames without a planted foot
-    /// keep the predicted velocity. The default: the denoiser's root velocity can run ahead of
-    /// its legs, and the feet then slide.
-    #[default]
+    /// keep the predicted velocity. For priors whose root velocity runs ahead of their legs
+    /// (the incoherent 3,000-step prior shipped until session 9).
     PlantedFeet,
-    /// The predicted root velocity as it is (HumanML3D's `recover_from_ric`).
+    /// The predicted root velocity as it is (HumanML3D's `recover_from_ric`). The default: the
+    /// temporally coherent prior's walks travel and step like the data with it.
+    #[default]
     Velocity,
 }
 
@@ -111,7 +112,7 @@ pub struct Prior {
     /// Normalisation of its features.
     pub mean_std: MeanStd,
     /// How generated features become a root trajectory (not stored in the file; default
-    /// [`RootDecode::PlantedFeet`]).
+    /// [`RootDecode::Velocity`]).
     pub root_decode: RootDecode,
     /// Bone lengths of the training data: generated joints are re-derived on them, so bones are
     /// rigid by construction ([`rigid_bones`]); `None` for files without it (joints as decoded).
@@ -228,7 +229,14 @@ impl Prior {
     /// `[batch, frames, 263]`, on the rest skeleton's bone lengths when the file has one;
     /// differentiable.
     pub fn to_joints(&self, normalized: &Tensor) -> candle_core::Result<Tensor> {
-        let joints = recover_from_ric(&self.to_features(normalized)?)?;
+        self.joints_of(&self.to_features(normalized)?)
+    }
+
+    /// Joint positions `[batch, frames, 22, 3]` of de-normalised, decoded features
+    /// `[batch, frames, 263]` (what [`Self::to_features`] returns), on the rest skeleton's bone
+    /// lengths when the file has one; differentiable.
+    pub fn joints_of(&self, features: &Tensor) -> candle_core::Result<Tensor> {
+        let joints = recover_from_ric(features)?;
         match &self.rest {
             Some(rest) => rigid_bones(&joints, rest),
             None => Ok(joints),
@@ -262,7 +270,7 @@ mod tests {
         let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
         let mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
         let rest = RestSkeleton::of_pose(&crate::import::deepmimic::rest_pose());
-        let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::Velocity, rest: Some(rest) };
+        let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::PlantedFeet, rest: Some(rest) };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("prior.safetensors");
         prior.save(&path).unwrap();
@@ -270,7 +278,7 @@ mod tests {
         assert_eq!(back.encoder, prior.encoder);
         assert_eq!(back.mdm.config(), prior.mdm.config());
         assert_eq!(back.mean_std.std().to_vec1::<f32>().unwrap()[5], 2.0);
-        assert_eq!(back.root_decode, RootDecode::PlantedFeet, "the default decode");
+        assert_eq!(back.root_decode, RootDecode::Velocity, "the default decode");
         assert_eq!(back.rest, Some(rest));
 
         std::fs::write(&path, b"not a prior").unwrap();

@@ -14,7 +14,7 @@ use crate::metrics::{
     mean_acceleration, mean_foot_acceleration, pace, root_travel, spike_frames, stance_toe_height, toe_flicker,
 };
 use crate::prior::{Prior, PriorError};
-use crate::representation::{recover_from_ric, RIC};
+use crate::representation::RIC;
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
 /// Means of the metrics over a set of motions (worst cases where the name says so).
@@ -204,7 +204,7 @@ pub fn quality_report(
             device,
         )?;
         let raw = prior.to_features(&x).map_err(fail)?;
-        let samples = tensor_to_poses(&recover_from_ric(&raw).map_err(fail)?).map_err(fail)?;
+        let samples = tensor_to_poses(&prior.joints_of(&raw).map_err(fail)?).map_err(fail)?;
         let sample_desc = descriptors(
             &raw.chunk(raw.dim(0).map_err(fail)?, 0)
                 .map_err(fail)?
@@ -222,7 +222,7 @@ pub fn quality_report(
         } else {
             // The data's root goes through the same decode as the samples'.
             let stacked = prior.root_decode.apply(&Tensor::cat(&own_crops, 0).map_err(fail)?).map_err(fail)?;
-            MetricMeans::of(&tensor_to_poses(&recover_from_ric(&stacked).map_err(fail)?).map_err(fail)?)
+            MetricMeans::of(&tensor_to_poses(&prior.joints_of(&stacked).map_err(fail)?).map_err(fail)?)
         };
         let nearest = nearest_distances(&sample_desc, &train_desc, |_, _| true).map_err(fail)?;
         let spacing = if own.is_empty() {

@@ -103,9 +103,10 @@ pub struct RunArgs {
     method: MethodArg,
     #[command(flatten)]
     generation: GenerationArgs,
-    /// Output folder: features.npy [n, frames, 263] (de-normalised HumanML3D features, the root
-    /// velocity re-derived from the planted feet), joints.npy [n, frames, 22, 3] (m, y up,
-    /// 20 fps), report.json, strip.png.
+    /// Output folder: features.npy [n, frames, 263] (de-normalised HumanML3D features),
+    /// joints.npy [n, frames, 22, 3] (m, y up, 20 fps, bones at the rest lengths), report.json
+    /// (every constraint in natural units with pass/fail), strip.png (world coordinates, the
+    /// scene drawn).
     #[arg(long, short, default_value = "out/run")]
     out: PathBuf,
 }

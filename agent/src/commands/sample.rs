@@ -8,7 +8,6 @@ use motion_core::diffusion::Guidance;
 use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
-use motion_core::representation::recover_from_ric;
 
 use crate::paths;
 
@@ -68,7 +67,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         &device,
     )?;
     let raw = prior.to_features(&x)?;
-    let joints = recover_from_ric(&raw)?;
+    let joints = prior.joints_of(&raw)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     joints.write_npy(args.out.join("joints.npy"))?;
     raw.write_npy(args.out.join("features.npy"))?;
