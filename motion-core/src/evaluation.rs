@@ -145,11 +145,15 @@ pub fn report(
     })
 }
 
-/// Whether constraint `id` counts steps: a count over foot speeds.
+/// Whether constraint `id` counts steps: `steps`, or a count over foot speeds.
 fn is_step_count(program: &TaskProgram, id: &str) -> bool {
     use crate::program::{Expr, Point, Quantity};
     use crate::skeleton::Joint;
-    let Some(Expr::Count(count)) = program.constraint(id).map(|c| &c.expr) else { return false };
+    let count = match program.constraint(id).map(|c| &c.expr) {
+        Some(Expr::Steps(_)) => return true,
+        Some(Expr::Count(count)) => count,
+        _ => return false,
+    };
     count.signals.iter().all(|s| {
         matches!(s, Quantity::Speed(d) | Quantity::Velocity(d)
             if matches!(d.of, Point::Joint(Joint::LeftFoot | Joint::RightFoot | Joint::LeftAnkle | Joint::RightAnkle)))

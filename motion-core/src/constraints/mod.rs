@@ -33,7 +33,8 @@ pub use support::FOOT_HALF_WIDTH_M;
 
 use crate::program::{
     BoneDirection, ComInSupport, Condition, Count, Equal, Expr, Extremum, FootContact, GreaterThan, JointSet, LessThan,
-    Metric, Primitive, ProgramError, Quantity, Reduce, SceneConstraint, SelfCollision, StayNearInitial, TaskProgram,
+    Metric, Primitive, ProgramError, Quantity, Reduce, SceneConstraint, SelfCollision, StayNearInitial, Steps,
+    TaskProgram,
 };
 use crate::skeleton::{Joint, FPS};
 use frames::{condition_mask, reduce, Frames};
@@ -116,6 +117,9 @@ enum Node {
         sharpness: f64,
         smoothing: usize,
         frames: Vec<usize>,
+    },
+    Steps {
+        target: f64,
     },
     Scene {
         joints: Tensor,
@@ -256,7 +260,7 @@ impl CompiledProgram {
         let mut found = Vec::new();
         for c in &self.constraints {
             let _ = c.node.walk(&mut |node: &Node| {
-                if let Node::Count { target, .. } = node {
+                if let Node::Count { target, .. } | Node::Steps { target } = node {
                     found.push((c.id.clone(), *target as u32));
                 }
                 Ok(())
@@ -332,6 +336,7 @@ impl Compiler<'_> {
                     frames: self.select(frames, n)?.kept().to_vec(),
                 }
             }
+            Expr::Steps(Steps { target_count }) => Node::Steps { target: f64::from(*target_count) },
             Expr::Scene(SceneConstraint { body, primitive, frames, reduce }) => {
                 let joints = match &body.joints {
                     JointSet::All => Joint::ALL.to_vec(),
@@ -505,6 +510,7 @@ impl Node {
                 }
                 (total - *target)?.sqr()?
             }
+            Node::Steps { target } => (count::soft_step_count(joints)? - *target)?.sqr()?,
             Node::Scene { joints: set, surface, primitive, frames, reduce: how } => {
                 let points = frames.select(&body_points(joints, set, *surface)?)?;
                 scene_reduce(&primitive_error(&points, primitive, false)?, *how)?

@@ -167,6 +167,18 @@ impl Node {
                     tolerance: COUNT_TOLERANCE,
                 })
             }
+            Node::Steps { target } => {
+                let counted: Vec<f64> = crate::quality::tensor_to_poses(joints)?
+                    .iter()
+                    .map(|m| (crate::metrics::step_count(m) as f64 - target).abs())
+                    .collect();
+                leaf(Check {
+                    what: format!("steps (leg alternations) off the target {target}"),
+                    unit: Unit::Count,
+                    value: counted,
+                    tolerance: COUNT_TOLERANCE,
+                })
+            }
             Node::Scene { joints: set, surface, primitive, frames, reduce } => {
                 let points = frames.select(&body_points(joints, set, *surface)?)?;
                 let depth = primitive_error(&points, primitive, true)?.max(D::Minus1)?; // [B, F]

@@ -35,6 +35,11 @@ pub enum Expr {
     Not(Not),
     /// Counting (RG-DNO eqs. 15–16): `(n − target_count)²` with `n` a soft count of extrema.
     Count(Count),
+    /// Steps taken, counted as leg alternations (the one step definition of the reports,
+    /// `metrics::step_count`): `(n − target_count)²` with the soft count
+    /// `n = Σ_t ½·|tanh(d[t+1]/w) − tanh(d[t]/w)|`, `d` the left-minus-right toe separation
+    /// along the facing direction and `w` = 2.5 cm (the metric's ±5 cm hysteresis, smoothed).
+    Steps(Steps),
     /// Body points against a scene primitive: the primitive's per-point error; each frame's worst
     /// point, reduced over the selected frames.
     Scene(SceneConstraint),
@@ -67,6 +72,7 @@ tag_first_deserialize!(Expr, "op", {
     Or(Args) = "or",
     Not(Not) = "not",
     Count(Count) = "count",
+    Steps(Steps) = "steps",
     Scene(SceneConstraint) = "scene",
     BoneDirection(BoneDirection) = "bone_direction",
     FootContact(FootContact) = "foot_contact",
@@ -205,6 +211,15 @@ pub struct Count {
     /// Frames searched (default: all).
     #[serde(default)]
     pub frames: FrameSelection,
+}
+
+/// Fields of [`Expr::Steps`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Steps {
+    /// Required number of steps (leg alternations) over the whole motion.
+    #[schemars(range(max = 1000))]
+    pub target_count: u32,
 }
 
 fn default_sharpness() -> f64 {

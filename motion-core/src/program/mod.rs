@@ -34,7 +34,7 @@ use serde::{Deserialize, Serialize};
 pub use error::{Problem, ProgramError};
 pub use expr::{
     Args, BoneDirection, ComInSupport, Count, Equal, Expr, Extremum, FootContact, GreaterThan, LessThan, Metric, Not,
-    SceneConstraint, SelfCollision, StayNearInitial, Support,
+    SceneConstraint, SelfCollision, StayNearInitial, Steps, Support,
 };
 pub use quantity::{
     Axes, CarriedLoad, CentreOfMass, Condition, Derivative, Displacement, Distance, DistanceToLine, DistanceToPlane,

@@ -347,6 +347,7 @@ impl Checker {
                 self.expr(&field(path, "arg"), &not.arg);
             }
             Expr::Count(count) => self.count(path, count),
+            Expr::Steps(_) => {}
             Expr::Scene(scene) => {
                 if let JointSet::Only(joints) = &scene.body.joints {
                     self.distinct_joints(&field(&field(path, "body"), "joints.only"), joints);
