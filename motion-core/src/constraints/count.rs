@@ -33,14 +33,19 @@ pub fn soft_count(s: &Tensor, frames: &[usize], extremum: Extremum, threshold: f
     score.sum(D::Minus1)
 }
 
-/// Width of the soft leg lead in [`soft_step_count`], m: half the step metric's ±5 cm
-/// hysteresis ([`crate::metrics::ALTERNATION_HYSTERESIS_M`]).
-pub const STEP_LEAD_WIDTH_M: f64 = 0.025;
+/// Half-width of the dead zone of the soft leg lead in [`soft_step_count`], m: the step
+/// metric's hysteresis ([`crate::metrics::ALTERNATION_HYSTERESIS_M`]).
+pub const STEP_LEAD_M: f64 = 0.05;
+/// Width of the sigmoids at the edges of the dead zone, m.
+pub const STEP_LEAD_EDGE_M: f64 = 0.005;
 
-/// Soft number of steps of joints `[B, T, 22, 3]`, `[B]`: `Σ_t ½·√((s[t+1] − s[t])² + ε)` with
-/// `s = tanh(d/w)`, `d` the left-minus-right toe separation along the horizontal facing
-/// direction (from hips and shoulders, as the step metric) and `w` = [`STEP_LEAD_WIDTH_M`]. A
-/// full change of the leading leg adds 1; leads held beyond ±5 cm add nothing.
+/// Soft number of steps of joints `[B, T, 22, 3]`, `[B]`: `Σ_t ½·√((l[t+1] − l[t])² + ε)` with
+/// the soft lead `l = σ((d − h)/w) − σ((−d − h)/w)` ∈ [−1, 1], `d` the left-minus-right toe
+/// separation along the horizontal facing direction (from hips and shoulders, as the step
+/// metric), `h` = [`STEP_LEAD_M`] and `w` = [`STEP_LEAD_EDGE_M`]. A change of the leading leg
+/// from beyond +h to beyond −h adds 1; feet shuffling within ±h add nothing (the soft form of
+/// the metric's hysteresis; a lead given up and taken again by the same foot adds 1 where the
+/// metric adds 0).
 pub fn soft_step_count(joints: &Tensor) -> Result<Tensor> {
     let frames = joints.dim(1)?;
     if frames < 2 {
@@ -54,9 +59,11 @@ pub fn soft_step_count(joints: &Tensor) -> Result<Tensor> {
     let length = ((ax.sqr()? + az.sqr()?)? + 1e-12)?.sqrt()?;
     let toe = (at(Joint::LeftFoot)? - at(Joint::RightFoot)?)?;
     let (tx, tz) = (toe.narrow(D::Minus1, 0, 1)?, toe.narrow(D::Minus1, 2, 1)?);
-    let lead = ((tx * &az)? - (tz * &ax)?)?.div(&length)?.squeeze(D::Minus1)?; // [B, T], m
-    let s = (lead / STEP_LEAD_WIDTH_M)?.tanh()?;
-    let change = (s.narrow(1, 1, frames - 1)? - s.narrow(1, 0, frames - 1)?)?;
+    let d = ((tx * &az)? - (tz * &ax)?)?.div(&length)?.squeeze(D::Minus1)?; // [B, T], m
+    let left = sigmoid(&((&d - STEP_LEAD_M)? / STEP_LEAD_EDGE_M)?)?;
+    let right = sigmoid(&((d.neg()? - STEP_LEAD_M)? / STEP_LEAD_EDGE_M)?)?;
+    let lead = (left - right)?;
+    let change = (lead.narrow(1, 1, frames - 1)? - lead.narrow(1, 0, frames - 1)?)?;
     ((change.sqr()? + 1e-8)?.sqrt()? * 0.5)?.sum(D::Minus1)
 }
 
@@ -127,8 +134,22 @@ mod tests {
             let hard = crate::metrics::step_count(&poses) as f64;
             assert!((soft - hard).abs() <= 1.0, "{name}: soft {soft:.2}, metric {hard}");
         }
-        // Standing still: no steps.
+        // Feet shuffling ±4 cm every frame: no steps (the metric's hysteresis, in soft form).
         let (poses, _) = clip_tensor("walker_0walk_forward.txt");
+        let mut shuffle = vec![poses[0]; 40];
+        for (t, p) in shuffle.iter_mut().enumerate() {
+            let facing = crate::representation::facing_direction(p).unwrap();
+            let lead = if t % 2 == 0 { 0.02 } else { -0.02 };
+            let base = (p[crate::skeleton::Joint::LeftFoot.index()] - p[crate::skeleton::Joint::RightFoot.index()])
+                .dot(facing);
+            p[crate::skeleton::Joint::LeftFoot.index()] += facing * (lead - base);
+        }
+        let flat: Vec<f64> = shuffle.iter().flatten().flat_map(|v| [v.x, v.y, v.z]).collect();
+        let shuffle_t = Tensor::from_vec(flat, (1, 40, 22, 3), &Device::Cpu).unwrap();
+        let shuffled = soft_step_count(&shuffle_t).unwrap().to_vec1::<f64>().unwrap()[0];
+        assert!(shuffled < 0.5, "shuffling counts {shuffled}");
+        assert_eq!(crate::metrics::step_count(&shuffle), 0);
+        // Standing still: no steps.
         let still: Vec<f64> = std::iter::repeat_n(poses[0], 40).flatten().flat_map(|v| [v.x, v.y, v.z]).collect();
         let still = Tensor::from_vec(still, (1, 40, 22, 3), &Device::Cpu).unwrap();
         assert!(soft_step_count(&still).unwrap().to_vec1::<f64>().unwrap()[0] < 0.01);

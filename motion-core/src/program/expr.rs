@@ -36,9 +36,10 @@ pub enum Expr {
     /// Counting (RG-DNO eqs. 15–16): `(n − target_count)²` with `n` a soft count of extrema.
     Count(Count),
     /// Steps taken, counted as leg alternations (the one step definition of the reports,
-    /// `metrics::step_count`): `(n − target_count)²` with the soft count
-    /// `n = Σ_t ½·|tanh(d[t+1]/w) − tanh(d[t]/w)|`, `d` the left-minus-right toe separation
-    /// along the facing direction and `w` = 2.5 cm (the metric's ±5 cm hysteresis, smoothed).
+    /// `metrics::step_count`): `(n − target_count)²` with the soft count `n = Σ_t ½·|l[t+1] − l[t]|`
+    /// of the soft lead `l = σ((d − 5 cm)/5 mm) − σ((−d − 5 cm)/5 mm)`, `d` the left-minus-right
+    /// toe separation along the facing direction (the metric's ±5 cm hysteresis, smoothed), so
+    /// feet shuffling within ±5 cm count nothing.
     Steps(Steps),
     /// Body points against a scene primitive: the primitive's per-point error; each frame's worst
     /// point, reduced over the selected frames.
