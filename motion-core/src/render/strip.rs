@@ -81,8 +81,8 @@ pub fn motion_strip(
     let top_y = points().map(|v| v.y).fold(SIDE_HEIGHT_M, f64::max) + 0.1;
     let scale = (MAX_WIDTH_PX / (z.1 - z.0)).min(MAX_SCALE);
     let width = (z.1 - z.0) * scale + 2.0 * MARGIN_PX as f64;
-    let side_h = top_y * scale + LABEL_PX as f64 + 24.0;
-    let top_h = (x.1 - x.0) * scale + LABEL_PX as f64 + 24.0;
+    let side_h = top_y * scale + LABEL_PX as f64 + 32.0;
+    let top_h = (x.1 - x.0) * scale + LABEL_PX as f64 + 32.0;
     let height = LABEL_PX as f64 + 8.0 + side_h * rows.len() as f64 + top_h + 8.0;
     let mut pixmap = Pixmap::new(width as u32, height as u32)
         .ok_or_else(|| RenderError::Empty(format!("{width:.0}x{height:.0} pixels")))?;
@@ -159,7 +159,7 @@ pub fn motion_strip(
         Color::BLACK,
     );
     for p in scene {
-        if let Some(([z0, z1], [x0, x1])) = top_box(p, z, x) {
+        for ([z0, z1], [x0, x1]) in top_boxes(p, z, x) {
             fill(&mut pixmap, (px_z(z0), px_x(x1)), (px_z(z1), px_x(x0)), obstacle);
         }
     }
@@ -197,7 +197,7 @@ fn axis(pixmap: &mut Pixmap, z: (f64, f64), scale: f64, y_px: f32, px_z: &dyn Fn
         }
         k += step;
     }
-    draw_text(pixmap, name, px_z(z.1) - 90.0, y_px + 8.0, 1.0, grey);
+    draw_text(pixmap, name, px_z(z.1) - 90.0, y_px + 18.0, 1.0, grey);
 }
 
 /// z extent of a primitive, m, when it has one.
@@ -231,27 +231,26 @@ fn side_box(p: &Primitive, top_y: f64) -> Option<(f64, f64, [f64; 2])> {
     }
 }
 
-/// A primitive's solid parts in the top view, ([z0, z1], [x0, x1]), m: the walls of a gap, the
-/// outside of a box's x range, a wall's slab 5 cm thick.
-fn top_box(p: &Primitive, z: (f64, f64), x: (f64, f64)) -> Option<([f64; 2], [f64; 2])> {
+/// A primitive's solid parts in the top view, each ([z0, z1], [x0, x1]), m: both walls of a
+/// gap, the outside of a box's x range, a wall's slab 5 cm thick.
+fn top_boxes(p: &Primitive, z: (f64, f64), x: (f64, f64)) -> Vec<([f64; 2], [f64; 2])> {
     match p {
         Primitive::Gap(g) => {
             let zr = g.z_range_m.unwrap_or([z.0, z.1]);
-            Some((zr, [g.centre_x_m + g.width_m / 2.0, x.1]))
+            let half = g.width_m / 2.0;
+            vec![(zr, [g.centre_x_m + half, x.1]), (zr, [x.0, g.centre_x_m - half])]
         }
         Primitive::Wall(Wall { point_m, normal, .. }) if normal[0].abs() > 0.9 => {
             let behind =
                 if normal[0] > 0.0 { [point_m[0] - 0.05, point_m[0]] } else { [point_m[0], point_m[0] + 0.05] };
-            Some(([z.0, z.1], behind))
+            vec![([z.0, z.1], behind)]
         }
-        _ => None,
+        Primitive::InsideBox(InsideBox { x_range_m: Some([lo, hi]), z_range_m, .. }) => {
+            let zr = z_range_m.unwrap_or([z.0, z.1]);
+            vec![(zr, [x.0, *lo]), (zr, [*hi, x.1])]
+        }
+        _ => Vec::new(),
     }
-    .or_else(|| match p {
-        Primitive::InsideBox(InsideBox { x_range_m: Some([lo, _]), z_range_m, .. }) => {
-            Some((z_range_m.unwrap_or([z.0, z.1]), [x.0, *lo]))
-        }
-        _ => None,
-    })
 }
 
 fn fill(pixmap: &mut Pixmap, a: (f32, f32), b: (f32, f32), color: Color) {
