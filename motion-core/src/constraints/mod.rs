@@ -407,6 +407,18 @@ impl Compiler<'_> {
 }
 
 /// The tested points `[B, T, P, 3]`: the listed joints, then the surface points if asked for.
+/// Signed distance (m, positive outside) of the centre of mass from the support region of
+/// `feet` on the selected frames, both projected on the ground (x, z), `[B, F]`.
+fn com_outside_support(joints: &Tensor, feet: crate::program::Support, frames: &Frames) -> Result<Tensor> {
+    let com = point(joints, &crate::program::Point::CentreOfMass(Default::default()))?;
+    let com = frames.select(&select_axes(&com, crate::program::Axes::Xz)?)?;
+    let list = support::support_joints(feet);
+    let index =
+        Tensor::from_vec(list.iter().map(|j| j.index() as u32).collect::<Vec<_>>(), list.len(), joints.device())?;
+    let points = frames.select(&select_axes(&joints.index_select(&index, 2)?, crate::program::Axes::Xz)?)?;
+    support::signed_distance(&com, &points)
+}
+
 /// A scene constraint's error per sample `[B]` from per-point errors `[B, T, P]`: each frame's
 /// worst point (m, the deepest penetration), then `how` over the frames; `mean` averages over
 /// the frames that violate (a mask without gradient), so a violation keeps its depth however
@@ -548,17 +560,7 @@ impl Node {
                 reduce(&(*min_distance - distance)?.relu()?, None, *how)?
             }
             Node::ComInSupport { support: feet, margin, frames, reduce: how } => {
-                let com = point(joints, &crate::program::Point::CentreOfMass(Default::default()))?;
-                let com = frames.select(&select_axes(&com, crate::program::Axes::Xz)?)?;
-                let list = support::support_joints(*feet);
-                let index = Tensor::from_vec(
-                    list.iter().map(|j| j.index() as u32).collect::<Vec<_>>(),
-                    list.len(),
-                    joints.device(),
-                )?;
-                let points =
-                    frames.select(&select_axes(&joints.index_select(&index, 2)?, crate::program::Axes::Xz)?)?;
-                let distance = support::signed_distance(&com, &points)?;
+                let distance = com_outside_support(joints, *feet, frames)?;
                 reduce(&(distance + *margin)?.relu()?.sqr()?, None, *how)?
             }
             Node::StayNearInitial { id, quantities, frames } => {

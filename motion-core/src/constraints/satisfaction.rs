@@ -10,9 +10,9 @@ use serde::{Deserialize, Serialize};
 use super::frames::condition_mask;
 use super::geometry::{constant, joint, norm, select_axes};
 use super::scene::{is_obstacle, primitive_error};
-use super::signal::{point, signal};
-use super::{body_points, support, Comparison, CompiledProgram, ConstraintError, Node};
-use crate::program::{Axes, Point, Primitive, Quantity, Reduce};
+use super::signal::signal;
+use super::{body_points, com_outside_support, Comparison, CompiledProgram, ConstraintError, Node};
+use crate::program::{Primitive, Quantity, Reduce};
 
 /// Tolerance on distances, penetrations and positions, m (the bar for ProgMoGen's HSI
 /// tasks: within 5 cm).
@@ -259,16 +259,7 @@ impl Node {
                 })
             }
             Node::ComInSupport { support: feet, frames, reduce, .. } => {
-                let com = frames
-                    .select(&select_axes(&point(joints, &Point::CentreOfMass(Default::default()))?, Axes::Xz)?)?;
-                let list = support::support_joints(*feet);
-                let index = Tensor::from_vec(
-                    list.iter().map(|j| j.index() as u32).collect::<Vec<_>>(),
-                    list.len(),
-                    joints.device(),
-                )?;
-                let points = frames.select(&select_axes(&joints.index_select(&index, 2)?, Axes::Xz)?)?;
-                let outside = support::signed_distance(&com, &points)?.relu()?;
+                let outside = com_outside_support(joints, *feet, frames)?.relu()?;
                 let value = over_frames(&outside, None, *reduce == Reduce::Min)?;
                 leaf(Check {
                     what: "centre of mass outside the support".into(),
