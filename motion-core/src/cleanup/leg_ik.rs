@@ -1,54 +1,207 @@
-//! Analytic two-bone inverse kinematics (hip → knee → ankle), as animation tools solve legs.
+//! Analytic two-bone leg IK: the hip stays, the knee bends in the plane of the original knee,
+//! the ankle goes to its target (or the closest point the leg reaches) and the toe follows at
+//! the fixed ankle–toe length. Every bone keeps the length it had in the input frame.
+//!
+//! Near full extension the reach is softened ("soft IK", as animation rigs do): the law of
+//! cosines puts the knee at `√(reach − distance)` from the hip–ankle line, so a target crossing
+//! the reach limit snaps a straight knee bent within a frame. Within `soft_m` of the limit the
+//! ankle instead approaches it exponentially and never quite straightens the leg.
 
 use glam::DVec3;
 
-/// Where the knee and ankle go when the ankle should reach `target`: thigh and shin keep their
-/// lengths `|knee − hip|` and `|ankle − knee|` exactly, and the knee bends in the plane that
-/// holds the hip, the target and the original knee (the pole). A target out of reach is
-/// replaced by the closest reachable point on the line from the hip. Returns `(knee, ankle,
-/// reached)`.
-pub fn solve_leg(hip: DVec3, knee: DVec3, ankle: DVec3, target: DVec3) -> (DVec3, DVec3, bool) {
-    let (thigh, shin) = ((knee - hip).length(), (ankle - knee).length());
-    let to_target = target - hip;
+/// One leg's joints, metres, world axes (y up).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Leg {
+    /// Hip joint (never moved).
+    pub hip: DVec3,
+    /// Knee joint.
+    pub knee: DVec3,
+    /// Ankle joint.
+    pub ankle: DVec3,
+    /// Toe-ball joint (HumanML3D's `*_foot`).
+    pub toe: DVec3,
+}
+
+/// A solved leg and whether the ankle reached its target.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LegSolution {
+    /// The new joints; `hip` is the input's.
+    pub leg: Leg,
+    /// `false` when the ankle target was farther from the hip than thigh + shin, or nearer than
+    /// |thigh − shin|; the ankle then lies on the hip–target line, at the [`soft_reach`] distance.
+    pub reached: bool,
+}
+
+/// Solves `leg` so that the ankle lies at `ankle_target` and the toe points at `toe_target`.
+///
+/// Thigh `|knee − hip|`, shin `|ankle − knee|` and foot `|toe − ankle|` keep their input lengths.
+/// A target nearer than `thigh + shin − soft_m` to the hip is hit exactly; beyond, the ankle lies
+/// on the hip–target line at [`soft_reach`] of the distance, m.
+/// The knee lies in the plane spanned by the hip→target line and the original knee (the pole
+/// vector); when the original knee lies on that line, in the plane of `forward` (the body's
+/// facing direction, knees bend forward). The toe is placed at the foot's length from the new
+/// ankle towards `toe_target` (exactly on it when the two targets are a foot's length apart).
+pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, forward: DVec3, soft_m: f64) -> LegSolution {
+    let thigh = (leg.knee - leg.hip).length();
+    let shin = (leg.ankle - leg.knee).length();
+    let foot = (leg.toe - leg.ankle).length();
+    let to_target = ankle_target - leg.hip;
+    let axis = to_target.try_normalize().or((leg.ankle - leg.hip).try_normalize()).unwrap_or(DVec3::NEG_Y);
+    // Reach limits; a tiny floor keeps the law of cosines finite when thigh = shin.
+    let (min_reach, max_reach) = (((thigh - shin).abs()).max(1e-9), thigh + shin);
     let distance = to_target.length();
-    let Some(u) = to_target.try_normalize() else { return (knee, ankle, false) };
-    let (lo, hi) = ((thigh - shin).abs() + 1e-9, thigh + shin - 1e-9);
-    let d = distance.clamp(lo, hi);
-    // The pole: the original knee's offset from the original hip–ankle line, made
-    // perpendicular to the new line.
-    let u0 = (ankle - hip).try_normalize().unwrap_or(u);
-    let bend = (knee - hip) - u0 * (knee - hip).dot(u0);
-    let pole = (bend - u * bend.dot(u)).try_normalize().unwrap_or_else(|| u.any_orthonormal_vector());
-    let along = (thigh * thigh + d * d - shin * shin) / (2.0 * d);
-    let across = (thigh * thigh - along * along).max(0.0).sqrt();
-    let new_knee = hip + u * along + pole * across;
-    let new_ankle = hip + u * d;
-    (new_knee, new_ankle, (distance - d).abs() < 1e-6)
+    let reached = distance >= min_reach && distance <= max_reach;
+    let distance = soft_reach(distance, max_reach, soft_m).max(min_reach);
+    let pole = perpendicular(leg.knee - leg.hip, axis)
+        .or_else(|| perpendicular(forward, axis))
+        .unwrap_or_else(|| axis.any_orthonormal_vector());
+    // Law of cosines for the angle at the hip between the hip→ankle line and the thigh.
+    let cos_hip = ((thigh * thigh + distance * distance - shin * shin) / (2.0 * thigh * distance)).clamp(-1.0, 1.0);
+    let sin_hip = (1.0 - cos_hip * cos_hip).max(0.0).sqrt();
+    let knee = leg.hip + thigh * (cos_hip * axis + sin_hip * pole);
+    let ankle = leg.hip + distance * axis;
+    let toe_direction =
+        (toe_target - ankle).try_normalize().or((leg.toe - leg.ankle).try_normalize()).unwrap_or(DVec3::Z);
+    let toe = ankle + foot * toe_direction;
+    LegSolution { leg: Leg { hip: leg.hip, knee, ankle, toe }, reached }
+}
+
+/// Distance from the hip at which a leg of full reach `max_reach` (m) puts an ankle whose target
+/// is `distance` away: the distance itself up to `max_reach − soft_m`, then
+/// `max_reach − soft_m·exp(−(distance − max_reach + soft_m)/soft_m)`, which continues it with
+/// the same slope and approaches `max_reach` without reaching it (`soft_m` = 0: a hard clamp).
+pub fn soft_reach(distance: f64, max_reach: f64, soft_m: f64) -> f64 {
+    let start = max_reach - soft_m;
+    if soft_m <= 0.0 || distance <= start {
+        distance.min(max_reach)
+    } else {
+        max_reach - soft_m * (-(distance - start) / soft_m).exp()
+    }
+}
+
+/// The unit component of `v` perpendicular to the unit `axis`, if it is not negligible.
+fn perpendicular(v: DVec3, axis: DVec3) -> Option<DVec3> {
+    let p = v - v.dot(axis) * axis;
+    (p.length() > 1e-9 * v.length().max(1.0)).then(|| p.normalize())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    fn bent_leg() -> Leg {
+        Leg {
+            hip: DVec3::new(0.1, 0.9, 0.0),
+            knee: DVec3::new(0.1, 0.5, 0.12),
+            ankle: DVec3::new(0.1, 0.07, 0.0),
+            toe: DVec3::new(0.1, 0.02, 0.12),
+        }
+    }
+
+    fn lengths(l: &Leg) -> [f64; 3] {
+        [(l.knee - l.hip).length(), (l.ankle - l.knee).length(), (l.toe - l.ankle).length()]
+    }
+
+    fn assert_lengths_kept(before: &Leg, after: &Leg) {
+        for (a, b) in lengths(before).iter().zip(lengths(after)) {
+            assert!((a - b).abs() <= 1e-12 * a, "{a} vs {b}");
+        }
+    }
+
     #[test]
-    fn reaches_the_target_keeping_bone_lengths_and_the_bend_plane() {
-        let (hip, knee, ankle) = (DVec3::new(0.0, 0.9, 0.0), DVec3::new(0.0, 0.5, 0.05), DVec3::new(0.0, 0.1, 0.0));
-        let target = DVec3::new(0.02, 0.15, 0.2);
-        let (k, a, reached) = solve_leg(hip, knee, ankle, target);
-        assert!(reached);
-        assert!((a - target).length() < 1e-9);
-        assert!(((k - hip).length() - (knee - hip).length()).abs() < 1e-9);
-        assert!(((a - k).length() - (ankle - knee).length()).abs() < 1e-9);
-        // The knee bends to the same side of the hip–ankle line as the original.
-        let side = |knee: DVec3, ankle: DVec3| {
-            let u = (ankle - hip).normalize();
-            (knee - hip) - u * (knee - hip).dot(u)
+    fn a_reachable_target_is_hit_with_every_length_kept() {
+        let leg = bent_leg();
+        let ankle = DVec3::new(0.15, 0.065, 0.1);
+        let toe = ankle + DVec3::new(0.0, -0.05, 0.12);
+        let s = solve_leg(&leg, ankle, toe, DVec3::Z, 0.0);
+        assert!(s.reached);
+        assert_eq!(s.leg.hip, leg.hip);
+        assert!((s.leg.ankle - ankle).length() < 1e-12);
+        assert!((s.leg.toe - toe).length() < 1e-3, "toe target a foot's length away (±1 mm)");
+        assert_lengths_kept(&leg, &s.leg);
+        // The knee stays on the pole's side: in front (+z) of the hip–ankle line.
+        let axis = (s.leg.ankle - s.leg.hip).normalize();
+        let bend = perpendicular(s.leg.knee - s.leg.hip, axis).unwrap();
+        assert!(bend.z > 0.9, "knee bends forward like the original: {bend}");
+    }
+
+    #[test]
+    fn the_original_targets_give_back_the_original_leg() {
+        let leg = bent_leg();
+        let s = solve_leg(&leg, leg.ankle, leg.toe, DVec3::Z, 0.0);
+        assert!(s.reached);
+        for (a, b) in [(s.leg.knee, leg.knee), (s.leg.ankle, leg.ankle), (s.leg.toe, leg.toe)] {
+            assert!((a - b).length() < 1e-12, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn an_unreachable_target_gives_the_closest_reachable_point() {
+        let leg = bent_leg();
+        let far = leg.hip + DVec3::new(0.0, -2.0, 0.0);
+        let s = solve_leg(&leg, far, far + DVec3::Z, DVec3::Z, 0.0);
+        assert!(!s.reached);
+        let [thigh, shin, _] = lengths(&leg);
+        // Straight leg pointing at the target.
+        assert!((s.leg.ankle - (leg.hip - DVec3::Y * (thigh + shin))).length() < 1e-12);
+        assert_lengths_kept(&leg, &s.leg);
+        // Too near: the ankle stops |thigh − shin| from the hip.
+        let near = solve_leg(&leg, leg.hip + DVec3::new(0.0, -1e-3, 0.0), leg.toe, DVec3::Z, 0.0);
+        assert!(!near.reached);
+        assert!(((near.leg.ankle - leg.hip).length() - (thigh - shin).abs()).abs() < 1e-12);
+        assert_lengths_kept(&leg, &near.leg);
+    }
+
+    #[test]
+    fn a_straight_leg_bends_forward() {
+        let leg = Leg {
+            hip: DVec3::new(0.0, 1.0, 0.0),
+            knee: DVec3::new(0.0, 0.55, 0.0),
+            ankle: DVec3::new(0.0, 0.1, 0.0),
+            toe: DVec3::new(0.0, 0.05, 0.12),
         };
-        assert!(side(k, a).dot(side(knee, ankle)) > 0.0);
-        // Out of reach: the leg straightens toward the target.
-        let (k, a, reached) = solve_leg(hip, knee, ankle, DVec3::new(0.0, -1.0, 0.0));
-        assert!(!reached);
-        assert!(((a - hip).length() - ((knee - hip).length() + (ankle - knee).length())).abs() < 1e-6);
-        assert!(((k - hip).length() - (knee - hip).length()).abs() < 1e-9);
+        let s = solve_leg(&leg, DVec3::new(0.0, 0.2, 0.0), leg.toe + DVec3::Y * 0.1, DVec3::new(0.0, 0.0, 2.0), 0.0);
+        assert!(s.reached);
+        assert!(s.leg.knee.z > 0.1, "knee forward (+z): {}", s.leg.knee);
+        assert_lengths_kept(&leg, &s.leg);
+    }
+
+    #[test]
+    fn the_soft_reach_is_smooth_and_never_straightens_the_leg() {
+        let (reach, soft) = (0.9, 0.02);
+        assert_eq!(soft_reach(0.5, reach, soft), 0.5);
+        assert_eq!(soft_reach(1.5, reach, 0.0), reach);
+        // Continuous with slope 1 where it starts, then approaching the reach from below.
+        let start = reach - soft;
+        assert!((soft_reach(start + 1e-7, reach, soft) - (start + 1e-7)).abs() < 1e-12);
+        let mut last = start;
+        for k in 1..200 {
+            let d = soft_reach(start + 0.001 * k as f64, reach, soft);
+            assert!(d > last && d < reach, "{d}");
+            last = d;
+        }
+        // A target sweeping through the reach limit moves the knee smoothly: its second
+        // difference over 1 mm steps stays small (a hard clamp makes a cusp there).
+        let leg = bent_leg();
+        let [thigh, shin, _] = lengths(&leg);
+        let knee_at = |d: f64, soft: f64| {
+            let target = leg.hip + d * DVec3::new(0.0, -1.0, 0.05).normalize();
+            solve_leg(&leg, target, target + DVec3::Z * 0.13, DVec3::Z, soft).leg.knee
+        };
+        let kink = |soft: f64| {
+            (-40..40)
+                .map(|k| {
+                    let d = thigh + shin + 0.001 * k as f64;
+                    (knee_at(d + 0.001, soft) - 2.0 * knee_at(d, soft) + knee_at(d - 0.001, soft)).length()
+                })
+                .fold(0.0, f64::max)
+        };
+        assert!(kink(0.0) > 0.01, "hard clamp: {}", kink(0.0));
+        assert!(kink(soft) < 0.1 * kink(0.0), "soft {} vs hard {}", kink(soft), kink(0.0));
+        // 1 cm out of reach: the leg stops 2 cm · e^(−1.5) = 4.5 mm short of straight.
+        let s = solve_leg(&leg, leg.hip - DVec3::Y * (thigh + shin + 0.01), leg.toe, DVec3::Z, soft);
+        let short = thigh + shin - (s.leg.ankle - leg.hip).length();
+        assert!(!s.reached && (short - 0.02 * (-1.5f64).exp()).abs() < 1e-12, "{short}");
+        assert_lengths_kept(&leg, &s.leg);
     }
 }

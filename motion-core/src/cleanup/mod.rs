@@ -1,10 +1,323 @@
-//! Contact-aware clean-up of a finished motion, as animation tools do it: planted feet are held
-//! where they were planted and put on the floor, the legs re-solved by two-bone IK
-//! ([`foot_lock`]). It runs on every method's output after generation and can be switched off;
-//! reports give the figures before and after it.
+//! Contact-aware clean-up of a finished motion: feet that stay planted.
+//!
+//! [`foot_lock`] is the foot locking animation tools apply to captured or generated motion
+//! (Kovar, Schreiner & Gleicher 2002, "Footskate cleanup for motion capture editing"), on joint
+//! positions (m, y up, 20 fps, floor y = 0):
+//! 1. **Floor** ([`contact::floor_height`]): a body hovering above the floor by more than
+//!    [`FootLockConfig::float_tolerance_m`] is lowered as a whole (every joint, the pelvis
+//!    included) onto it. Generated motions float or sink a few centimetres; this one vertical
+//!    offset is the only change to the pelvis and the upper body.
+//! 2. **Contacts** ([`contact::detect`]): each of the four [`CONTACT_JOINTS`] (ankles, toes) is
+//!    in contact while it is low above the floor and slow, with hysteresis; contacts shorter
+//!    than [`FootLockConfig::min_contact_frames`] are dropped. Callers holding contact labels
+//!    (the 263-d features' four channels) can pass them instead.
+//! 3. **Locks** ([`foot_lock::Lock`]): per contact, the joint is held at its mean horizontal
+//!    position and lifted so that its median height comes within
+//!    [`FootLockConfig::height_tolerance_m`] of its standing height (it keeps its own small
+//!    vertical motion, such as a heel rising before the foot leaves); it eases back to its own
+//!    motion over [`FootLockConfig::blend_frames`] frames on either side, more for a large
+//!    offset ([`FootLockConfig::blend_speed_m_per_s`]), so nothing pops.
+//! 4. **Leg IK** ([`leg_ik::solve_leg`]): hip fixed, knee in its original bend plane, thigh,
+//!    shin and foot lengths kept exactly; a free ankle follows its toe's correction (and a free
+//!    toe its ankle's), so the foot turns about the planted joint. A target out of the leg's
+//!    reach gives the closest point the leg reaches with the knee a little bent (soft reach,
+//!    [`FootLockConfig::soft_reach_m`]) and is counted.
+//!
+//! Only the knees, ankles and toes move (and the whole body by the floor offset), so a
+//! constraint on any other joint keeps its error exactly unless the body is lowered. A
+//! constraint on the legs or the centre of mass may change: on the shipped walking clips and
+//! tasks no task constraint's error `E` rises above
+//! `E·(1 + CONSTRAINT_TOLERANCE_RELATIVE) + CONSTRAINT_TOLERANCE_ABSOLUTE` (tested in
+//! `tests.rs`); `stay_near_initial` regularisers, which measure how far joints moved, are
+//! excepted.
 
-mod foot_lock;
-mod leg_ik;
+pub mod contact;
+pub mod foot_lock;
+pub mod leg_ik;
+#[cfg(test)]
+mod tests;
 
-pub use foot_lock::{foot_lock, FootLockConfig, FootLockReport};
-pub use leg_ik::solve_leg;
+use std::ops::Range;
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::metrics::foot_skate_ratio;
+use crate::skeleton::{bone_lengths, Joint, Pose, CONTACT_JOINTS, FPS, NUM_JOINTS};
+use crate::MotionError;
+use contact::{detect, floor_height, runs, speeds, Hysteresis};
+use foot_lock::{corrections, Correction, Easing, Lock};
+use leg_ik::{solve_leg, Leg};
+
+/// The clean-up raises no task constraint's error `E` by more than this fraction of `E` ...
+pub const CONSTRAINT_TOLERANCE_RELATIVE: f64 = 0.05;
+/// ... plus this, in the constraint's own unit (m² for squared position errors: a 1 cm miss).
+pub const CONSTRAINT_TOLERANCE_ABSOLUTE: f64 = 1e-4;
+
+/// Settings of [`foot_lock`]. Heights and speeds were measured on the shipped walking clips
+/// (`fixtures/mocap`, the DeepMimic walks): standing ankles at 5.9–7.2 cm (median per clip),
+/// standing toes at 1.5–2.4 cm; stance joints move at about 0.1 m/s, swinging feet at 1–4 m/s.
+/// Fields missing from a deserialised config take their defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FootLockConfig {
+    /// Run the clean-up (default true); `false` returns the motion unchanged.
+    pub enabled: bool,
+    /// Height of an ankle joint when its foot stands on the floor, m (default 0.065, the
+    /// walks' median; the rest pose puts the ankle 4.7 cm above the toe, feet flat).
+    pub ankle_height_m: f64,
+    /// Height of a toe-ball joint (`*_foot`) when it rests on the floor, m (default 0.02).
+    pub toe_height_m: f64,
+    /// A joint enters contact below this height above its standing height, m (default 0.02),
+    /// heights measured from the motion's floor (its [`contact::floor_height`] where it floats
+    /// less than `float_tolerance_m`, else y = 0) ...
+    pub enter_height_m: f64,
+    /// ... while slower than this, m/s (default 1.0: generated feet slide at up to about
+    /// 1 m/s in stance; the skate metric counts 0.5 m/s).
+    pub enter_speed_m_per_s: f64,
+    /// It stays in contact below this height above its standing height, m (default 0.03) ...
+    pub leave_height_m: f64,
+    /// ... while slower than this, m/s (default 1.5).
+    pub leave_speed_m_per_s: f64,
+    /// A contact whose median height is within this of the joint's standing height keeps its
+    /// height; one farther away is brought this close, m (default 0.01: the walks' stance
+    /// heights vary by about ±1 cm between clips).
+    pub height_tolerance_m: f64,
+    /// Contacts shorter than this are dropped, frames (default 3).
+    pub min_contact_frames: usize,
+    /// Frames over which a lock eases in before and out after its contact, at least (default 3)
+    /// ...
+    pub blend_frames: usize,
+    /// ... and more where needed for the easing to move a joint by at most this speed, m/s
+    /// (default 0.5, the skate metric's threshold): a foot held far from where it slid to is
+    /// let go of gradually.
+    pub blend_speed_m_per_s: f64,
+    /// Width of the soft zone below a leg's full reach, m (default 0.01; [`leg_ik::soft_reach`]):
+    /// a held foot the hip pulls out of reach then follows it smoothly instead of snapping
+    /// the knee straight.
+    pub soft_reach_m: f64,
+    /// Plant contacts on the floor y = 0: lower a floating body and bring locked joints within
+    /// `height_tolerance_m` of their standing heights (default true). Switch off for motions on
+    /// raised supports (a balance beam): locks then hold only horizontally, and the body keeps
+    /// its height.
+    pub plant_on_floor: bool,
+    /// A body floating less than this above the floor is not lowered, m (default 0.02): its
+    /// stance feet come within `height_tolerance_m` of the floor through the leg IK.
+    pub float_tolerance_m: f64,
+}
+
+impl Default for FootLockConfig {
+    fn default() -> Self {
+        FootLockConfig {
+            enabled: true,
+            ankle_height_m: 0.065,
+            toe_height_m: 0.02,
+            enter_height_m: 0.02,
+            enter_speed_m_per_s: 1.0,
+            leave_height_m: 0.03,
+            leave_speed_m_per_s: 1.5,
+            height_tolerance_m: 0.01,
+            min_contact_frames: 3,
+            blend_frames: 3,
+            blend_speed_m_per_s: 0.5,
+            soft_reach_m: 0.01,
+            plant_on_floor: true,
+            float_tolerance_m: 0.02,
+        }
+    }
+}
+
+impl FootLockConfig {
+    /// Standing heights of the four [`CONTACT_JOINTS`], m.
+    fn standing_m(&self) -> [f64; 4] {
+        [self.ankle_height_m, self.toe_height_m, self.ankle_height_m, self.toe_height_m]
+    }
+
+    fn easing(&self) -> Easing {
+        Easing { min_frames: self.blend_frames, max_step_m: self.blend_speed_m_per_s / FPS }
+    }
+
+    fn hysteresis(&self) -> Hysteresis {
+        Hysteresis {
+            enter_height_m: self.enter_height_m,
+            enter_speed_m_per_s: self.enter_speed_m_per_s,
+            leave_height_m: self.leave_height_m,
+            leave_speed_m_per_s: self.leave_speed_m_per_s,
+        }
+    }
+}
+
+/// Contacts of one foot joint.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct JointContacts {
+    /// The joint (one of [`CONTACT_JOINTS`]).
+    pub joint: Joint,
+    /// The contact segments locked: half-open frame ranges, in order.
+    pub segments: Vec<Range<usize>>,
+    /// Frames inside those segments.
+    pub locked_frames: usize,
+}
+
+/// What [`foot_lock`] did, with the figures before and after it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FootLockReport {
+    /// Whether the clean-up ran.
+    pub enabled: bool,
+    /// Height of the floor under the input motion ([`contact::floor_height`]), m.
+    pub floor_m: f64,
+    /// How far the whole body was lowered, m (0 or `floor_m`).
+    pub lowered_m: f64,
+    /// Contacts per joint, in [`CONTACT_JOINTS`] order.
+    pub contacts: [JointContacts; 4],
+    /// Leg solves whose ankle target was out of the leg's reach (one per leg and frame).
+    pub unreachable: usize,
+    /// Largest joint displacement, m.
+    pub max_displacement_m: f64,
+    /// Mean displacement over every joint of every frame, m.
+    pub mean_displacement_m: f64,
+    /// [`foot_skate_ratio`] of the input.
+    pub skate_before: f64,
+    /// [`foot_skate_ratio`] of the output.
+    pub skate_after: f64,
+    /// Largest change of any bone's length in any frame, m (round-off only).
+    pub max_bone_length_change_m: f64,
+}
+
+/// A cleaned motion and its report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FootLocked {
+    /// The motion, `[frames]` of poses (m, y up).
+    pub poses: Vec<Pose>,
+    /// What was done.
+    pub report: FootLockReport,
+}
+
+/// Why [`foot_lock`] refused a motion.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FootLockError {
+    /// The contact labels do not cover the motion frame for frame.
+    #[error("contact labels cover {labels} frames; the motion has {frames}")]
+    ContactFrames {
+        /// Frames of labels given.
+        labels: usize,
+        /// Frames of the motion.
+        frames: usize,
+    },
+    /// The motion itself is unusable.
+    #[error(transparent)]
+    Motion(#[from] MotionError),
+}
+
+/// The two legs: hip, knee, then the indices of the ankle and toe in [`CONTACT_JOINTS`].
+const LEGS: [(Joint, Joint, usize, usize); 2] =
+    [(Joint::LeftHip, Joint::LeftKnee, 0, 1), (Joint::RightHip, Joint::RightKnee, 2, 3)];
+
+/// Locks the feet of `poses` (`[frames]`, m, y up, 20 fps) during their contacts (see the
+/// module docs). `contacts`, when given, labels each frame's contacts in [`CONTACT_JOINTS`]
+/// order `[left_ankle, left_foot, right_ankle, right_foot]` (the 263-d features' channels) and
+/// replaces detection.
+pub fn foot_lock(
+    poses: &[Pose],
+    contacts: Option<&[[bool; 4]]>,
+    config: &FootLockConfig,
+) -> Result<FootLocked, FootLockError> {
+    if let Some(labels) = contacts.filter(|c| c.len() != poses.len()) {
+        return Err(FootLockError::ContactFrames { labels: labels.len(), frames: poses.len() });
+    }
+    for (frame, pose) in poses.iter().enumerate() {
+        if let Some(joint) = Joint::ALL.into_iter().find(|j| !pose[j.index()].is_finite()) {
+            return Err(MotionError::NonFinite { frame, joint }.into());
+        }
+    }
+    let standing = config.standing_m();
+    let floor_m = floor_height(poses, &standing);
+    if !config.enabled {
+        return Ok(FootLocked { poses: poses.to_vec(), report: report(poses, poses, floor_m, 0.0, None, 0) });
+    }
+
+    // 1. Floor: lower a floating body as a whole.
+    let lowered_m = if config.plant_on_floor && floor_m > config.float_tolerance_m { floor_m } else { 0.0 };
+    let mut out: Vec<Pose> = poses.iter().map(|p| p.map(|v| v - DVec3::Y * lowered_m)).collect();
+
+    // 2–3. Contacts and the correction of each foot joint.
+    let mut locked: [Vec<Range<usize>>; 4] = Default::default();
+    let mut correction: Vec<Vec<Correction>> = Vec::with_capacity(4);
+    for (k, joint) in CONTACT_JOINTS.iter().enumerate() {
+        let track: Vec<DVec3> = out.iter().map(|p| p[joint.index()]).collect();
+        let segments = match contacts {
+            Some(labels) => runs(labels.iter().map(|c| c[k])),
+            None => {
+                // Measured from y = 0 under a sinking motion: its sunk feet count as low.
+                let floor = (floor_m - lowered_m).max(0.0);
+                let clearance: Vec<f64> = track.iter().map(|v| v.y - floor - standing[k]).collect();
+                detect(&clearance, &speeds(&track), &config.hysteresis())
+            }
+        };
+        let locks: Vec<Lock> = segments
+            .into_iter()
+            .filter(|s| s.len() >= config.min_contact_frames.max(1))
+            .map(|s| Lock::new(&track, s, config.plant_on_floor.then_some(standing[k]), config.height_tolerance_m))
+            .collect();
+        locked[k] = locks.iter().map(|l| l.frames.clone()).collect();
+        correction.push(corrections(&track, &locks, &config.easing()));
+    }
+
+    // 4. Leg IK towards the corrected ankle and toe.
+    let mut unreachable = 0;
+    for (t, pose) in out.iter_mut().enumerate() {
+        let forward = (pose[Joint::LeftHip.index()] - pose[Joint::RightHip.index()]).cross(DVec3::Y);
+        for (hip, knee, a, b) in LEGS {
+            let (ankle_c, toe_c) = (correction[a][t], correction[b][t]);
+            if ankle_c.weight == 0.0 && toe_c.weight == 0.0 {
+                continue;
+            }
+            let (ankle, toe) = (CONTACT_JOINTS[a].index(), CONTACT_JOINTS[b].index());
+            let leg = Leg { hip: pose[hip.index()], knee: pose[knee.index()], ankle: pose[ankle], toe: pose[toe] };
+            // A free joint follows its partner's correction: the foot rolls about the held one.
+            let ankle_target = leg.ankle + ankle_c.offset + (1.0 - ankle_c.weight) * toe_c.offset;
+            let toe_target = leg.toe + toe_c.offset + (1.0 - toe_c.weight) * ankle_c.offset;
+            let solved = solve_leg(&leg, ankle_target, toe_target, forward, config.soft_reach_m);
+            unreachable += usize::from(!solved.reached);
+            pose[knee.index()] = solved.leg.knee;
+            pose[ankle] = solved.leg.ankle;
+            pose[toe] = solved.leg.toe;
+        }
+    }
+    let report = report(poses, &out, floor_m, lowered_m, Some(locked), unreachable);
+    Ok(FootLocked { poses: out, report })
+}
+
+/// The figures of a clean-up from `before` to `after`; `locked` is `None` when it did not run.
+fn report(
+    before: &[Pose],
+    after: &[Pose],
+    floor_m: f64,
+    lowered_m: f64,
+    locked: Option<[Vec<Range<usize>>; 4]>,
+    unreachable: usize,
+) -> FootLockReport {
+    let displacements: Vec<f64> =
+        before.iter().zip(after).flat_map(|(a, b)| (0..NUM_JOINTS).map(move |j| (a[j] - b[j]).length())).collect();
+    let max_bone_length_change_m = before
+        .iter()
+        .zip(after)
+        .flat_map(|(a, b)| bone_lengths(a).into_iter().zip(bone_lengths(b)).map(|(x, y)| (x - y).abs()))
+        .fold(0.0, f64::max);
+    let enabled = locked.is_some();
+    let mut segments = locked.unwrap_or_default();
+    FootLockReport {
+        enabled,
+        floor_m,
+        lowered_m,
+        contacts: std::array::from_fn(|k| {
+            let segments = std::mem::take(&mut segments[k]);
+            JointContacts { joint: CONTACT_JOINTS[k], locked_frames: segments.iter().map(Range::len).sum(), segments }
+        }),
+        unreachable,
+        max_displacement_m: displacements.iter().copied().fold(0.0, f64::max),
+        mean_displacement_m: displacements.iter().sum::<f64>() / displacements.len().max(1) as f64,
+        skate_before: foot_skate_ratio(before),
+        skate_after: foot_skate_ratio(after),
+        max_bone_length_change_m,
+    }
+}

@@ -366,7 +366,8 @@ fn wrap_angle(a: f64) -> f64 {
     (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
 }
 
-fn smoothstep(x: f64) -> f64 {
+/// Hermite ease `3x² − 2x³` of `x` clamped to [0, 1].
+pub(crate) fn smoothstep(x: f64) -> f64 {
     let x = x.clamp(0.0, 1.0);
     x * x * (3.0 - 2.0 * x)
 }
