@@ -82,3 +82,49 @@ fn dno_is_reproducible_from_its_seed() {
     let diff = (a.joints - b.joints).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
     assert_eq!(diff, 0.0);
 }
+
+#[test]
+fn the_foot_clean_up_runs_on_every_output_and_switches_off() {
+    use motion_core::cleanup::{CONSTRAINT_TOLERANCE_ABSOLUTE, CONSTRAINT_TOLERANCE_RELATIVE};
+    use motion_core::metrics::{bone_length_range, foot_skate_ratio};
+    use motion_core::quality::tensor_to_poses;
+    let (prior, program, compiled) = setup();
+    let device = Device::Cpu;
+    let on_config = config(Method::Dno, 4);
+    let on = generate(&prior, &program, &compiled, &on_config, &device, |_| {}).unwrap();
+    let mut off_config = on_config.clone();
+    off_config.foot_lock.enabled = false;
+    let off = generate(&prior, &program, &compiled, &off_config, &device, |_| {}).unwrap();
+    let max_diff = |a: &candle_core::Tensor, b: &candle_core::Tensor| {
+        (a - b)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_dtype(candle_core::DType::F64)
+            .unwrap()
+            .to_scalar::<f64>()
+            .unwrap()
+    };
+    // Off: the output is the network's motion; on: the same network motion, cleaned.
+    assert_eq!(max_diff(&off.joints, &off.raw_joints), 0.0);
+    assert_eq!(max_diff(&on.raw_joints, &off.raw_joints), 0.0);
+    assert!(max_diff(&on.joints, &on.raw_joints) > 1e-4, "the clean-up changed nothing");
+    let (cleaned, raw) = (tensor_to_poses(&on.joints).unwrap(), tensor_to_poses(&on.raw_joints).unwrap());
+    for ((c, r), lock) in cleaned.iter().zip(&raw).zip(&on.foot_lock) {
+        assert!(lock.enabled && (lock.skate_after - foot_skate_ratio(c)).abs() < 1e-9);
+        assert!(foot_skate_ratio(c) <= foot_skate_ratio(r) + 1e-9, "{} > {}", foot_skate_ratio(c), foot_skate_ratio(r));
+        assert!(bone_length_range(c) < 0.01, "bones stretch {} m", bone_length_range(c));
+    }
+    // The report measures the written joints and keeps the figures before the clean-up.
+    let r = report(&program, &compiled, &on, &on_config).unwrap();
+    let r_off = report(&program, &compiled, &off, &off_config).unwrap();
+    assert!(r.cleanup.enabled && !r_off.cleanup.enabled);
+    assert_eq!(r.cleanup.before.foot_skate_ratio, r_off.foot_skate_ratio);
+    assert_eq!(r.cleanup.before.constraint_error, r_off.constraint_error);
+    for (after, before) in r.constraint_error_per_sample.iter().zip(&r_off.constraint_error_per_sample) {
+        let bound = before * (1.0 + CONSTRAINT_TOLERANCE_RELATIVE) + CONSTRAINT_TOLERANCE_ABSOLUTE;
+        assert!(*after <= bound, "clean-up raised the constraint error {before} to {after}");
+    }
+}

@@ -4,6 +4,7 @@
 use candle_core::{DType, Tensor};
 use serde::{Deserialize, Serialize};
 
+use crate::cleanup::FootLockReport;
 use crate::constraints::{Check, CompiledProgram};
 use crate::generation::{Generated, GenerationConfig};
 use crate::metrics::{foot_skate_ratio, hands_raised, head_neck_incorrect, max_acceleration, pace, step_count};
@@ -37,6 +38,35 @@ pub struct StepReport {
     pub counts: Vec<usize>,
     /// Fraction of samples with exactly `target` steps.
     pub success_rate: f64,
+}
+
+/// The figures of the network's motion before the contact-aware clean-up, to set beside the
+/// report's (which are measured after it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BeforeCleanup {
+    /// Mean over samples of `Σ wᵢ·Eᵢ`.
+    pub constraint_error: f64,
+    /// Fraction of samples that meet every constraint within its tolerance.
+    pub success_rate: f64,
+    /// The deepest penetration of any sample into an obstacle, m.
+    pub max_scene_penetration_m: Option<f64>,
+    /// Mean foot skate ratio.
+    pub foot_skate_ratio: f64,
+    /// Mean over samples of the maximum joint acceleration, m/frame².
+    pub max_acceleration: f64,
+    /// Steps counted per sample, for programs with a counting constraint.
+    pub steps: Option<Vec<usize>>,
+}
+
+/// What the contact-aware clean-up ([`crate::cleanup::foot_lock`]) did to the run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CleanupReport {
+    /// Whether it ran (when not, `before` equals the report's own figures).
+    pub enabled: bool,
+    /// Per sample: contacts locked, displacements, foot skate before and after.
+    pub samples: Vec<FootLockReport>,
+    /// The run's figures before it.
+    pub before: BeforeCleanup,
 }
 
 /// The report of a run (written as `report.json`).
@@ -79,20 +109,29 @@ pub struct TaskReport {
     /// Fraction of head–neck lengths at frames 0, L//2, L−1 outside
     /// [`crate::metrics::HEAD_NECK_VALID_M`].
     pub head_neck_incorrect_ratio: f64,
+    /// The clean-up and the figures before it (every figure above is measured after it, on the
+    /// written joints).
+    pub cleanup: CleanupReport,
 }
 
-/// Builds the report of `generated` for `program`.
-pub fn report(
+/// The constraint figures of one set of joints.
+struct Judged {
+    per_sample: Vec<f64>,
+    constraints: Vec<ConstraintReport>,
+    success_rate: f64,
+    penetration: Option<Vec<f64>>,
+    steps: Option<StepReport>,
+}
+
+fn judge(
     program: &TaskProgram,
     compiled: &CompiledProgram,
-    generated: &Generated,
-    config: &GenerationConfig,
-) -> candle_core::Result<TaskReport> {
-    let evaluation =
-        compiled.evaluate(&generated.joints, Some(&generated.initial_joints)).map_err(candle_core::Error::wrap)?;
+    joints: &Tensor,
+    initial: &Tensor,
+) -> candle_core::Result<Judged> {
+    let evaluation = compiled.evaluate(joints, Some(initial)).map_err(candle_core::Error::wrap)?;
     let per_sample = to_f64(&evaluation.total)?;
-    let satisfaction =
-        compiled.satisfaction(&generated.joints, Some(&generated.initial_joints)).map_err(candle_core::Error::wrap)?;
+    let satisfaction = compiled.satisfaction(joints, Some(initial)).map_err(candle_core::Error::wrap)?;
     let constraints = evaluation
         .per_constraint
         .iter()
@@ -112,36 +151,72 @@ pub fn report(
     let samples = per_sample.len();
     let successes =
         (0..samples).filter(|&b| constraints.iter().all(|c| c.pass.get(b).copied().unwrap_or(false))).count();
-    let penetration = compiled.max_scene_penetration(&generated.joints)?.map(|t| to_f64(&t)).transpose()?;
-    let motions = tensor_to_poses(&generated.joints)?;
-    let mean = |values: Vec<f64>| values.iter().sum::<f64>() / values.len().max(1) as f64;
+    let penetration = compiled.max_scene_penetration(joints)?.map(|t| to_f64(&t)).transpose()?;
+    let motions = tensor_to_poses(joints)?;
     let steps = compiled.count_targets().into_iter().find(|(id, _)| is_step_count(program, id)).map(|(_, target)| {
         let counts: Vec<usize> = motions.iter().map(|m| step_count(m)).collect();
         let hits = counts.iter().filter(|&&c| c == target as usize).count();
         StepReport { target, success_rate: hits as f64 / counts.len().max(1) as f64, counts }
     });
+    Ok(Judged { per_sample, constraints, success_rate: successes as f64 / samples.max(1) as f64, penetration, steps })
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len().max(1) as f64
+}
+
+fn worst(values: &Option<Vec<f64>>) -> Option<f64> {
+    values.as_ref().map(|p| p.iter().copied().fold(0.0, f64::max))
+}
+
+/// Builds the report of `generated` for `program`.
+pub fn report(
+    program: &TaskProgram,
+    compiled: &CompiledProgram,
+    generated: &Generated,
+    config: &GenerationConfig,
+) -> candle_core::Result<TaskReport> {
+    let judged = judge(program, compiled, &generated.joints, &generated.initial_joints)?;
+    let raw = judge(program, compiled, &generated.raw_joints, &generated.initial_joints)?;
+    let motions = tensor_to_poses(&generated.joints)?;
+    let raw_motions = tensor_to_poses(&generated.raw_joints)?;
+    let skate = |m: &[Vec<_>]| mean(&m.iter().map(|m| foot_skate_ratio(m)).collect::<Vec<_>>());
+    let max_acc = |m: &[Vec<_>]| mean(&m.iter().map(|m| max_acceleration(m)).collect::<Vec<_>>());
     let paces: Vec<(f64, Option<f64>)> = motions.iter().map(|m| pace(m)).collect();
     let cvs: Vec<f64> = paces.iter().filter_map(|p| p.1).collect();
     let (bad, checked) =
         motions.iter().map(|m| head_neck_incorrect(m)).fold((0, 0), |(b, c), (b1, c1)| (b + b1, c + c1));
+    let cleanup = CleanupReport {
+        enabled: config.foot_lock.enabled,
+        samples: generated.foot_lock.clone(),
+        before: BeforeCleanup {
+            constraint_error: mean(&raw.per_sample),
+            success_rate: raw.success_rate,
+            max_scene_penetration_m: worst(&raw.penetration),
+            foot_skate_ratio: skate(&raw_motions),
+            max_acceleration: max_acc(&raw_motions),
+            steps: raw.steps.map(|s| s.counts),
+        },
+    };
     Ok(TaskReport {
         text: program.text.clone(),
         frames: compiled.frames(),
         config: config.clone(),
         seconds: generated.seconds,
-        constraint_error: mean(per_sample.clone()),
-        constraint_error_per_sample: per_sample,
-        constraints,
-        max_scene_penetration_m: penetration.as_ref().map(|p| p.iter().copied().fold(0.0, f64::max)),
-        scene_penetration_per_sample_m: penetration,
-        success_rate: successes as f64 / samples.max(1) as f64,
-        foot_skate_ratio: mean(motions.iter().map(|m| foot_skate_ratio(m)).collect()),
-        max_acceleration: mean(motions.iter().map(|m| max_acceleration(m)).collect()),
-        steps,
-        hands_raised_rate: mean(motions.iter().map(|m| f64::from(u8::from(hands_raised(m)))).collect()),
-        pace_steps_per_s: mean(paces.iter().map(|p| p.0).collect()),
-        pace_interval_cv: (!cvs.is_empty()).then(|| mean(cvs)),
+        constraint_error: mean(&judged.per_sample),
+        max_scene_penetration_m: worst(&judged.penetration),
+        scene_penetration_per_sample_m: judged.penetration,
+        constraint_error_per_sample: judged.per_sample,
+        constraints: judged.constraints,
+        success_rate: judged.success_rate,
+        foot_skate_ratio: skate(&motions),
+        max_acceleration: max_acc(&motions),
+        steps: judged.steps,
+        hands_raised_rate: mean(&motions.iter().map(|m| f64::from(u8::from(hands_raised(m)))).collect::<Vec<_>>()),
+        pace_steps_per_s: mean(&paces.iter().map(|p| p.0).collect::<Vec<_>>()),
+        pace_interval_cv: (!cvs.is_empty()).then(|| mean(&cvs)),
         head_neck_incorrect_ratio: bad as f64 / checked.max(1) as f64,
+        cleanup,
     })
 }
 

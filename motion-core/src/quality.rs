@@ -164,6 +164,20 @@ pub fn tensor_to_poses(joints: &Tensor) -> candle_core::Result<Vec<Vec<Pose>>> {
         .collect())
 }
 
+/// Per-sample pose lists (equal lengths) → `[batch, frames, 22, 3]` of `dtype` on `device`.
+pub fn poses_to_tensor(
+    motions: &[Vec<Pose>],
+    dtype: candle_core::DType,
+    device: &candle_core::Device,
+) -> candle_core::Result<Tensor> {
+    let frames = motions.first().map_or(0, Vec::len);
+    if motions.iter().any(|m| m.len() != frames) {
+        candle_core::bail!("motions of different lengths cannot form one tensor");
+    }
+    let data: Vec<f64> = motions.iter().flatten().flat_map(|pose| pose.iter().flat_map(|v| v.to_array())).collect();
+    Tensor::from_vec(data, (motions.len(), frames, NUM_JOINTS, 3), device)?.to_dtype(dtype)
+}
+
 /// Runs the report over every label of the database; `on_label` is called after each.
 pub fn quality_report(
     prior: &Prior,

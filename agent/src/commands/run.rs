@@ -66,6 +66,10 @@ pub struct GenerationArgs {
     /// Weight of DNO's jitter guard on joint accelerations above 0.15 m/frame² (0: off).
     #[arg(long, default_value_t = 1.0)]
     pub jitter_weight: f64,
+    /// Switch off the contact-aware clean-up (foot locking with leg IK) of the output; the report
+    /// gives every figure before and after it when it runs.
+    #[arg(long)]
+    pub no_foot_lock: bool,
     /// Trained prior file.
     #[arg(long, default_value_os_t = paths::default_prior())]
     pub prior: PathBuf,
@@ -80,6 +84,7 @@ impl GenerationArgs {
         config.guidance = self.guidance;
         config.dno.restarts = self.restarts;
         config.jitter_weight = self.jitter_weight;
+        config.foot_lock.enabled = !self.no_foot_lock;
         if let Some(lr) = self.lr {
             config.dno.lr = lr;
         }
@@ -103,10 +108,11 @@ pub struct RunArgs {
     method: MethodArg,
     #[command(flatten)]
     generation: GenerationArgs,
-    /// Output folder: features.npy [n, frames, 263] (de-normalised HumanML3D features),
-    /// joints.npy [n, frames, 22, 3] (m, y up, 20 fps, bones at the rest lengths), report.json
-    /// (every constraint in natural units with pass/fail), strip.png (world coordinates, the
-    /// scene drawn).
+    /// Output folder: features.npy [n, frames, 263] (de-normalised HumanML3D features of the
+    /// network's motion, before the foot clean-up), joints.npy [n, frames, 22, 3] (m, y up, 20
+    /// fps, bones at the rest lengths, after the clean-up: the output), report.json (every
+    /// constraint in natural units with pass/fail, before and after the clean-up), strip.png
+    /// (world coordinates, the scene drawn).
     #[arg(long, short, default_value = "out/run")]
     out: PathBuf,
 }
@@ -209,5 +215,21 @@ pub fn print_summary(report: &TaskReport) {
     );
     if let Some(steps) = &report.steps {
         println!("  steps {:?} (target {}), success {:.2}", steps.counts, steps.target, steps.success_rate);
+    }
+    let cleanup = &report.cleanup;
+    if cleanup.enabled {
+        let before = &cleanup.before;
+        let locked: usize = cleanup.samples.iter().flat_map(|s| s.contacts.iter()).map(|c| c.locked_frames).sum();
+        let moved = cleanup.samples.iter().map(|s| s.max_displacement_m).fold(0.0, f64::max);
+        let penetration = before.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
+        println!(
+            "  foot clean-up: {locked} joint-frames locked, joints moved up to {moved:.3} m; before it: foot skate {:.3}, \
+             all constraints met by {:.0}%, max scene penetration {penetration}{}",
+            before.foot_skate_ratio,
+            100.0 * before.success_rate,
+            before.steps.as_ref().map_or(String::new(), |s| format!(", steps {s:?}"))
+        );
+    } else {
+        println!("  foot clean-up: off");
     }
 }

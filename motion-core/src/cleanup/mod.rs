@@ -148,7 +148,7 @@ impl FootLockConfig {
 }
 
 /// Contacts of one foot joint.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JointContacts {
     /// The joint (one of [`CONTACT_JOINTS`]).
     pub joint: Joint,
@@ -159,7 +159,7 @@ pub struct JointContacts {
 }
 
 /// What [`foot_lock`] did, with the figures before and after it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FootLockReport {
     /// Whether the clean-up ran.
     pub enabled: bool,

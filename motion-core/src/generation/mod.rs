@@ -7,6 +7,11 @@
 //! unconstrained motion is `G(z0)`, IK starts from `G(z0)`, DNO optimises `z` from `z0`. Losses
 //! are the compiled program's `Σ wᵢ·Eᵢ` on the joints recovered from the features; terms that
 //! stay near "the initial motion" compare with `G(z0)` (ProgMoGen's `pred_res_0`).
+//!
+//! Every method's motion then goes through the contact-aware clean-up
+//! ([`crate::cleanup::foot_lock`], switchable off with [`GenerationConfig::foot_lock`]): the
+//! returned joints are the cleaned ones, the network's joints are kept beside them so that a
+//! report can give every figure before and after it.
 
 mod direct;
 
@@ -18,12 +23,14 @@ use serde::{Deserialize, Serialize};
 
 pub use direct::DirectConfig;
 
+use crate::cleanup::{foot_lock, FootLockConfig, FootLockError, FootLockReport};
 use crate::constraints::{CompiledProgram, ConstraintError};
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
 use crate::dno::{optimize_with_restarts, DnoConfig, Solver, UnrolledDdim};
 use crate::prior::Prior;
-use crate::program::TaskProgram;
+use crate::program::{Primitive, TaskProgram};
+use crate::quality::{poses_to_tensor, tensor_to_poses};
 use crate::representation::FEATURE_DIM;
 
 /// A generation method.
@@ -86,6 +93,11 @@ pub struct GenerationConfig {
     /// on HSI-2/3). 0 switches it off. Default 1.
     #[serde(default = "default_jitter_weight")]
     pub jitter_weight: f64,
+    /// The contact-aware clean-up of every method's output (foot locking with leg IK; on by
+    /// default). Its `plant_on_floor` is switched off for programs whose scene holds a raised
+    /// support (a balance beam, a ground away from y = 0).
+    #[serde(default)]
+    pub foot_lock: FootLockConfig,
 }
 
 fn default_jitter_weight() -> f64 {
@@ -119,6 +131,7 @@ impl GenerationConfig {
             dno: DnoConfig::default(),
             direct: DirectConfig::default(),
             jitter_weight: default_jitter_weight(),
+            foot_lock: FootLockConfig::default(),
         }
     }
 }
@@ -132,6 +145,14 @@ pub enum GenerationError {
     /// A setting cannot be used.
     #[error("invalid setting: {0}")]
     Setting(String),
+    /// The clean-up refused a motion (one with NaN joints).
+    #[error("foot clean-up of sample {sample}: {source}")]
+    FootLock {
+        /// The sample's index in the batch.
+        sample: usize,
+        /// What was wrong.
+        source: FootLockError,
+    },
     /// A tensor operation failed.
     #[error(transparent)]
     Tensor(#[from] candle_core::Error),
@@ -155,8 +176,13 @@ pub struct Progress {
 pub struct Generated {
     /// Normalised features `[B, T, 263]`.
     pub features: Tensor,
-    /// Joint positions `[B, T, 22, 3]` (m, y up).
+    /// Joint positions `[B, T, 22, 3]` (m, y up) after the clean-up: the output.
     pub joints: Tensor,
+    /// The joints of `features` before the clean-up, `[B, T, 22, 3]` (the same tensor as
+    /// `joints` when the clean-up is off).
+    pub raw_joints: Tensor,
+    /// Per sample, what the clean-up did (with the foot skate before and after).
+    pub foot_lock: Vec<FootLockReport>,
     /// The unconstrained start `G(z0)` as joints, `[B, T, 22, 3]`.
     pub initial_joints: Tensor,
     /// Per sample, the criterion loss at every optimisation step (empty when unconstrained;
@@ -221,8 +247,46 @@ pub fn generate(
             (run.best.x, history)
         }
     };
-    let joints = prior.to_joints(&features)?;
-    Ok(Generated { features, joints, initial_joints, loss_history, seconds: start.elapsed().as_secs_f64() })
+    let raw_joints = prior.to_joints(&features)?;
+    let mut lock = config.foot_lock.clone();
+    lock.plant_on_floor &= !has_raised_support(program);
+    let (joints, foot_lock) = clean_up(&raw_joints, &lock)?;
+    Ok(Generated {
+        features,
+        joints,
+        raw_joints,
+        foot_lock,
+        initial_joints,
+        loss_history,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// [`foot_lock`] on every sample of `joints` `[B, T, 22, 3]`: the cleaned joints (same shape,
+/// dtype and device) and each sample's report.
+pub fn clean_up(joints: &Tensor, config: &FootLockConfig) -> Result<(Tensor, Vec<FootLockReport>), GenerationError> {
+    let motions = tensor_to_poses(joints)?;
+    let mut cleaned = Vec::with_capacity(motions.len());
+    let mut reports = Vec::with_capacity(motions.len());
+    for (sample, poses) in motions.iter().enumerate() {
+        let locked = foot_lock(poses, None, config).map_err(|source| GenerationError::FootLock { sample, source })?;
+        cleaned.push(locked.poses);
+        reports.push(locked.report);
+    }
+    if !config.enabled {
+        return Ok((joints.clone(), reports));
+    }
+    Ok((poses_to_tensor(&cleaned, joints.dtype(), joints.device())?, reports))
+}
+
+/// Whether the scene holds a support more than 1 cm above or below the floor y = 0 (a raised
+/// balance beam, a raised or sunk ground), on which feet must not be planted at y = 0.
+fn has_raised_support(program: &TaskProgram) -> bool {
+    program.scene_primitives().iter().any(|p| match p {
+        Primitive::BalanceBeam(beam) => beam.point_m[1].abs() > 0.01,
+        Primitive::Ground(ground) => ground.height_m.abs() > 0.01,
+        _ => false,
+    })
 }
 
 #[cfg(test)]
