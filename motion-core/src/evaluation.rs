@@ -7,7 +7,10 @@ use serde::{Deserialize, Serialize};
 use crate::cleanup::FootLockReport;
 use crate::constraints::{Check, CompiledProgram};
 use crate::generation::{Generated, GenerationConfig};
-use crate::metrics::{foot_skate_ratio, hands_raised, head_neck_incorrect, max_acceleration, pace, step_count};
+use crate::metrics::{
+    foot_skate_ratio, ground_penetration, hands_raised, head_neck_incorrect, max_acceleration, mean_acceleration, pace,
+    stance_toe_height, step_count, toe_flicker,
+};
 use crate::program::TaskProgram;
 use crate::quality::tensor_to_poses;
 
@@ -106,6 +109,20 @@ pub struct TaskReport {
     pub pace_steps_per_s: f64,
     /// Mean coefficient of variation of step intervals over the samples that have one.
     pub pace_interval_cv: Option<f64>,
+    /// Mean toe flicker ([`crate::metrics::toe_flicker`]): fraction of frames at which a toe
+    /// zig-zags by more than 1 cm both ways (the DeepMimic walks: about 0.1).
+    #[serde(default)]
+    pub toe_flicker: f64,
+    /// Mean over samples of the mean joint acceleration, m/frame² (the walks: about 0.011).
+    #[serde(default)]
+    pub mean_acceleration: f64,
+    /// Mean over samples of the lower toe's median height, m
+    /// ([`crate::metrics::stance_toe_height`]; the walks: 1.5–2 cm): a floating figure shows here.
+    #[serde(default)]
+    pub stance_toe_height_m: f64,
+    /// The deepest any joint goes under the floor y = 0 in any sample, m.
+    #[serde(default)]
+    pub max_under_floor_m: f64,
     /// Fraction of head–neck lengths at frames 0, L//2, L−1 outside
     /// [`crate::metrics::HEAD_NECK_VALID_M`].
     pub head_neck_incorrect_ratio: f64,
@@ -215,6 +232,10 @@ pub fn report(
         hands_raised_rate: mean(&motions.iter().map(|m| f64::from(u8::from(hands_raised(m)))).collect::<Vec<_>>()),
         pace_steps_per_s: mean(&paces.iter().map(|p| p.0).collect::<Vec<_>>()),
         pace_interval_cv: (!cvs.is_empty()).then(|| mean(&cvs)),
+        toe_flicker: mean(&motions.iter().map(|m| toe_flicker(m)).collect::<Vec<_>>()),
+        mean_acceleration: mean(&motions.iter().map(|m| mean_acceleration(m)).collect::<Vec<_>>()),
+        stance_toe_height_m: mean(&motions.iter().map(|m| stance_toe_height(m)).collect::<Vec<_>>()),
+        max_under_floor_m: motions.iter().map(|m| ground_penetration(m)).fold(0.0, f64::max),
         head_neck_incorrect_ratio: bad as f64 / checked.max(1) as f64,
         cleanup,
     })

@@ -103,25 +103,37 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.jitter_weight, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
         ));
     }
-    out.push_str("| task | method | constraint error | max scene penetration (m) | foot skate | max acc (m/frame²) | steps (target) / success | hands raised | head-neck incorrect | time (s) |\n");
-    out.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
+    out.push_str(
+        "Every figure is measured on the written joints, after the foot clean-up; \"skate\" gives it before → after. \
+         The training walks (DeepMimic): 1.62 steps/s, toe flicker 0.11, mean acc 0.011 m/frame², skate 0.17, \
+         median lower toe 0.3–0.5 cm above the floor.\n\n",
+    );
+    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | steps/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | steps (target) / success | time (s) |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         let p = &r.report;
         let steps = p
             .steps
             .as_ref()
             .map_or("–".to_owned(), |s| format!("{:?} ({}) / {:.2}", s.counts, s.target, s.success_rate));
+        let skate = if p.cleanup.enabled {
+            format!("{:.3} → {:.3}", p.cleanup.before.foot_skate_ratio, p.foot_skate_ratio)
+        } else {
+            format!("{:.3}", p.foot_skate_ratio)
+        };
         out.push_str(&format!(
-            "| {} | {} | {:.6} | {} | {:.3} | {:.4} | {} | {:.2} | {:.2} | {:.1} |\n",
+            "| {} | {} | {:.6} | {:.0}% | {} | {:.3} | {:.2} | {:.3} | {:.4} | {:.3} | {skate} | {:.3} | {steps} | {:.1} |\n",
             r.task,
             p.config.method,
             p.constraint_error,
-            fmt_opt(p.max_scene_penetration_m, 4),
-            p.foot_skate_ratio,
+            100.0 * p.success_rate,
+            fmt_opt(p.max_scene_penetration_m, 3),
+            p.max_under_floor_m,
+            p.pace_steps_per_s,
+            p.toe_flicker,
+            p.mean_acceleration,
             p.max_acceleration,
-            steps,
-            p.hands_raised_rate,
-            p.head_neck_incorrect_ratio,
+            p.stance_toe_height_m,
             p.seconds
         ));
     }

@@ -60,6 +60,13 @@ pub struct GenerationArgs {
     /// DDIM steps of the sampler that DNO differentiates through (default 10).
     #[arg(long)]
     pub ddim_steps: Option<usize>,
+    /// Late start of DNO: optimise the noise of the unconstrained motion noised to this
+    /// timestep (0–999) and denoise from there, instead of the start latent at 900.
+    #[arg(long)]
+    pub start_timestep: Option<usize>,
+    /// Weight of DNO's noise decorrelation regulariser (default 1000, DNO's; 0: off).
+    #[arg(long)]
+    pub decorrelate_scale: Option<f64>,
     /// Classifier-free guidance scale of the prior (1 = conditional only).
     #[arg(long, default_value_t = motion_core::diffusion::Guidance::MDM_SCALE)]
     pub guidance: f64,
@@ -87,6 +94,10 @@ impl GenerationArgs {
         config.foot_lock.enabled = !self.no_foot_lock;
         if let Some(lr) = self.lr {
             config.dno.lr = lr;
+        }
+        config.dno.start_timestep = self.start_timestep;
+        if let Some(scale) = self.decorrelate_scale {
+            config.dno.decorrelate_scale = scale;
         }
         if let Some(ddim_steps) = self.ddim_steps {
             config.dno.ddim_steps = ddim_steps;
@@ -153,10 +164,23 @@ pub fn run_program(
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar.set_prefix(config.method.to_string());
+    let start = std::time::Instant::now();
     let generated = generate(prior, program, &compiled, config, &device, |p| {
         bar.set_length(p.steps as u64);
         bar.set_position(p.step as u64 + 1);
         bar.set_message(format!("{:.5} (round {})", p.loss, p.round));
+        // Not a terminal (a log, CI): a plain line every tenth of the run instead of the bar.
+        if bar.is_hidden() && ((p.step + 1) % (p.steps / 10).max(1) == 0 || p.step + 1 == p.steps) {
+            eprintln!(
+                "{} round {}: step {}/{} loss {:.5} ({:.0} s)",
+                config.method,
+                p.round,
+                p.step + 1,
+                p.steps,
+                p.loss,
+                start.elapsed().as_secs_f64()
+            );
+        }
     })?;
     bar.finish_and_clear();
     let report = report(program, &compiled, &generated, config)?;

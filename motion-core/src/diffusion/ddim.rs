@@ -59,6 +59,14 @@ impl DdimSampler {
         Ok(Self { timesteps, alphas_cumprod })
     }
 
+    /// The same sampler started later: only the spaced indices whose timestep is at most
+    /// `max_timestep` (ddim10 from 550: timesteps 500, 400, …, 0). Index 0 is t = 0, so at
+    /// least that one step is kept.
+    pub fn starting_at(&self, max_timestep: usize) -> Self {
+        let kept = self.timesteps.iter().take_while(|&&t| t <= max_timestep).count().max(1);
+        Self { timesteps: self.timesteps[..kept].to_vec(), alphas_cumprod: self.alphas_cumprod[..kept].to_vec() }
+    }
+
     /// Number of DDIM steps K (= denoiser evaluations per sample, without guidance).
     pub fn steps(&self) -> usize {
         self.timesteps.len()
@@ -249,6 +257,11 @@ mod tests {
         let ddim10 = DdimSampler::new(&s, 10)?;
         assert_eq!(ddim10.steps(), 10);
         assert_eq!(ddim10.alphas_cumprod()[9], s.alphas_cumprod()[900]);
+        let late = ddim10.starting_at(550);
+        assert_eq!(late.timesteps(), &[0, 100, 200, 300, 400, 500]);
+        assert_eq!(late.alphas_cumprod(), &ddim10.alphas_cumprod()[..6]);
+        assert_eq!(ddim10.starting_at(999), ddim10);
+        assert_eq!(DdimSampler::new(&s, 2)?.starting_at(300).timesteps(), &[0]);
         Ok(())
     }
 

@@ -35,6 +35,12 @@ pub struct DnoConfig {
     /// DDIM steps K of the unrolled sampler z → x (default 10, timesteps 900, 800, …, 0). Read
     /// by whoever builds the solver ([`super::UnrolledDdim::from_config`]), not by the loop.
     pub ddim_steps: usize,
+    /// Late start: when set, z is the noise of the unconstrained motion G(z0) noised to the
+    /// last spaced timestep at or below this one, and only the DDIM steps from there are run
+    /// ([`super::UnrolledDdim::starting_late`]; default `None`: z is the start latent at the
+    /// first timestep, as DNO).
+    #[serde(default)]
+    pub start_timestep: Option<usize>,
     /// Independent restarts N_S from random noise; the best per sample by final criterion
     /// loss is kept (default 1; RG-DNO's ProgMoGen+DNO baseline uses 5).
     pub restarts: usize,
@@ -55,6 +61,7 @@ impl Default for DnoConfig {
             perturb_scale: 0.0,
             diff_penalty_scale: 0.0,
             ddim_steps: 10,
+            start_timestep: None,
             restarts: 1,
             seed: 0,
         }

@@ -35,13 +35,39 @@ pub struct UnrolledDdim<'a, D: Denoiser + ?Sized> {
     pub text: Tensor,
     /// Classifier-free guidance.
     pub guidance: Guidance,
+    /// A late start ([`Self::starting_late`]): z is then the noise added to a fixed motion at
+    /// the sampler's first timestep, not the whole start latent.
+    pub late_start: Option<LateStart>,
+}
+
+/// Where a late-started solver begins: x_s = `signal` + `noise_scale`·z, with `signal` =
+/// √ᾱ_s·x_init (`[batch, frames, 263]`) and `noise_scale` = √(1 − ᾱ_s) at the start timestep s
+/// (SDEdit's noising of x_init, Meng et al. 2022).
+#[derive(Debug, Clone)]
+pub struct LateStart {
+    /// √ᾱ_s·x_init, detached.
+    pub signal: Tensor,
+    /// √(1 − ᾱ_s).
+    pub noise_scale: f64,
 }
 
 impl<'a, D: Denoiser + ?Sized> UnrolledDdim<'a, D> {
     /// DDIM with `ddim_steps` steps over MDM's cosine schedule (ddim10: timesteps 900, …, 0).
     pub fn new(denoiser: &'a D, text: Tensor, guidance: Guidance, ddim_steps: usize) -> Result<Self> {
         let sampler = DdimSampler::new(&NoiseSchedule::mdm(), ddim_steps).map_err(candle_core::Error::wrap)?;
-        Ok(Self { sampler, denoiser, text, guidance })
+        Ok(Self { sampler, denoiser, text, guidance, late_start: None })
+    }
+
+    /// This solver started at timestep `max_timestep` (the sampler's last spaced timestep at
+    /// or below it) from `x_init` noised by z: x = G(√ᾱ_s·x_init + √(1 − ᾱ_s)·z). DNO then
+    /// optimises the noise of an existing motion where the denoiser keeps more of what it is
+    /// given, instead of the start latent at t = 900 (`x_init` `[batch, frames, 263]`).
+    pub fn starting_late(mut self, max_timestep: usize, x_init: &Tensor) -> Result<Self> {
+        self.sampler = self.sampler.starting_at(max_timestep);
+        let abar = self.sampler.alphas_cumprod().last().copied().unwrap_or(1.0);
+        let signal = x_init.detach().affine(abar.sqrt(), 0.0)?;
+        self.late_start = Some(LateStart { signal, noise_scale: (1.0 - abar).sqrt() });
+        Ok(self)
     }
 
     /// [`Self::new`] with `config.ddim_steps`.
@@ -52,6 +78,12 @@ impl<'a, D: Denoiser + ?Sized> UnrolledDdim<'a, D> {
 
 impl<D: Denoiser + ?Sized> Solver for UnrolledDdim<'_, D> {
     fn solve(&self, z: &Tensor) -> Result<Tensor> {
-        self.sampler.sample_unrolled(self.denoiser, z, &self.text, self.guidance)
+        match &self.late_start {
+            None => self.sampler.sample_unrolled(self.denoiser, z, &self.text, self.guidance),
+            Some(start) => {
+                let x = (&start.signal + z.affine(start.noise_scale, 0.0)?)?;
+                self.sampler.sample_unrolled(self.denoiser, &x, &self.text, self.guidance)
+            }
+        }
     }
 }

@@ -180,3 +180,27 @@ fn bad_inputs_are_errors() {
     let none = DnoConfig { steps: 0, ..config };
     assert!(optimize(&identity, reach(&[0.0, 0.0], &[1.0, 1.0]), &z0, &none, |_| {}).is_err());
 }
+
+/// A late-started solver runs only the DDIM steps from its start timestep on x_init noised by
+/// z, keeps the graph back to z, and its start is x_init's SDEdit noising.
+#[test]
+fn a_late_start_denoises_the_noised_initial_motion_from_there() {
+    let dev = Device::Cpu;
+    let cfg = MdmConfig { latent_dim: 16, ff_size: 32, num_layers: 1, num_heads: 2, text_dim: 4, ..MdmConfig::small() };
+    let mdm = Mdm::random(cfg, DType::F32, &dev, 7).unwrap();
+    let text = gaussian((2, 4), 8, &dev).unwrap();
+    let full = UnrolledDdim::new(&mdm, text.clone(), Guidance::none(), 10).unwrap();
+    let x_init = gaussian((2, FRAMES, FEATURE_DIM), 4, &dev).unwrap();
+    let late = full.clone().starting_late(450, &x_init).unwrap();
+    assert_eq!(late.sampler.timesteps(), &[0, 100, 200, 300, 400]);
+    let abar = full.sampler.alphas_cumprod()[4];
+    let z = gaussian((2, FRAMES, FEATURE_DIM), 5, &dev).unwrap();
+    let start = ((&x_init * abar.sqrt()).unwrap() + (&z * (1.0 - abar).sqrt()).unwrap()).unwrap();
+    let expected = late.sampler.sample(&mdm, &start, &text, Guidance::none()).unwrap();
+    let z_var = candle_core::Var::from_tensor(&z).unwrap();
+    let got = late.solve(z_var.as_tensor()).unwrap();
+    assert!(max_abs_diff(&got, &expected) < 1e-5);
+    let grads = got.sqr().unwrap().sum_all().unwrap().backward().unwrap();
+    let g = grads.get(z_var.as_tensor()).expect("a gradient reaches z");
+    assert!(g.abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap() > 0.0);
+}

@@ -214,9 +214,12 @@ pub fn generate(
     let shape = (config.samples, frames, FEATURE_DIM);
     let text = prior.encode_text(&vec![program.text.as_str(); config.samples], device)?;
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
-    let solver = UnrolledDdim::new(&prior.mdm, text, guidance, config.dno.ddim_steps)?;
+    let mut solver = UnrolledDdim::new(&prior.mdm, text, guidance, config.dno.ddim_steps)?;
     let z0 = gaussian(shape, config.seed, device)?;
     let x0 = solver.sampler.sample(solver.denoiser, &z0, &solver.text, solver.guidance)?;
+    if let Some(start) = config.dno.start_timestep {
+        solver = solver.starting_late(start, &x0)?;
+    }
     let initial_joints = prior.to_joints(&x0)?;
     // The program's loss on the recovered joints, plus `jitter_weight ×` the jitter guard.
     let objective = |x: &Tensor, jitter_weight: f64| -> candle_core::Result<Tensor> {
