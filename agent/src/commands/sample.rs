@@ -4,7 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use motion_core::cleanup::FootLockConfig;
 use motion_core::diffusion::Guidance;
+use motion_core::generation::clean_up;
 use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
@@ -37,8 +39,12 @@ pub struct SampleArgs {
     /// follows the feet whose contact is on, so they stay put) or `velocity` (as predicted).
     #[arg(long, default_value_t = RootDecode::default())]
     root_decode: RootDecode,
-    /// Output folder: joints.npy [n, frames, 22, 3] (m, y up), features.npy [n, frames, 263]
-    /// (de-normalised, the root velocity as decoded), strip.png.
+    /// Switch off the contact-aware clean-up (foot locking with leg IK) of the samples.
+    #[arg(long)]
+    no_foot_lock: bool,
+    /// Output folder: joints.npy [n, frames, 22, 3] (m, y up, after the foot clean-up),
+    /// features.npy [n, frames, 263] (de-normalised, the root velocity as decoded, before the
+    /// clean-up), strip.png.
     #[arg(long, short, default_value = "out/sample")]
     out: PathBuf,
 }
@@ -67,7 +73,16 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         &device,
     )?;
     let raw = prior.to_features(&x)?;
-    let joints = prior.joints_of(&raw)?;
+    let lock = FootLockConfig { enabled: !args.no_foot_lock, ..FootLockConfig::default() };
+    let (joints, reports) = clean_up(&prior.joints_of(&raw)?, &lock)?;
+    if lock.enabled {
+        for (i, r) in reports.iter().enumerate() {
+            eprintln!(
+                "sample {i}: foot clean-up lowered the body {:.3} m, moved joints up to {:.3} m, foot skate {:.3} → {:.3}",
+                r.lowered_m, r.max_displacement_m, r.skate_before, r.skate_after
+            );
+        }
+    }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     joints.write_npy(args.out.join("joints.npy"))?;
     raw.write_npy(args.out.join("features.npy"))?;
