@@ -13,6 +13,7 @@ use crate::metrics::{
 };
 use crate::program::TaskProgram;
 use crate::quality::tensor_to_poses;
+use crate::skeleton::Pose;
 
 /// One constraint's errors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -138,6 +139,8 @@ struct Judged {
     success_rate: f64,
     penetration: Option<Vec<f64>>,
     steps: Option<StepReport>,
+    /// The joints as poses, per sample.
+    motions: Vec<Vec<Pose>>,
 }
 
 fn judge(
@@ -175,11 +178,17 @@ fn judge(
         let hits = counts.iter().filter(|&&c| c == target as usize).count();
         StepReport { target, success_rate: hits as f64 / counts.len().max(1) as f64, counts }
     });
-    Ok(Judged { per_sample, constraints, success_rate: successes as f64 / samples.max(1) as f64, penetration, steps })
+    let success_rate = successes as f64 / samples.max(1) as f64;
+    Ok(Judged { per_sample, constraints, success_rate, penetration, steps, motions })
 }
 
 fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len().max(1) as f64
+}
+
+/// The mean over samples of a per-motion figure.
+fn mean_of(motions: &[Vec<Pose>], figure: impl Fn(&[Pose]) -> f64) -> f64 {
+    mean(&motions.iter().map(|m| figure(m)).collect::<Vec<_>>())
 }
 
 fn worst(values: &Option<Vec<f64>>) -> Option<f64> {
@@ -195,10 +204,7 @@ pub fn report(
 ) -> candle_core::Result<TaskReport> {
     let judged = judge(program, compiled, &generated.joints, &generated.initial_joints)?;
     let raw = judge(program, compiled, &generated.raw_joints, &generated.initial_joints)?;
-    let motions = tensor_to_poses(&generated.joints)?;
-    let raw_motions = tensor_to_poses(&generated.raw_joints)?;
-    let skate = |m: &[Vec<_>]| mean(&m.iter().map(|m| foot_skate_ratio(m)).collect::<Vec<_>>());
-    let max_acc = |m: &[Vec<_>]| mean(&m.iter().map(|m| max_acceleration(m)).collect::<Vec<_>>());
+    let motions = &judged.motions;
     let paces: Vec<(f64, Option<f64>)> = motions.iter().map(|m| pace(m)).collect();
     let cvs: Vec<f64> = paces.iter().filter_map(|p| p.1).collect();
     let (bad, checked) =
@@ -210,8 +216,8 @@ pub fn report(
             constraint_error: mean(&raw.per_sample),
             success_rate: raw.success_rate,
             max_scene_penetration_m: worst(&raw.penetration),
-            foot_skate_ratio: skate(&raw_motions),
-            max_acceleration: max_acc(&raw_motions),
+            foot_skate_ratio: mean_of(&raw.motions, foot_skate_ratio),
+            max_acceleration: mean_of(&raw.motions, max_acceleration),
             steps: raw.steps.map(|s| s.counts),
         },
     };
@@ -226,15 +232,15 @@ pub fn report(
         constraint_error_per_sample: judged.per_sample,
         constraints: judged.constraints,
         success_rate: judged.success_rate,
-        foot_skate_ratio: skate(&motions),
-        max_acceleration: max_acc(&motions),
+        foot_skate_ratio: mean_of(motions, foot_skate_ratio),
+        max_acceleration: mean_of(motions, max_acceleration),
         steps: judged.steps,
-        hands_raised_rate: mean(&motions.iter().map(|m| f64::from(u8::from(hands_raised(m)))).collect::<Vec<_>>()),
+        hands_raised_rate: mean_of(motions, |m| f64::from(u8::from(hands_raised(m)))),
         pace_steps_per_s: mean(&paces.iter().map(|p| p.0).collect::<Vec<_>>()),
         pace_interval_cv: (!cvs.is_empty()).then(|| mean(&cvs)),
-        toe_flicker: mean(&motions.iter().map(|m| toe_flicker(m)).collect::<Vec<_>>()),
-        mean_acceleration: mean(&motions.iter().map(|m| mean_acceleration(m)).collect::<Vec<_>>()),
-        stance_toe_height_m: mean(&motions.iter().map(|m| stance_toe_height(m)).collect::<Vec<_>>()),
+        toe_flicker: mean_of(motions, toe_flicker),
+        mean_acceleration: mean_of(motions, mean_acceleration),
+        stance_toe_height_m: mean_of(motions, stance_toe_height),
         max_under_floor_m: motions.iter().map(|m| ground_penetration(m)).fold(0.0, f64::max),
         head_neck_incorrect_ratio: bad as f64 / checked.max(1) as f64,
         cleanup,

@@ -78,12 +78,10 @@ impl<'a, D: Denoiser + ?Sized> UnrolledDdim<'a, D> {
 
 impl<D: Denoiser + ?Sized> Solver for UnrolledDdim<'_, D> {
     fn solve(&self, z: &Tensor) -> Result<Tensor> {
-        match &self.late_start {
-            None => self.sampler.sample_unrolled(self.denoiser, z, &self.text, self.guidance),
-            Some(start) => {
-                let x = (&start.signal + z.affine(start.noise_scale, 0.0)?)?;
-                self.sampler.sample_unrolled(self.denoiser, &x, &self.text, self.guidance)
-            }
-        }
+        let x_start = match &self.late_start {
+            None => z.clone(),
+            Some(start) => (&start.signal + z.affine(start.noise_scale, 0.0)?)?,
+        };
+        self.sampler.sample_unrolled(self.denoiser, &x_start, &self.text, self.guidance)
     }
 }
