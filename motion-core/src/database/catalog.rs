@@ -7,6 +7,7 @@ use serde::Deserialize;
 
 use crate::import::bvh::{BvhClip, BvhOptions};
 use crate::import::deepmimic::DeepMimicClip;
+use crate::import::isaaclab::IsaacAmpClip;
 use crate::import::{ImportError, ImportWarning, MocapClip};
 
 /// File format of a source clip.
@@ -17,6 +18,8 @@ pub enum SourceFormat {
     Deepmimic,
     /// Biovision hierarchy file (units, up axis and rig detected).
     Bvh,
+    /// Isaac Lab AMP humanoid motion (NumPy archive, z up).
+    IsaaclabAmp,
 }
 
 /// One catalog entry.
@@ -81,20 +84,22 @@ impl Catalog {
         for entry in &self.clips {
             let path = self.base.join(&entry.file);
             let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-            let clip: Box<dyn MocapClip> = match entry.format {
-                SourceFormat::Deepmimic => {
-                    let (clip, w) = DeepMimicClip::read(&path)?;
-                    warnings.extend(w);
-                    Box::new(clip)
-                }
-                SourceFormat::Bvh => {
-                    let (clip, w) = BvhClip::read(&path, &BvhOptions::default())?;
-                    warnings.extend(w);
-                    Box::new(clip)
-                }
+            let clip = match entry.format {
+                SourceFormat::Deepmimic => keep(DeepMimicClip::read(&path)?, &mut warnings),
+                SourceFormat::Bvh => keep(BvhClip::read(&path, &BvhOptions::default())?, &mut warnings),
+                SourceFormat::IsaaclabAmp => keep(IsaacAmpClip::read(&path)?, &mut warnings),
             };
             clips.push(SourceClip { name, label: entry.label.clone(), clip });
         }
         Ok((clips, warnings))
     }
+}
+
+/// Boxes an imported clip and keeps its warnings.
+fn keep<C: MocapClip + 'static>(
+    (clip, clip_warnings): (C, Vec<ImportWarning>),
+    warnings: &mut Vec<ImportWarning>,
+) -> Box<dyn MocapClip> {
+    warnings.extend(clip_warnings);
+    Box::new(clip)
 }

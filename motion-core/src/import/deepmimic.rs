@@ -17,7 +17,7 @@ use crate::skeleton::{Pose, NUM_JOINTS};
 /// Values per frame.
 const FRAME_WIDTH: usize = 44;
 /// DeepMimic joints.
-const DM_JOINTS: usize = 15;
+pub(crate) const DM_JOINTS: usize = 15;
 
 /// DeepMimic joint: name, parent, offset from the parent joint in the parent's frame (m), and
 /// where its rotation lives in a frame (start, 4 for a quaternion or 1 for an angle about +z).
@@ -330,22 +330,37 @@ impl MocapClip for DeepMimicClip {
 
 /// Forward kinematics of one keyframe, mapped to the 22 joints in our axes.
 fn smpl22(key: &Keyframe) -> Pose {
-    let mut pos = [DVec3::ZERO; DM_JOINTS];
-    let mut rot = [DQuat::IDENTITY; DM_JOINTS];
+    let mut world = [DQuat::IDENTITY; DM_JOINTS];
     for (j, joint) in SKELETON.iter().enumerate() {
-        match joint.parent {
-            None => {
-                pos[j] = key.root;
-                rot[j] = key.rot[j];
-            }
-            Some(p) => {
-                pos[j] = pos[p] + rot[p] * DVec3::from_array(joint.offset);
-                rot[j] = rot[p] * key.rot[j];
-            }
+        world[j] = match joint.parent {
+            None => key.rot[j],
+            Some(p) => world[p] * key.rot[j],
+        };
+    }
+    smpl22_from_world(key.root, &world)
+}
+
+/// Joint positions of the humanoid (DeepMimic world, m, unscaled) from the root position and
+/// every joint's **world** rotation, in skeleton order (root, chest, neck, right hip, knee,
+/// ankle, shoulder, elbow, wrist, then the same on the left): each joint sits at its parent plus
+/// the parent's rotation applied to the skeleton offset, so bone lengths are exact.
+pub(crate) fn joint_positions(root: DVec3, world: &[DQuat; DM_JOINTS]) -> [DVec3; DM_JOINTS] {
+    let mut pos = [root; DM_JOINTS];
+    for (j, joint) in SKELETON.iter().enumerate() {
+        if let Some(p) = joint.parent {
+            pos[j] = pos[p] + world[p] * DVec3::from_array(joint.offset);
         }
     }
+    pos
+}
+
+/// The 22 joints in our axes (m, scaled by [`STATURE_SCALE`]) of the humanoid posed by its root
+/// position and every joint's world rotation (DeepMimic world). Shared by every source of this
+/// character (DeepMimic clips, Isaac Lab's AMP motions).
+pub(crate) fn smpl22_from_world(root: DVec3, world: &[DQuat; DM_JOINTS]) -> Pose {
+    let pos = joint_positions(root, world);
     SMPL22_FROM_DM.map(|(j, local)| {
-        let v = (pos[j] + rot[j] * DVec3::from_array(local)) * STATURE_SCALE;
+        let v = (pos[j] + world[j] * DVec3::from_array(local)) * STATURE_SCALE;
         DVec3::new(-v.z, v.y, v.x)
     })
 }

@@ -7,6 +7,7 @@
 pub mod bvh;
 pub mod deepmimic;
 pub mod humanml3d;
+pub mod isaaclab;
 
 use std::path::PathBuf;
 
