@@ -262,6 +262,11 @@ impl Bvh {
         })
     }
 
+    /// Index of the End Site whose parent is node `joint` (the first, if it has several).
+    pub fn end_site_of(&self, joint: usize) -> Option<usize> {
+        self.joints.iter().position(|j| j.end_site && j.parent == Some(joint))
+    }
+
     /// Vertical extent of the rest skeleton (OFFSETs only, end sites included), file units.
     pub fn rest_height(&self, up: UpAxis) -> f64 {
         let mut pos = vec![DVec3::ZERO; self.joints.len()];

@@ -164,11 +164,18 @@ mod tests {
     use crate::motion::bone_length_spread;
     use crate::skeleton::Joint;
 
-    const CMU: [&str; 2] = ["cmu_01_01_20fps.bvh", "cmu_01_03_20fps.bvh"];
-    const ALL: [&str; 3] = ["cmu_01_01_20fps.bvh", "cmu_01_03_20fps.bvh", "boxing_toes_20fps.bvh"];
+    const CMU: [&str; 2] = ["cmu/cmu_01_01_20fps.bvh", "cmu/cmu_01_03_20fps.bvh"];
+    const MOCAPBANK: &str = "bvhtoolbox/test_mocapbank.bvh";
+    const ALL: [&str; 4] =
+        ["cmu/cmu_01_01_20fps.bvh", "cmu/cmu_01_03_20fps.bvh", "cmu/boxing_toes_20fps.bvh", MOCAPBANK];
+
+    /// Path under `fixtures/mocap/`.
+    fn fixture(name: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap").join(name)
+    }
 
     fn clip(name: &str) -> BvhClip {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/cmu").join(name);
+        let path = fixture(name);
         let (clip, warnings) = BvhClip::read(&path, &BvhOptions::default()).unwrap();
         assert!(warnings.is_empty(), "{warnings:?}");
         clip
@@ -189,9 +196,9 @@ mod tests {
     #[test]
     fn fixtures_have_the_right_frames_rate_rig_and_unit() {
         for (name, frames, rig, unit) in [
-            ("cmu_01_01_20fps.bvh", 459, Rig::Cmu, LengthUnit::CmuAsf),
-            ("cmu_01_03_20fps.bvh", 752, Rig::Cmu, LengthUnit::CmuAsf),
-            ("boxing_toes_20fps.bvh", 614, Rig::HipsAbChest, LengthUnit::Centimetres),
+            ("cmu/cmu_01_01_20fps.bvh", 459, Rig::Cmu, LengthUnit::CmuAsf),
+            ("cmu/cmu_01_03_20fps.bvh", 752, Rig::Cmu, LengthUnit::CmuAsf),
+            ("cmu/boxing_toes_20fps.bvh", 614, Rig::HipsAbChest, LengthUnit::Centimetres),
         ] {
             let c = clip(name);
             assert_eq!((c.animation().frames(), c.rig(), c.animation().unit()), (frames, rig, unit), "{name}");
@@ -386,6 +393,49 @@ mod tests {
         // The TINY skeleton is flat: its unit cannot be detected.
         let e = BvhClip::from_bvh("tiny", &bvh, &BvhOptions::default(), Path::new("tiny.bvh")).unwrap_err().to_string();
         assert!(e.contains("line 2") && e.contains("cannot detect the unit"), "{e}");
+    }
+
+    #[test]
+    fn mocapbank_clip_kneels_on_the_right_knee_with_the_hands_low_and_stands_up() {
+        let c = clip(MOCAPBANK);
+        assert_eq!(
+            (c.animation().frames(), c.rig(), c.animation().unit()),
+            (455, Rig::HipsChestChest2, LengthUnit::Centimetres)
+        );
+        assert!((c.fps() - 30.0).abs() < 0.01 && (c.duration_s() - 15.13).abs() < 0.01);
+        let poses = resample(&c, 1.0, None);
+        let floor = poses.iter().map(lowest_foot).fold(f64::MAX, f64::min);
+        let height = |t: f64, j: Joint| at(&poses[(t * 20.0) as usize], j).y - floor;
+        for t in [1.0, 14.0] {
+            assert!(height(t, Joint::Pelvis) > 0.85 && height(t, Joint::Head) > 1.4, "standing at {t} s");
+        }
+        // From 5 s to 10 s: the right knee on the floor, the left foot flat, the left knee up,
+        // the pelvis half-way down and both hands near the ground in front.
+        for t in [5.0, 6.0, 8.0, 10.0] {
+            let h = |j: Joint| height(t, j);
+            assert!(h(Joint::RightKnee) < 0.1 && h(Joint::LeftKnee) > 0.4, "kneeling at {t} s");
+            assert!(h(Joint::LeftAnkle) < 0.1 && h(Joint::Pelvis) < 0.6, "kneeling at {t} s");
+            assert!(h(Joint::LeftWrist) < 0.3 && h(Joint::RightWrist) < 0.3, "hands low at {t} s");
+        }
+        // Standing, the balls of the feet are below the ankles and near the floor.
+        let p = &poses[20];
+        for (ankle, ball) in [(Joint::LeftAnkle, Joint::LeftFoot), (Joint::RightAnkle, Joint::RightFoot)] {
+            assert!(at(p, ball).y - floor < 0.06 && (at(p, ball) - at(p, ankle)).y < 0.0, "{ball}");
+        }
+    }
+
+    #[test]
+    fn a_rig_without_the_toe_end_site_is_named() {
+        let text = std::fs::read_to_string(fixture(MOCAPBANK)).unwrap();
+        // Drop the End Site block of the left ankle (the first End Site after "JOINT LeftAnkle").
+        let ankle = text.find("JOINT LeftAnkle").unwrap();
+        let start = ankle + text[ankle..].find("End Site").unwrap();
+        let end = start + text[start..].find('}').unwrap() + 1;
+        let cut = format!("{}{}", &text[..start], &text[end..]);
+        let (bvh, _) = Bvh::parse(&cut, Path::new("cut.bvh")).unwrap();
+        let forced = BvhOptions { rig: Some(Rig::HipsChestChest2), ..BvhOptions::default() };
+        let e = BvhClip::from_bvh("cut", &bvh, &forced, Path::new("cut.bvh")).unwrap_err().to_string();
+        assert!(e.contains("cut.bvh") && e.contains("missing LeftAnkle End Site"), "{e}");
     }
 
     #[test]

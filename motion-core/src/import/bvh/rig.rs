@@ -2,7 +2,7 @@
 
 use super::Bvh;
 use crate::skeleton::NUM_JOINTS;
-use Source::{At, Between};
+use Source::{At, Between, TowardEnd};
 
 /// Where one of our joints sits on a source rig.
 #[derive(Debug, Clone, Copy)]
@@ -11,6 +11,8 @@ enum Source {
     At(&'static str),
     /// A fraction of the way from the first joint to the second (its descendant).
     Between(&'static str, &'static str, f64),
+    /// A fraction of the way from a joint to its End Site (for rigs without toe joints).
+    TowardEnd(&'static str, f64),
 }
 
 /// A family of joint names that [`BvhClip`](super::BvhClip) can map to the 22 joints.
@@ -27,11 +29,15 @@ pub enum Rig {
     /// Chest, Neck, Head, LeftCollar, LeftShoulder, LeftElbow, LeftWrist, LeftHip, LeftKnee,
     /// LeftAnkle, LeftToes.
     HipsAbChest,
+    /// MocapBank's rig (bvhtoolbox's `test_mocapbank.bvh`): Hips, Chest, Chest2, Neck, Head,
+    /// LeftCollar, LeftShoulder, LeftElbow, LeftWrist, LeftHip, LeftKnee, LeftAnkle and an End
+    /// Site at the toe tip instead of a toe joint.
+    HipsChestChest2,
 }
 
 impl Rig {
     /// Every rig, in detection order.
-    pub const ALL: [Rig; 3] = [Rig::Cmu, Rig::Mixamo, Rig::HipsAbChest];
+    pub const ALL: [Rig; 4] = [Rig::Cmu, Rig::Mixamo, Rig::HipsAbChest, Rig::HipsChestChest2];
 
     /// Display name.
     pub fn name(self) -> &'static str {
@@ -39,6 +45,7 @@ impl Rig {
             Rig::Cmu => "CMU (cgspeed)",
             Rig::Mixamo => "Mixamo",
             Rig::HipsAbChest => "Hips/Ab/Chest",
+            Rig::HipsChestChest2 => "Hips/Chest/Chest2",
         }
     }
 
@@ -124,23 +131,57 @@ impl Rig {
                 At("LeftWrist"),
                 At("RightWrist"),
             ],
+            // Chest 0.10 m above Hips, Chest2 0.26 m, Neck (and both collar joints) 0.43 m,
+            // shoulders 0.40 m, Head 0.55 m. The collar joints sit above the shoulders, so our
+            // collars go on the line Chest2 → shoulder, below them as in SMPL. The ankle's End
+            // Site is the toe tip (0.19 m forward and 0.07 m down); 70 % of the way there is the
+            // ball of the foot.
+            Rig::HipsChestChest2 => [
+                At("Hips"),
+                At("LeftHip"),
+                At("RightHip"),
+                At("Chest"),
+                At("LeftKnee"),
+                At("RightKnee"),
+                At("Chest2"),
+                At("LeftAnkle"),
+                At("RightAnkle"),
+                Between("Chest2", "Neck", 0.85),
+                TowardEnd("LeftAnkle", 0.7),
+                TowardEnd("RightAnkle", 0.7),
+                Between("Neck", "Head", 0.4),
+                Between("Chest2", "LeftShoulder", 0.55),
+                Between("Chest2", "RightShoulder", 0.55),
+                At("Head"),
+                At("LeftShoulder"),
+                At("RightShoulder"),
+                At("LeftElbow"),
+                At("RightElbow"),
+                At("LeftWrist"),
+                At("RightWrist"),
+            ],
         }
     }
 
-    /// Resolves the map on a file's joints: per joint `(from, to, fraction)`, or the names missing.
-    pub(super) fn resolve(self, bvh: &Bvh) -> Result<[(usize, usize, f64); NUM_JOINTS], Vec<&'static str>> {
-        let mut missing = Vec::new();
-        let mut find = |name: &'static str| {
-            bvh.joint_index(name).unwrap_or_else(|| {
-                if !missing.contains(&name) {
-                    missing.push(name);
+    /// Resolves the map on a file's nodes: per joint `(from, to, fraction)`, or the names missing.
+    pub(super) fn resolve(self, bvh: &Bvh) -> Result<[(usize, usize, f64); NUM_JOINTS], Vec<String>> {
+        let mut missing: Vec<String> = Vec::new();
+        // The node of joint `name`, or of its End Site when `end`.
+        let mut find = |name: &str, end: bool| {
+            let joint = bvh.joint_index(name);
+            let node = if end { joint.and_then(|j| bvh.end_site_of(j)) } else { joint };
+            node.unwrap_or_else(|| {
+                let what = if joint.is_some() { format!("{name} End Site") } else { name.to_owned() };
+                if !missing.contains(&what) {
+                    missing.push(what);
                 }
                 0
             })
         };
         let map = self.sources().map(|s| match s {
-            At(a) => (find(a), find(a), 0.0),
-            Between(a, b, t) => (find(a), find(b), t),
+            At(a) => (find(a, false), find(a, false), 0.0),
+            Between(a, b, t) => (find(a, false), find(b, false), t),
+            TowardEnd(a, t) => (find(a, false), find(a, true), t),
         });
         if missing.is_empty() {
             Ok(map)
