@@ -19,10 +19,14 @@ fn max_error(a: &[Pose], b: &[Pose]) -> f64 {
     a.iter().zip(b).flat_map(|(p, q)| p.iter().zip(q).map(|(u, v)| (*u - *v).length())).fold(0.0, f64::max)
 }
 
+/// Every clip of the shipped prior's catalog and of the candidates imported for its next training.
 #[test]
 fn every_catalog_clip_round_trips_through_263_features_within_1mm() {
-    let (sources, _) = Catalog::read(&fixtures().join("mocap/catalog.json")).unwrap().load().unwrap();
+    let (mut sources, _) = Catalog::read(&fixtures().join("mocap/catalog.json")).unwrap().load().unwrap();
     assert!(sources.len() >= 20);
+    let (candidates, _) = Catalog::read(&fixtures().join("mocap/catalog_candidates.json")).unwrap().load().unwrap();
+    assert!(candidates.len() >= 4);
+    sources.extend(candidates);
     for s in &sources {
         let poses = resample(s.clip.as_ref(), 1.0, s.clip.is_cyclic().then_some(6.0));
         let e = extract_features(&poses).unwrap();

@@ -47,6 +47,60 @@ impl Lock {
     }
 }
 
+/// The steadiest stretch of a contact: the longest run of `frames`, grown from its slowest
+/// frame, over which `track` stays within `max_offset_m` (horizontally) of the run's mean, so
+/// that holding the joint at that mean moves it by at most `max_offset_m`. The whole contact
+/// when it already fits; `frames` is non-empty and in range.
+///
+/// A generated stance foot that slides farther than a foot's length is not planted; holding it
+/// at the mean of the whole slide drags the leg by half the slide (28–66 cm on DNO outputs,
+/// session 10) and makes a stride the network never drew. Its steadiest part is held instead,
+/// and the rest of the contact is left as generated.
+pub fn steadiest(track: &[DVec3], frames: Range<usize>, max_offset_m: f64) -> Range<usize> {
+    let flat = |t: usize| DVec3::new(track[t].x, 0.0, track[t].z);
+    let fits = |r: &Range<usize>| {
+        let mean = r.clone().map(flat).sum::<DVec3>() / r.len() as f64;
+        r.clone().all(|t| (flat(t) - mean).length() <= max_offset_m)
+    };
+    if fits(&frames) {
+        return frames;
+    }
+    // Horizontal speed per frame in whole mm per frame (central differences, one-sided at the
+    // ends); among equally slow frames the one nearest the contact's middle.
+    let speed = |t: usize| {
+        let (a, b) = (t.saturating_sub(1).max(frames.start), (t + 1).min(frames.end - 1));
+        ((flat(b) - flat(a)).length() / (b - a).max(1) as f64 * 1000.0).round()
+    };
+    let middle = (frames.start + frames.end - 1) as f64 / 2.0;
+    let key = |t: usize| (speed(t), (t as f64 - middle).abs());
+    let slowest = frames
+        .clone()
+        .min_by(|&a, &b| {
+            let (ka, kb) = (key(a), key(b));
+            ka.0.total_cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
+        })
+        .unwrap_or(frames.start);
+    let mut run = slowest..slowest + 1;
+    loop {
+        let left = (run.start > frames.start).then(|| run.start - 1..run.end).filter(|r| fits(r));
+        let right = (run.end < frames.end).then(|| run.start..run.end + 1).filter(|r| fits(r));
+        run = match (left, right) {
+            (Some(l), Some(r)) => {
+                // Grow towards the frame nearer the current hold.
+                let mean = run.clone().map(flat).sum::<DVec3>() / run.len() as f64;
+                if (flat(l.start) - mean).length() <= (flat(r.end - 1) - mean).length() + 1e-9 {
+                    l
+                } else {
+                    r
+                }
+            }
+            (Some(l), None) => l,
+            (None, Some(r)) => r,
+            (None, None) => return run,
+        };
+    }
+}
+
 /// How far the joint is moved in one frame and how firmly it is held.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Correction {
@@ -142,6 +196,24 @@ mod tests {
         assert!((Lock::new(&track, 2..5, Some(-0.01), 0.01).lift_m - (-median)).abs() < 1e-12);
         let held = track[3] + lock.offset(track[3]);
         assert!((held - DVec3::new(0.0, track[3].y + lock.lift_m, 0.15)).length() < 1e-12);
+    }
+
+    #[test]
+    fn a_slide_beyond_the_cap_keeps_only_its_steadiest_stretch() {
+        // Slides 5 cm per frame, except frames 10..14, which stand still at z = 0.5.
+        let track: Vec<DVec3> =
+            (0..24usize).map(|t| DVec3::new(0.0, 0.0, 0.05 * (t.min(10) + t.saturating_sub(14)) as f64)).collect();
+        // The whole contact fits a generous cap ...
+        assert_eq!(steadiest(&track, 0..24, 1.0), 0..24);
+        // ... a 15 cm cap keeps the standstill and the frames around it that stay within 15 cm
+        // of the held point.
+        let run = steadiest(&track, 0..24, 0.15);
+        assert!(run.contains(&10) && run.contains(&14), "{run:?}");
+        let mean = run.clone().map(|t| track[t]).sum::<DVec3>() / run.len() as f64;
+        assert!(run.clone().all(|t| (track[t] - mean).length() <= 0.15), "{run:?}");
+        assert!(run.len() < 24 && run.len() >= 9, "{run:?}");
+        // A single frame always fits.
+        assert_eq!(steadiest(&track, 3..4, 0.0), 3..4);
     }
 
     #[test]

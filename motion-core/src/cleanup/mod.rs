@@ -12,7 +12,8 @@
 //!    than [`FootLockConfig::min_contact_frames`] are dropped. Callers holding contact labels
 //!    (the 263-d features' four channels) can pass them instead.
 //! 3. **Locks** ([`foot_lock::Lock`]): per contact, the joint is held at its mean horizontal
-//!    position and lifted so that its median height comes within
+//!    position (over the contact's steadiest stretch when it slides farther than
+//!    [`FootLockConfig::max_lock_offset_m`] from that mean, [`foot_lock::steadiest`]) and lifted so that its median height comes within
 //!    [`FootLockConfig::height_tolerance_m`] of its standing height (it keeps its own small
 //!    vertical motion, such as a heel rising before the foot leaves); it eases back to its own
 //!    motion over [`FootLockConfig::blend_frames`] frames on either side, more for a large
@@ -46,7 +47,7 @@ use crate::metrics::foot_skate_ratio;
 use crate::skeleton::{bone_lengths, Joint, Pose, CONTACT_JOINTS, FPS, NUM_JOINTS};
 use crate::MotionError;
 use contact::{detect, floor_height, runs, speeds, Hysteresis};
-use foot_lock::{corrections, Correction, Easing, Lock};
+use foot_lock::{corrections, steadiest, Correction, Easing, Lock};
 use leg_ik::{solve_leg, Leg};
 
 /// The clean-up raises no task constraint's error `E` by more than this fraction of `E` ...
@@ -85,6 +86,11 @@ pub struct FootLockConfig {
     pub height_tolerance_m: f64,
     /// Contacts shorter than this are dropped, frames (default 3).
     pub min_contact_frames: usize,
+    /// A locked joint is held at most this far (horizontally) from where the motion puts it, m
+    /// (default 0.15, under a foot's length): a contact over which it slides farther is cut to
+    /// its steadiest stretch ([`foot_lock::steadiest`]) and dropped if that is shorter than
+    /// `min_contact_frames`. Holding a long slide at its mean drags the leg by half the slide.
+    pub max_lock_offset_m: f64,
     /// Frames over which a lock eases in before and out after its contact, at least (default 3)
     /// ...
     pub blend_frames: usize,
@@ -118,6 +124,7 @@ impl Default for FootLockConfig {
             leave_speed_m_per_s: 1.5,
             height_tolerance_m: 0.01,
             min_contact_frames: 3,
+            max_lock_offset_m: 0.15,
             blend_frames: 3,
             blend_speed_m_per_s: 0.5,
             soft_reach_m: 0.01,
@@ -169,6 +176,9 @@ pub struct FootLockReport {
     pub lowered_m: f64,
     /// Contacts per joint, in [`CONTACT_JOINTS`] order.
     pub contacts: [JointContacts; 4],
+    /// Contacts cut to their steadiest stretch (or dropped) because the joint slid farther
+    /// than [`FootLockConfig::max_lock_offset_m`] from the hold.
+    pub shortened: usize,
     /// Leg solves whose ankle target was out of the leg's reach (one per leg and frame).
     pub unreachable: usize,
     /// Largest joint displacement, m.
@@ -232,7 +242,7 @@ pub fn foot_lock(
     let standing = config.standing_m();
     let floor_m = floor_height(poses, &standing);
     if !config.enabled {
-        return Ok(FootLocked { poses: poses.to_vec(), report: report(poses, poses, floor_m, 0.0, None, 0) });
+        return Ok(FootLocked { poses: poses.to_vec(), report: report(poses, poses, floor_m, 0.0, None, 0, 0) });
     }
 
     // 1. Floor: lower a floating body as a whole.
@@ -242,6 +252,8 @@ pub fn foot_lock(
     // 2–3. Contacts and the correction of each foot joint.
     let mut locked: [Vec<Range<usize>>; 4] = Default::default();
     let mut correction: Vec<Vec<Correction>> = Vec::with_capacity(4);
+    let mut shortened = 0;
+    let min_frames = config.min_contact_frames.max(1);
     for (k, joint) in CONTACT_JOINTS.iter().enumerate() {
         let track: Vec<DVec3> = out.iter().map(|p| p[joint.index()]).collect();
         let segments = match contacts {
@@ -255,7 +267,13 @@ pub fn foot_lock(
         };
         let locks: Vec<Lock> = segments
             .into_iter()
-            .filter(|s| s.len() >= config.min_contact_frames.max(1))
+            .filter(|s| s.len() >= min_frames)
+            .map(|s| {
+                let held = steadiest(&track, s.clone(), config.max_lock_offset_m);
+                shortened += usize::from(held != s);
+                held
+            })
+            .filter(|s| s.len() >= min_frames)
             .map(|s| Lock::new(&track, s, config.plant_on_floor.then_some(standing[k]), config.height_tolerance_m))
             .collect();
         locked[k] = locks.iter().map(|l| l.frames.clone()).collect();
@@ -283,7 +301,7 @@ pub fn foot_lock(
             pose[toe] = solved.leg.toe;
         }
     }
-    let report = report(poses, &out, floor_m, lowered_m, Some(locked), unreachable);
+    let report = report(poses, &out, floor_m, lowered_m, Some(locked), shortened, unreachable);
     Ok(FootLocked { poses: out, report })
 }
 
@@ -294,6 +312,7 @@ fn report(
     floor_m: f64,
     lowered_m: f64,
     locked: Option<[Vec<Range<usize>>; 4]>,
+    shortened: usize,
     unreachable: usize,
 ) -> FootLockReport {
     let displacements: Vec<f64> =
@@ -313,6 +332,7 @@ fn report(
             let segments = std::mem::take(&mut segments[k]);
             JointContacts { joint: CONTACT_JOINTS[k], locked_frames: segments.iter().map(Range::len).sum(), segments }
         }),
+        shortened,
         unreachable,
         max_displacement_m: displacements.iter().copied().fold(0.0, f64::max),
         mean_displacement_m: displacements.iter().sum::<f64>() / displacements.len().max(1) as f64,

@@ -119,10 +119,34 @@ fn assert_slide_held(step_m: f64, labels: Option<&[[bool; 4]]>) {
 
 #[test]
 fn a_sliding_stance_foot_is_held_with_every_bone_kept() {
-    // 5 cm per frame (1 m/s, the entering speed) with the contact given as labels ...
-    assert_slide_held(0.05, Some(&[[true, true, false, false]; 10]));
-    // ... and 4 cm per frame found by detection.
-    assert_slide_held(0.04, None);
+    // 3 cm per frame (0.6 m/s; 27 cm in all, so the hold is at most 13.5 cm from the slide,
+    // under the 15 cm cap) with the contact given as labels ...
+    assert_slide_held(0.03, Some(&[[true, true, false, false]; 10]));
+    // ... and found by detection.
+    assert_slide_held(0.03, None);
+}
+
+#[test]
+fn a_slide_longer_than_the_cap_is_held_only_over_its_steadiest_stretch() {
+    // 5 cm per frame for 10 frames: 45 cm. Held at the mean, the ends would move 22.5 cm.
+    let poses = sliding(0.05);
+    let out = foot_lock(&poses, Some(&[[true, true, false, false]; 10]), &FootLockConfig::default()).unwrap();
+    let r = &out.report;
+    assert_eq!(r.shortened, 2, "ankle and toe: {r:?}");
+    for k in [0, 1] {
+        let segments = &r.contacts[k].segments;
+        assert!(segments.len() == 1 && segments[0].len() >= 3 && segments[0].len() < 10, "{segments:?}");
+    }
+    // No joint moves farther than the cap (plus the leg's soft reach), bones are kept, and the
+    // held stretch does not slide.
+    // The ankle and toe keep the same stretch, so the foot is held flat.
+    assert_eq!(r.contacts[0].segments, r.contacts[1].segments, "{r:?}");
+    assert!(r.max_displacement_m <= 0.15 + 0.01, "{r:?}");
+    assert!(bone_change(&poses, &out.poses) < 1e-9);
+    let held = r.contacts[0].segments[0].clone();
+    let ankle = |t: usize| out.poses[t][Joint::LeftAnkle.index()];
+    assert!(held.clone().all(|t| (ankle(t) - ankle(held.start)).length() < 1e-3));
+    assert!(r.skate_after < r.skate_before, "{r:?}");
 }
 
 #[test]
@@ -260,6 +284,11 @@ fn stretched(poses: &[Pose], factor: f64) -> Vec<Pose> {
 #[test]
 fn sliding_walks_get_their_skate_cut() {
     let mut failed = Vec::new();
+    // Stretched 1.5×, a stance foot (about 0.6 s at 1.3 m/s) slides some 40 cm: the locks hold
+    // the stretch of it that fits their 15 cm cap and let the rest go (by design, see
+    // `a_slide_longer_than_the_cap_is_held_only_over_its_steadiest_stretch`), so the skate
+    // falls by at least a quarter rather than vanishing, and no joint is dragged far (under
+    // 25 cm: the knee follows a foot held 15 cm away).
     for (name, poses) in walking_clips(SIX_SECONDS) {
         let sliding = stretched(&poses, 1.5);
         let out = foot_lock(&sliding, None, &FootLockConfig::default()).unwrap();
@@ -278,7 +307,8 @@ fn sliding_walks_get_their_skate_cut() {
         // Locks let go of no faster than 0.5 m/s and the soft reach keeps knees from snapping:
         // no new acceleration peaks.
         if !(r.skate_before > 0.1
-            && r.skate_after < 0.5 * r.skate_before
+            && r.skate_after < 0.75 * r.skate_before
+            && r.max_displacement_m < 0.25
             && bone_change(&sliding, &out.poses) < 1e-9
             && max_acceleration(&out.poses) <= 1.15 * max_acceleration(&sliding))
         {
