@@ -37,9 +37,9 @@ pub struct LegSolution {
 /// Thigh `|knee − hip|`, shin `|ankle − knee|` and foot `|toe − ankle|` keep their input lengths.
 /// A target nearer than `thigh + shin − soft_m` to the hip is hit exactly; beyond, the ankle lies
 /// on the hip–target line at [`soft_reach`] of the distance, m.
-/// The knee lies in the plane spanned by the hip→target line and the original knee (the pole
-/// vector); when the original knee lies on that line, in the plane of `forward` (the body's
-/// facing direction, knees bend forward). The toe is placed at the foot's length from the new
+/// The knee lies in the plane spanned by the hip→target line and the way the original knee bends
+/// off its own hip–ankle line ([`bend`], the pole vector); a straight original leg bends towards
+/// `forward` (the body's facing direction, knees bend forward). The toe is placed at the foot's length from the new
 /// ankle towards `toe_target` (exactly on it when the two targets are a foot's length apart).
 pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, forward: DVec3, soft_m: f64) -> LegSolution {
     let thigh = (leg.knee - leg.hip).length();
@@ -52,7 +52,7 @@ pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, forward: DVe
     let distance = to_target.length();
     let reached = distance >= min_reach && distance <= max_reach;
     let distance = soft_reach(distance, max_reach, soft_m).max(min_reach);
-    let pole = perpendicular(leg.knee - leg.hip, axis)
+    let pole = perpendicular(bend(leg, forward), axis)
         .or_else(|| perpendicular(forward, axis))
         .unwrap_or_else(|| axis.any_orthonormal_vector());
     // Law of cosines for the angle at the hip between the hip→ankle line and the thigh.
@@ -65,6 +65,25 @@ pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, forward: DVe
     let toe = ankle + foot * toe_direction;
     LegSolution { leg: Leg { hip: leg.hip, knee, ankle, toe }, reached }
 }
+
+/// Which way the knee of `leg` bends, m: the knee's offset from the hip–ankle line, plus a
+/// little of `forward` (up to [`STRAIGHT_KNEE_M`] as the offset shrinks to 0), so a leg that is
+/// straight or nearly so bends forward like a knee rather than wherever round-off points.
+///
+/// Taken against the leg's own hip–ankle line, not the line to the new target: a straight
+/// stance leg whose ankle is held ahead of where it was would otherwise have its thigh direction
+/// read as a backward bend, and its knee flips behind the leg for a frame (seen as a 0.49
+/// m/frame² spike on the README's gap task).
+fn bend(leg: &Leg, forward: DVec3) -> DVec3 {
+    let line = (leg.ankle - leg.hip).try_normalize().unwrap_or(DVec3::NEG_Y);
+    let knee = leg.knee - leg.hip;
+    let offset = knee - knee.dot(line) * line;
+    let straightness = (1.0 - offset.length() / STRAIGHT_KNEE_M).max(0.0);
+    offset + STRAIGHT_KNEE_M * straightness * forward.normalize_or_zero()
+}
+
+/// A knee less than this off its hip–ankle line counts as nearly straight, m.
+const STRAIGHT_KNEE_M: f64 = 0.01;
 
 /// Distance from the hip at which a leg of full reach `max_reach` (m) puts an ankle whose target
 /// is `distance` away: the distance itself up to `max_reach − soft_m`, then
@@ -123,6 +142,25 @@ mod tests {
         let axis = (s.leg.ankle - s.leg.hip).normalize();
         let bend = perpendicular(s.leg.knee - s.leg.hip, axis).unwrap();
         assert!(bend.z > 0.9, "knee bends forward like the original: {bend}");
+    }
+
+    #[test]
+    fn a_straight_leg_held_ahead_bends_its_knee_forward() {
+        // A straight stance leg under the hip; its ankle is held 15 cm ahead and 5 cm higher (the
+        // network slid it back). Against the line to the target the straight thigh points back.
+        let leg = Leg {
+            hip: DVec3::new(0.1, 0.9, 0.0),
+            knee: DVec3::new(0.1, 0.485, 0.0),
+            ankle: DVec3::new(0.1, 0.07, 0.0),
+            toe: DVec3::new(0.1, 0.02, 0.12),
+        };
+        let ankle = DVec3::new(0.1, 0.12, 0.15);
+        let s = solve_leg(&leg, ankle, ankle + DVec3::new(0.0, -0.05, 0.12), DVec3::Z, 0.01);
+        assert!(s.reached);
+        assert_lengths_kept(&leg, &s.leg);
+        let axis = (s.leg.ankle - s.leg.hip).normalize();
+        let bend = perpendicular(s.leg.knee - s.leg.hip, axis).unwrap();
+        assert!(bend.z > 0.9, "the knee bends forward, not behind the leg: {bend}");
     }
 
     #[test]
