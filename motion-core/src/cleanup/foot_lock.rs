@@ -58,9 +58,10 @@ impl Lock {
 /// and the rest of the contact is left as generated.
 pub fn steadiest(track: &[DVec3], frames: Range<usize>, max_offset_m: f64) -> Range<usize> {
     let flat = |t: usize| DVec3::new(track[t].x, 0.0, track[t].z);
+    let mean = |r: &Range<usize>| r.clone().map(flat).sum::<DVec3>() / r.len() as f64;
     let fits = |r: &Range<usize>| {
-        let mean = r.clone().map(flat).sum::<DVec3>() / r.len() as f64;
-        r.clone().all(|t| (flat(t) - mean).length() <= max_offset_m)
+        let hold = mean(r);
+        r.clone().all(|t| (flat(t) - hold).length() <= max_offset_m)
     };
     if fits(&frames) {
         return frames;
@@ -87,8 +88,8 @@ pub fn steadiest(track: &[DVec3], frames: Range<usize>, max_offset_m: f64) -> Ra
         run = match (left, right) {
             (Some(l), Some(r)) => {
                 // Grow towards the frame nearer the current hold.
-                let mean = run.clone().map(flat).sum::<DVec3>() / run.len() as f64;
-                if (flat(l.start) - mean).length() <= (flat(r.end - 1) - mean).length() + 1e-9 {
+                let hold = mean(&run);
+                if (flat(l.start) - hold).length() <= (flat(r.end - 1) - hold).length() + 1e-9 {
                     l
                 } else {
                     r

@@ -39,8 +39,9 @@ pub struct LegSolution {
 /// on the hip–target line at [`soft_reach`] of the distance, m.
 /// The knee lies in the plane spanned by the hip→target line and the way the original knee bends
 /// off its own hip–ankle line ([`bend`], the pole vector); a straight original leg bends towards
-/// `forward` (the body's facing direction, knees bend forward). The toe is placed at the foot's length from the new
-/// ankle towards `toe_target` (exactly on it when the two targets are a foot's length apart).
+/// `forward` (the body's facing direction, knees bend forward). The toe is placed at the foot's
+/// length from the new ankle towards `toe_target` (exactly on it when the two targets are a
+/// foot's length apart).
 pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, forward: DVec3, soft_m: f64) -> LegSolution {
     let thigh = (leg.knee - leg.hip).length();
     let shin = (leg.ankle - leg.knee).length();

@@ -13,8 +13,8 @@
 //!    (the 263-d features' four channels) can pass them instead.
 //! 3. **Locks** ([`foot_lock::Lock`]): per contact, the joint is held at its mean horizontal
 //!    position (over the contact's steadiest stretch when it slides farther than
-//!    [`FootLockConfig::max_lock_offset_m`] from that mean, [`foot_lock::steadiest`]) and lifted so that its median height comes within
-//!    [`FootLockConfig::height_tolerance_m`] of its standing height (it keeps its own small
+//!    [`FootLockConfig::max_lock_offset_m`] from that mean, [`foot_lock::steadiest`]) and
+//!    lifted so that its median height comes within [`FootLockConfig::height_tolerance_m`] of its standing height (it keeps its own small
 //!    vertical motion, such as a heel rising before the foot leaves); it eases back to its own
 //!    motion over [`FootLockConfig::blend_frames`] frames on either side, more for a large
 //!    offset ([`FootLockConfig::blend_speed_m_per_s`]), so nothing pops.

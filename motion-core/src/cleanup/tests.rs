@@ -137,10 +137,10 @@ fn a_slide_longer_than_the_cap_is_held_only_over_its_steadiest_stretch() {
         let segments = &r.contacts[k].segments;
         assert!(segments.len() == 1 && segments[0].len() >= 3 && segments[0].len() < 10, "{segments:?}");
     }
-    // No joint moves farther than the cap (plus the leg's soft reach), bones are kept, and the
-    // held stretch does not slide.
     // The ankle and toe keep the same stretch, so the foot is held flat.
     assert_eq!(r.contacts[0].segments, r.contacts[1].segments, "{r:?}");
+    // No joint moves farther than the cap (plus the leg's soft reach), bones are kept, and the
+    // held stretch does not slide.
     assert!(r.max_displacement_m <= 0.15 + 0.01, "{r:?}");
     assert!(bone_change(&poses, &out.poses) < 1e-9);
     let held = r.contacts[0].segments[0].clone();

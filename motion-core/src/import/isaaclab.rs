@@ -76,6 +76,8 @@ pub struct IsaacAmpClip {
 impl IsaacAmpClip {
     /// Reads a motion file.
     pub fn read(path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
+        // Opened first so that a missing or unreadable file is an I/O error with its OS reason,
+        // not an npz message.
         std::fs::File::open(path).map_err(|source| ImportError::Io { path: path.into(), source })?;
         let npz = |e: candle_core::Error| ImportError::Invalid {
             path: path.into(),
