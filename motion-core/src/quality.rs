@@ -4,6 +4,7 @@
 use candle_core::{Device, Tensor};
 use serde::Serialize;
 
+use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::database::MotionDatabase;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
@@ -96,8 +97,11 @@ impl MetricMeans {
 pub struct LabelQuality {
     /// The label (also the prompt).
     pub label: String,
-    /// Generated samples.
+    /// Generated samples, as the network made them.
     pub samples: MetricMeans,
+    /// The same samples after the foot clean-up with its defaults ([`foot_lock`]): the motions
+    /// `mogen sample` writes.
+    pub cleaned: MetricMeans,
     /// Training windows of the label (cropped to the same length).
     pub training: MetricMeans,
     /// Mean over samples of the RMS joint distance (root-relative, heading-free) to the nearest
@@ -219,6 +223,11 @@ pub fn quality_report(
         )?;
         let raw = prior.to_features(&x).map_err(fail)?;
         let samples = tensor_to_poses(&prior.joints_of(&raw).map_err(fail)?).map_err(fail)?;
+        let cleaned: Vec<Vec<Pose>> = samples
+            .iter()
+            .map(|m| foot_lock(m, None, &FootLockConfig::default()).map(|c| c.poses))
+            .collect::<Result<_, _>>()
+            .map_err(|e| PriorError::Format { path: "<quality report>".into(), message: e.to_string() })?;
         let sample_desc = descriptors(
             &raw.chunk(raw.dim(0).map_err(fail)?, 0)
                 .map_err(fail)?
@@ -255,6 +264,7 @@ pub fn quality_report(
         let row = LabelQuality {
             label: label.clone(),
             samples: MetricMeans::of(&samples),
+            cleaned: MetricMeans::of(&cleaned),
             training,
             nearest_training_m: nearest,
             training_spacing_m: spacing,

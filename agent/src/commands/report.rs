@@ -4,10 +4,11 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use motion_core::cleanup::{foot_lock, FootLockConfig};
 use motion_core::database::MotionDatabase;
 use motion_core::inversion::InversionConfig;
 use motion_core::prior::{Prior, RootDecode};
-use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, QualityConfig};
+use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, MetricMeans, QualityConfig};
 use motion_core::render::{motion_strip, StripRow};
 
 use crate::paths;
@@ -76,47 +77,20 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         seed: args.seed,
         labels: args.labels,
     };
-    let header = "| label | steps/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | bone range (m) | deepest joint under floor (m) | lower toe y (m) | airborne | turn ° (left / right) | spikes | head y (m) | travel (m) | nearest train (m) | data spacing (m) | diversity (m) |";
+    let metric_columns = "steps/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | bone range (m) | deepest joint under floor (m) | lower toe y (m) | airborne | turn ° (left / right) | spikes | head y (m) | travel (m)";
+    let header = format!("| label | {metric_columns} | nearest train (m) | data spacing (m) | diversity (m) |");
     let decode = format!(
-        "Root decode: `{}` (samples and training data alike). Each cell: generated / training data.",
+        "Root decode: `{}` (samples and training data alike). Each cell: generated / training data. The samples as the network made them, before the foot clean-up:",
         args.root_decode
     );
     println!("{decode}\n");
-    let mut lines = vec![decode, String::new(), header.to_owned(), format!("|{}", "---|".repeat(17))];
+    let mut lines = vec![decode, String::new(), header.clone(), format!("|{}", "---|".repeat(17))];
     println!("{header}");
     let rows = quality_report(&prior, &db, &config, &device, |r| {
-        let (g, d) = (&r.samples, &r.training);
         let line = format!(
-            "| {} | {:.2} / {:.2} | {:.3} / {:.3} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.0}% / {:.0}% | {:+.0} ({:.0}% / {:.0}%) / {:+.0} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {:.3} | {:.3} | {:.3} |",
+            "| {} | {} | {:.3} | {:.3} | {:.3} |",
             r.label,
-            g.steps_per_second,
-            d.steps_per_second,
-            g.toe_flicker,
-            d.toe_flicker,
-            g.mean_acceleration,
-            d.mean_acceleration,
-            g.max_acceleration,
-            d.max_acceleration,
-            g.foot_skate_ratio,
-            d.foot_skate_ratio,
-            g.bone_length_range_m,
-            d.bone_length_range_m,
-            g.ground_penetration_m,
-            d.ground_penetration_m,
-            g.stance_toe_height_m,
-            d.stance_toe_height_m,
-            100.0 * g.airborne_share,
-            100.0 * d.airborne_share,
-            g.turn_deg,
-            100.0 * g.turn_left_share,
-            100.0 * g.turn_right_share,
-            d.turn_deg,
-            g.spikes,
-            d.spikes,
-            g.head_height_m,
-            d.head_height_m,
-            g.travel_m,
-            d.travel_m,
+            metric_cells(&r.samples, &r.training),
             r.nearest_training_m,
             r.training_spacing_m,
             r.sample_diversity_m
@@ -124,6 +98,18 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         println!("{line}");
         lines.push(line);
     })?;
+    let cleaned = [
+        String::new(),
+        "The same samples after the foot clean-up (defaults; what `mogen sample` writes), each cell: cleaned / training data:".to_owned(),
+        String::new(),
+        format!("| label | {metric_columns} |"),
+        format!("|{}", "---|".repeat(14)),
+    ];
+    lines.extend(cleaned);
+    for r in &rows {
+        lines.push(format!("| {} | {} |", r.label, metric_cells(&r.cleaned, &r.training)));
+    }
+    println!("{}", lines[lines.len() - rows.len() - 4..].join("\n"));
     lines.push(String::new());
     let walk = "a person walks forward";
     if db.labels().iter().any(|l| l == walk) {
@@ -177,6 +163,8 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&rows)?)?;
     let strip_labels = [
         "a person walks forward",
+        "a person walks and turns left",
+        "a person walks and turns right",
         "a person runs forward",
         "a person crawls forward on the ground",
         "a person jumps forward",
@@ -194,16 +182,56 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
                 motion_core::diffusion::Guidance { scale: args.guidance },
                 &device,
             )?;
-            motions.push((
-                format!("{label} (seed {})", 1000 + 10 * i as u64 + seed),
-                motion_core::quality::joints_of(&prior, &x)?.remove(0),
-            ));
+            let poses = motion_core::quality::joints_of(&prior, &x)?.remove(0);
+            let cleaned = foot_lock(&poses, None, &FootLockConfig::default())?.poses;
+            motions.push((format!("{label} (seed {})", 1000 + 10 * i as u64 + seed), cleaned));
         }
     }
     let strip: Vec<StripRow<'_>> = motions.iter().map(|(l, p)| StripRow { label: l.clone(), poses: p }).collect();
-    motion_strip(&strip, 8, &[], "unconstrained samples of the shipped prior", &args.out.join("samples.png"))?;
+    motion_strip(
+        &strip,
+        8,
+        &[],
+        "unconstrained samples of the shipped prior, after the foot clean-up",
+        &args.out.join("samples.png"),
+    )?;
     println!("wrote {}/{{report.md,report.json,samples.png}}", args.out.display());
     Ok(())
+}
+
+/// The metric cells of one row, "generated / training data" each, in the header's order.
+fn metric_cells(g: &MetricMeans, d: &MetricMeans) -> String {
+    format!(
+        "{:.2} / {:.2} | {:.3} / {:.3} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.0}% / {:.0}% | {:+.0} ({:.0}% / {:.0}%) / {:+.0} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2}",
+        g.steps_per_second,
+        d.steps_per_second,
+        g.toe_flicker,
+        d.toe_flicker,
+        g.mean_acceleration,
+        d.mean_acceleration,
+        g.max_acceleration,
+        d.max_acceleration,
+        g.foot_skate_ratio,
+        d.foot_skate_ratio,
+        g.bone_length_range_m,
+        d.bone_length_range_m,
+        g.ground_penetration_m,
+        d.ground_penetration_m,
+        g.stance_toe_height_m,
+        d.stance_toe_height_m,
+        100.0 * g.airborne_share,
+        100.0 * d.airborne_share,
+        g.turn_deg,
+        100.0 * g.turn_left_share,
+        100.0 * g.turn_right_share,
+        d.turn_deg,
+        g.spikes,
+        d.spikes,
+        g.head_height_m,
+        d.head_height_m,
+        g.travel_m,
+        d.travel_m,
+    )
 }
 
 #[derive(Debug, Args)]

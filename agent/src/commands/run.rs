@@ -246,10 +246,13 @@ pub fn print_summary(report: &TaskReport) {
         let locked: usize = cleanup.samples.iter().flat_map(|s| s.contacts.iter()).map(|c| c.locked_frames).sum();
         let moved = cleanup.samples.iter().map(|s| s.max_displacement_m).fold(0.0, f64::max);
         let shortened: usize = cleanup.samples.iter().map(|s| s.shortened).sum();
+        let raised = cleanup.samples.iter().map(|s| s.raised_m).fold(0.0, f64::max);
+        let held: usize = cleanup.samples.iter().map(|s| s.held_above_floor).sum();
         let penetration = before.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
         println!(
             "  foot clean-up: {locked} joint-frames locked ({shortened} sliding contacts cut to their steadiest \
-             stretch), joints moved up to {moved:.3} m; before it: foot skate {:.3}, \
+             stretch), sinking frames raised up to {raised:.3} m, {held} leg-frames held above the floor, joints \
+             moved up to {moved:.3} m; before it: foot skate {:.3}, \
              all constraints met by {:.0}%, max scene penetration {penetration}{}",
             before.foot_skate_ratio,
             100.0 * before.success_rate,

@@ -78,9 +78,16 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     if lock.enabled {
         for (i, r) in reports.iter().enumerate() {
             eprintln!(
-                "sample {i}: foot clean-up lowered the body {:.3} m, moved joints up to {:.3} m ({} sliding contacts \
-                 cut to their steadiest stretch), foot skate {:.3} → {:.3}",
-                r.lowered_m, r.max_displacement_m, r.shortened, r.skate_before, r.skate_after
+                "sample {i}: foot clean-up lowered the body {:.3} m, raised sinking frames up to {:.3} m, moved \
+                 joints up to {:.3} m ({} sliding contacts cut to their steadiest stretch, {} leg-frames held above \
+                 the floor), foot skate {:.3} → {:.3}",
+                r.lowered_m,
+                r.raised_m,
+                r.max_displacement_m,
+                r.shortened,
+                r.held_above_floor,
+                r.skate_before,
+                r.skate_after
             );
         }
     }

@@ -37,6 +37,25 @@ pub fn floor_height(poses: &[Pose], standing_m: &[f64; 4]) -> f64 {
     lowest[((lowest.len() - 1) as f64 * FLOOR_PERCENTILE).round() as usize]
 }
 
+/// How far each frame of a motion must rise so that no joint centre lies below the floor y = 0,
+/// m, spread smoothly over ±`radius` frames: each frame's depth `max(0, −min_j y_j)`, dilated
+/// (the largest depth within `radius` frames), then averaged over the same window. Every window
+/// holding frame t holds only values ≥ t's depth, so the lift never falls short of a frame's own
+/// depth, and it rises and falls over `radius` frames instead of popping. `NaN` coordinates are
+/// ignored.
+pub fn sinking_lift(poses: &[Pose], radius: usize) -> Vec<f64> {
+    let depth: Vec<f64> =
+        poses.iter().map(|p| p.iter().map(|v| -v.y).filter(|d| d.is_finite()).fold(0.0, f64::max)).collect();
+    let window = |t: usize| t.saturating_sub(radius)..(t + radius + 1).min(depth.len());
+    let dilated: Vec<f64> = (0..depth.len()).map(|t| depth[window(t)].iter().copied().fold(0.0, f64::max)).collect();
+    (0..depth.len())
+        .map(|t| {
+            let w = window(t);
+            dilated[w.clone()].iter().sum::<f64>() / w.len() as f64
+        })
+        .collect()
+}
+
 /// Speed of a joint per frame, m/s: central differences, one-sided at the ends (0 for one frame).
 pub fn speeds(track: &[DVec3]) -> Vec<f64> {
     let last = track.len().saturating_sub(1);
@@ -127,6 +146,23 @@ mod tests {
         let clearance = [0.0, 0.0, 0.01, 0.03, 0.03, 0.03, 0.01];
         let speed = [2.0, 1.2, 0.5, 1.2, 1.6, 1.2, 0.2];
         assert_eq!(detect(&clearance, &speed, &H), vec![2..4, 6..7]);
+    }
+
+    #[test]
+    fn a_sinking_frame_is_lifted_by_at_least_its_depth_and_the_lift_ramps() {
+        // Frames 5 and 6 sink 4 and 2 cm; the rest stand on the floor.
+        let mut poses = vec![[DVec3::new(0.0, 0.05, 0.0); NUM_JOINTS]; 12];
+        poses[5][3].y = -0.04;
+        poses[6][7].y = -0.02;
+        let lift = sinking_lift(&poses, 2);
+        assert!(lift[5] >= 0.04 - 1e-12 && lift[6] >= 0.02 - 1e-12, "{lift:?}");
+        // The dilation reaches frames 3..=8, the average 1..=10.
+        assert!(lift[..1].iter().chain(&lift[11..]).all(|&l| l == 0.0) && lift[1] > 0.0, "{lift:?}");
+        // Never more than the deepest frame, and at most a window's share of it per frame.
+        assert!(lift.iter().all(|&l| l <= 0.04 + 1e-12));
+        assert!(lift.windows(2).all(|w| (w[1] - w[0]).abs() <= 0.04 / 5.0 * 2.0 + 1e-12), "{lift:?}");
+        assert_eq!(sinking_lift(&poses[..2], 2), vec![0.0, 0.0]);
+        assert!(sinking_lift(&[], 2).is_empty());
     }
 
     #[test]

@@ -5,8 +5,10 @@
 //! positions (m, y up, 20 fps, floor y = 0):
 //! 1. **Floor** ([`contact::floor_height`]): a body hovering above the floor by more than
 //!    [`FootLockConfig::float_tolerance_m`] is lowered as a whole (every joint, the pelvis
-//!    included) onto it. Generated motions float or sink a few centimetres; this one vertical
-//!    offset is the only change to the pelvis and the upper body.
+//!    included) onto it; frames in which a joint sinks below the floor are raised as a whole
+//!    by at least that depth, the raise spread over [`SINK_RAISE_FRAMES`] frames on either side
+//!    ([`contact::sinking_lift`]). Generated motions float or sink a few centimetres; these
+//!    vertical offsets are the only change to the pelvis and the upper body.
 //! 2. **Contacts** ([`contact::detect`]): each of the four [`CONTACT_JOINTS`] (ankles, toes) is
 //!    in contact while it is low above the floor and slow, with hysteresis; contacts shorter
 //!    than [`FootLockConfig::min_contact_frames`] are dropped. Callers holding contact labels
@@ -22,7 +24,12 @@
 //!    shin and foot lengths kept exactly; a free ankle follows its toe's correction (and a free
 //!    toe its ankle's), so the foot turns about the planted joint. A target out of the leg's
 //!    reach gives the closest point the leg reaches with the knee a little bent (soft reach,
-//!    [`FootLockConfig::soft_reach_m`]) and is counted.
+//!    [`FootLockConfig::soft_reach_m`]) and is counted. The IK never takes a knee, ankle or toe
+//!    below the floor, nor deeper than it was: where the full correction would, the leg takes
+//!    the largest fraction of it that does not (`floor_safe_fraction`), and neighbouring frames
+//!    ease into that fraction at most [`FLOOR_FRACTION_STEP`] per frame. (A lock lowering a
+//!    stance ankle to its standing height used to push its toe, or a crawl's knee, up to 7 cm
+//!    through the floor.)
 //!
 //! Only the knees, ankles and toes move (and the whole body by the floor offset), so a
 //! constraint on any other joint keeps its error exactly unless the body is lowered. A
@@ -46,14 +53,24 @@ use serde::{Deserialize, Serialize};
 use crate::metrics::foot_skate_ratio;
 use crate::skeleton::{bone_lengths, Joint, Pose, CONTACT_JOINTS, FPS, NUM_JOINTS};
 use crate::MotionError;
-use contact::{detect, floor_height, runs, speeds, Hysteresis};
+use contact::{detect, floor_height, runs, sinking_lift, speeds, Hysteresis};
 use foot_lock::{corrections, steadiest, Correction, Easing, Lock};
-use leg_ik::{solve_leg, Leg};
+use leg_ik::{solve_leg, Leg, LegSolution};
 
 /// The clean-up raises no task constraint's error `E` by more than this fraction of `E` ...
 pub const CONSTRAINT_TOLERANCE_RELATIVE: f64 = 0.05;
 /// ... plus this, in the constraint's own unit (m² for squared position errors: a 1 cm miss).
 pub const CONSTRAINT_TOLERANCE_ABSOLUTE: f64 = 1e-4;
+
+/// Frames on either side over which a sinking frame's raise is spread (0.2 s at 20 fps).
+pub const SINK_RAISE_FRAMES: usize = 4;
+
+/// Largest change per frame of the fraction of a leg's correction the floor lets through: a
+/// leg whose correction is held back for the floor eases into and out of it over 4 frames.
+pub const FLOOR_FRACTION_STEP: f64 = 0.25;
+
+/// How far below the floor, or below where it was, the IK may leave a joint, m (round-off).
+const FLOOR_SLACK_M: f64 = 1e-3;
 
 /// Settings of [`foot_lock`]. Heights and speeds were measured on the shipped walking clips
 /// (`fixtures/mocap`, the DeepMimic walks): standing ankles at 5.9–7.2 cm (median per clip),
@@ -102,10 +119,10 @@ pub struct FootLockConfig {
     /// a held foot the hip pulls out of reach then follows it smoothly instead of snapping
     /// the knee straight.
     pub soft_reach_m: f64,
-    /// Plant contacts on the floor y = 0: lower a floating body and bring locked joints within
-    /// `height_tolerance_m` of their standing heights (default true). Switch off for motions on
-    /// raised supports (a balance beam): locks then hold only horizontally, and the body keeps
-    /// its height.
+    /// Plant contacts on the floor y = 0: lower a floating body, raise sinking frames, keep the
+    /// leg IK above the floor, and bring locked joints within `height_tolerance_m` of their
+    /// standing heights (default true). Switch off for motions on raised supports (a balance
+    /// beam): locks then hold only horizontally, and the body keeps its height.
     pub plant_on_floor: bool,
     /// A body floating less than this above the floor is not lowered, m (default 0.02): its
     /// stance feet come within `height_tolerance_m` of the floor through the leg IK.
@@ -174,6 +191,9 @@ pub struct FootLockReport {
     pub floor_m: f64,
     /// How far the whole body was lowered, m (0 or `floor_m`).
     pub lowered_m: f64,
+    /// Largest raise of a sinking frame, m (0 when no joint sank below the floor).
+    #[serde(default)]
+    pub raised_m: f64,
     /// Contacts per joint, in [`CONTACT_JOINTS`] order.
     pub contacts: [JointContacts; 4],
     /// Contacts cut to their steadiest stretch (or dropped) because the joint slid farther
@@ -181,6 +201,10 @@ pub struct FootLockReport {
     pub shortened: usize,
     /// Leg solves whose ankle target was out of the leg's reach (one per leg and frame).
     pub unreachable: usize,
+    /// Leg solves that took only part of their correction so as not to push a joint through
+    /// the floor (one per leg and frame).
+    #[serde(default)]
+    pub held_above_floor: usize,
     /// Largest joint displacement, m.
     pub max_displacement_m: f64,
     /// Mean displacement over every joint of every frame, m.
@@ -242,12 +266,17 @@ pub fn foot_lock(
     let standing = config.standing_m();
     let floor_m = floor_height(poses, &standing);
     if !config.enabled {
-        return Ok(FootLocked { poses: poses.to_vec(), report: report(poses, poses, floor_m, 0.0, None, 0, 0) });
+        let report = report(poses, poses, (floor_m, 0.0, 0.0), None, Counts::default());
+        return Ok(FootLocked { poses: poses.to_vec(), report });
     }
 
-    // 1. Floor: lower a floating body as a whole.
+    // 1. Floor: lower a floating body as a whole, raise the frames that sink.
     let lowered_m = if config.plant_on_floor && floor_m > config.float_tolerance_m { floor_m } else { 0.0 };
     let mut out: Vec<Pose> = poses.iter().map(|p| p.map(|v| v - DVec3::Y * lowered_m)).collect();
+    let raise = if config.plant_on_floor { sinking_lift(&out, SINK_RAISE_FRAMES) } else { vec![0.0; out.len()] };
+    for (pose, r) in out.iter_mut().zip(&raise) {
+        *pose = pose.map(|v| v + DVec3::Y * *r);
+    }
 
     // 2–3. Contacts and the correction of each foot joint.
     let mut locked: [Vec<Range<usize>>; 4] = Default::default();
@@ -259,9 +288,11 @@ pub fn foot_lock(
         let segments = match contacts {
             Some(labels) => runs(labels.iter().map(|c| c[k])),
             None => {
-                // Measured from y = 0 under a sinking motion: its sunk feet count as low.
+                // Measured from y = 0 under a sinking motion: its sunk feet count as low. The
+                // raise of sinking frames is left out, so it does not end a contact.
                 let floor = (floor_m - lowered_m).max(0.0);
-                let clearance: Vec<f64> = track.iter().map(|v| v.y - floor - standing[k]).collect();
+                let clearance: Vec<f64> =
+                    track.iter().zip(&raise).map(|(v, r)| v.y - r - floor - standing[k]).collect();
                 detect(&clearance, &speeds(&track), &config.hysteresis())
             }
         };
@@ -280,40 +311,109 @@ pub fn foot_lock(
         correction.push(corrections(&track, &locks, &config.easing()));
     }
 
-    // 4. Leg IK towards the corrected ankle and toe.
-    let mut unreachable = 0;
-    for (t, pose) in out.iter_mut().enumerate() {
-        let forward = (pose[Joint::LeftHip.index()] - pose[Joint::RightHip.index()]).cross(DVec3::Y);
-        for (hip, knee, a, b) in LEGS {
-            let (ankle_c, toe_c) = (correction[a][t], correction[b][t]);
-            if ankle_c.weight == 0.0 && toe_c.weight == 0.0 {
-                continue;
-            }
-            let (ankle, toe) = (CONTACT_JOINTS[a].index(), CONTACT_JOINTS[b].index());
+    // 4. Leg IK towards the corrected ankle and toe, kept above the floor.
+    let (mut unreachable, mut held_above_floor) = (0, 0);
+    for (hip, knee, a, b) in LEGS {
+        let (ankle, toe) = (CONTACT_JOINTS[a].index(), CONTACT_JOINTS[b].index());
+        let moved = |t: usize| correction[a][t].weight > 0.0 || correction[b][t].weight > 0.0;
+        // The leg of frame t solved towards `fraction` of its correction.
+        let solve = |t: usize, fraction: f64| {
+            let pose = &out[t];
+            let forward = (pose[Joint::LeftHip.index()] - pose[Joint::RightHip.index()]).cross(DVec3::Y);
             let leg = Leg { hip: pose[hip.index()], knee: pose[knee.index()], ankle: pose[ankle], toe: pose[toe] };
+            let (ankle_c, toe_c) = (correction[a][t], correction[b][t]);
             // A free joint follows its partner's correction: the foot rolls about the held one.
-            let ankle_target = leg.ankle + ankle_c.offset + (1.0 - ankle_c.weight) * toe_c.offset;
-            let toe_target = leg.toe + toe_c.offset + (1.0 - toe_c.weight) * ankle_c.offset;
-            let solved = solve_leg(&leg, ankle_target, toe_target, forward, config.soft_reach_m);
+            let ankle_offset = ankle_c.offset + (1.0 - ankle_c.weight) * toe_c.offset;
+            let toe_offset = toe_c.offset + (1.0 - toe_c.weight) * ankle_c.offset;
+            let target = |joint: DVec3, offset: DVec3| joint + fraction * offset;
+            let solved = solve_leg(
+                &leg,
+                target(leg.ankle, ankle_offset),
+                target(leg.toe, toe_offset),
+                forward,
+                config.soft_reach_m,
+            );
+            (leg, solved)
+        };
+        let fractions: Vec<f64> = (0..out.len())
+            .map(|t| match moved(t) && config.plant_on_floor {
+                true => floor_safe_fraction(|f| solve(t, f)),
+                false => 1.0,
+            })
+            .collect();
+        let fractions = ease_down(&fractions, FLOOR_FRACTION_STEP);
+        let solutions: Vec<Option<(f64, LegSolution)>> =
+            fractions.iter().enumerate().map(|(t, &f)| moved(t).then(|| (f, solve(t, f).1))).collect();
+        for (pose, (fraction, solved)) in out.iter_mut().zip(solutions).filter_map(|(p, s)| Some((p, s?))) {
             unreachable += usize::from(!solved.reached);
+            held_above_floor += usize::from(fraction < 1.0);
             pose[knee.index()] = solved.leg.knee;
             pose[ankle] = solved.leg.ankle;
             pose[toe] = solved.leg.toe;
         }
     }
-    let report = report(poses, &out, floor_m, lowered_m, Some(locked), shortened, unreachable);
+    let raised_m = raise.iter().copied().fold(0.0, f64::max);
+    let counts = Counts { shortened, unreachable, held_above_floor };
+    let report = report(poses, &out, (floor_m, lowered_m, raised_m), Some(locked), counts);
     Ok(FootLocked { poses: out, report })
 }
 
-/// The figures of a clean-up from `before` to `after`; `locked` is `None` when it did not run.
+/// The largest fraction in [0, 1] of a leg's correction whose solve (`solve(fraction)` gives
+/// the input leg and the solved one) leaves its knee, ankle and toe no lower than the floor
+/// y = 0 or, for a joint already below it, than where it was (bisection, 1 mm slack; the full
+/// correction when it is safe, 0 when nothing is).
+fn floor_safe_fraction(solve: impl Fn(f64) -> (Leg, LegSolution)) -> f64 {
+    let safe = |fraction: f64| {
+        let (leg, solved) = solve(fraction);
+        [(leg.knee, solved.leg.knee), (leg.ankle, solved.leg.ankle), (leg.toe, solved.leg.toe)]
+            .iter()
+            .all(|(was, now)| now.y >= was.y.min(0.0) - FLOOR_SLACK_M)
+    };
+    if safe(1.0) {
+        return 1.0;
+    }
+    let (mut lo, mut hi) = (0.0, 1.0);
+    for _ in 0..10 {
+        let mid = 0.5 * (lo + hi);
+        if safe(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// `values` lowered so that no two neighbours differ by more than `step`: each value becomes
+/// the least of `v_k + step·|t − k|` over all k (two passes), so a dip is approached and left
+/// along ramps instead of in one frame.
+fn ease_down(values: &[f64], step: f64) -> Vec<f64> {
+    let mut out = values.to_vec();
+    for t in 1..out.len() {
+        out[t] = out[t].min(out[t - 1] + step);
+    }
+    for t in (0..out.len().saturating_sub(1)).rev() {
+        out[t] = out[t].min(out[t + 1] + step);
+    }
+    out
+}
+
+/// Counters of [`foot_lock`] for its report.
+#[derive(Debug, Clone, Copy, Default)]
+struct Counts {
+    shortened: usize,
+    unreachable: usize,
+    held_above_floor: usize,
+}
+
+/// The figures of a clean-up from `before` to `after` (`floor` is the floor height, the
+/// lowering and the largest raise, m); `locked` is `None` when it did not run.
 fn report(
     before: &[Pose],
     after: &[Pose],
-    floor_m: f64,
-    lowered_m: f64,
+    (floor_m, lowered_m, raised_m): (f64, f64, f64),
     locked: Option<[Vec<Range<usize>>; 4]>,
-    shortened: usize,
-    unreachable: usize,
+    counts: Counts,
 ) -> FootLockReport {
     let displacements: Vec<f64> =
         before.iter().zip(after).flat_map(|(a, b)| (0..NUM_JOINTS).map(move |j| (a[j] - b[j]).length())).collect();
@@ -328,12 +428,14 @@ fn report(
         enabled,
         floor_m,
         lowered_m,
+        raised_m,
         contacts: std::array::from_fn(|k| {
             let segments = std::mem::take(&mut segments[k]);
             JointContacts { joint: CONTACT_JOINTS[k], locked_frames: segments.iter().map(Range::len).sum(), segments }
         }),
-        shortened,
-        unreachable,
+        shortened: counts.shortened,
+        unreachable: counts.unreachable,
+        held_above_floor: counts.held_above_floor,
         max_displacement_m: displacements.iter().copied().fold(0.0, f64::max),
         mean_displacement_m: displacements.iter().sum::<f64>() / displacements.len().max(1) as f64,
         skate_before: foot_skate_ratio(before),
