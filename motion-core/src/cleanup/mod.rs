@@ -27,9 +27,9 @@
 //!    [`FootLockConfig::soft_reach_m`]) and is counted. The IK never takes a knee, ankle or toe
 //!    below the floor, nor deeper than it was: where the full correction would, the leg takes
 //!    the largest fraction of it that does not (`floor_safe_fraction`), and neighbouring frames
-//!    ease into that fraction at most [`FLOOR_FRACTION_STEP`] per frame. (A lock lowering a
-//!    stance ankle to its standing height used to push its toe, or a crawl's knee, up to 7 cm
-//!    through the floor.)
+//!    ease into that fraction at most [`FLOOR_FRACTION_STEP`] per frame (each eased fraction is
+//!    checked again). (A lock lowering a stance ankle to its standing height used to push its
+//!    toe, or a crawl's knee, up to 7 cm through the floor.)
 //!
 //! Only the knees, ankles and toes move (and the whole body by the floor offset), so a
 //! constraint on any other joint keeps its error exactly unless the body is lowered. A
@@ -335,13 +335,16 @@ pub fn foot_lock(
             );
             (leg, solved)
         };
-        let fractions: Vec<f64> = (0..out.len())
-            .map(|t| match moved(t) && config.plant_on_floor {
-                true => floor_safe_fraction(|f| solve(t, f)),
-                false => 1.0,
-            })
+        let guarded = |t: usize| moved(t) && config.plant_on_floor;
+        let fractions: Vec<f64> =
+            (0..out.len()).map(|t| if guarded(t) { floor_safe_fraction(|f| solve(t, f), 1.0) } else { 1.0 }).collect();
+        // Easing lowers fractions, and a lower one need not keep the leg above the floor
+        // either (the knee swings as the ankle moves): each eased one is checked again.
+        let fractions: Vec<f64> = ease_down(&fractions, FLOOR_FRACTION_STEP)
+            .into_iter()
+            .enumerate()
+            .map(|(t, f)| if guarded(t) { floor_safe_fraction(|g| solve(t, g), f) } else { f })
             .collect();
-        let fractions = ease_down(&fractions, FLOOR_FRACTION_STEP);
         let solutions: Vec<Option<(f64, LegSolution)>> =
             fractions.iter().enumerate().map(|(t, &f)| moved(t).then(|| (f, solve(t, f).1))).collect();
         for (pose, (fraction, solved)) in out.iter_mut().zip(solutions).filter_map(|(p, s)| Some((p, s?))) {
@@ -358,21 +361,21 @@ pub fn foot_lock(
     Ok(FootLocked { poses: out, report })
 }
 
-/// The largest fraction in [0, 1] of a leg's correction whose solve (`solve(fraction)` gives
-/// the input leg and the solved one) leaves its knee, ankle and toe no lower than the floor
-/// y = 0 or, for a joint already below it, than where it was (bisection, 1 mm slack; the full
-/// correction when it is safe, 0 when nothing is).
-fn floor_safe_fraction(solve: impl Fn(f64) -> (Leg, LegSolution)) -> f64 {
+/// The largest fraction in [0, `at_most`] of a leg's correction whose solve (`solve(fraction)`
+/// gives the input leg and the solved one) leaves its knee, ankle and toe no lower than the
+/// floor y = 0 or, for a joint already below it, than where it was (bisection, 1 mm slack;
+/// `at_most` itself when it is safe, 0 when nothing is).
+fn floor_safe_fraction(solve: impl Fn(f64) -> (Leg, LegSolution), at_most: f64) -> f64 {
     let safe = |fraction: f64| {
         let (leg, solved) = solve(fraction);
         [(leg.knee, solved.leg.knee), (leg.ankle, solved.leg.ankle), (leg.toe, solved.leg.toe)]
             .iter()
             .all(|(was, now)| now.y >= was.y.min(0.0) - FLOOR_SLACK_M)
     };
-    if safe(1.0) {
-        return 1.0;
+    if safe(at_most) {
+        return at_most;
     }
-    let (mut lo, mut hi) = (0.0, 1.0);
+    let (mut lo, mut hi) = (0.0, at_most);
     for _ in 0..10 {
         let mid = 0.5 * (lo + hi);
         if safe(mid) {

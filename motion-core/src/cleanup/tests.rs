@@ -486,7 +486,8 @@ fn the_leg_takes_the_largest_part_of_its_correction_that_keeps_it_above_the_floo
         moved.toe.y -= 0.05 * fraction;
         (leg, LegSolution { leg: moved, reached: true })
     };
-    let f = floor_safe_fraction(solve);
+    let f = floor_safe_fraction(solve, 1.0);
+    assert_eq!(floor_safe_fraction(solve, 0.3), 0.3);
     assert!((f - (0.02 + FLOOR_SLACK_M) / 0.05).abs() < 2e-3, "{f}");
     // A joint already under the floor may stay there but not sink deeper.
     let sunk = Leg { toe: DVec3::new(0.0, -0.01, 0.12), ..leg };
@@ -495,8 +496,8 @@ fn the_leg_takes_the_largest_part_of_its_correction_that_keeps_it_above_the_floo
         moved.toe.y -= 0.05 * fraction;
         (sunk, LegSolution { leg: moved, reached: true })
     };
-    assert!(floor_safe_fraction(deeper) < 0.03);
-    assert_eq!(floor_safe_fraction(|_| (leg, LegSolution { leg, reached: true })), 1.0);
+    assert!(floor_safe_fraction(deeper, 1.0) < 0.03);
+    assert_eq!(floor_safe_fraction(|_| (leg, LegSolution { leg, reached: true }), 1.0), 1.0);
     // A dip of the fraction is approached and left along ramps of FLOOR_FRACTION_STEP.
     assert_eq!(ease_down(&[1.0, 1.0, 1.0, 0.0, 1.0, 1.0], 0.25), vec![0.75, 0.5, 0.25, 0.0, 0.25, 0.5]);
     assert!(ease_down(&[], 0.25).is_empty());
