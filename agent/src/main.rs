@@ -41,6 +41,9 @@ enum Command {
     Sample(commands::sample::SampleArgs),
     /// Generate motions for a constraint program file (npy, JSON report, PNG strip).
     Run(commands::run::RunArgs),
+    /// RG-DNO's constraint-based retrieval for a program: the database crops that best satisfy
+    /// its retrieval set C_R, and the best crop of each label.
+    Retrieve(commands::retrieve::RetrieveArgs),
     /// Print the JSON Schema of constraint programs (what `run` accepts).
     Schema,
     /// Reports: `prior` compares unconstrained samples with the training data per label.
@@ -82,6 +85,7 @@ fn main() -> anyhow::Result<()> {
         Command::Train(args) => commands::train::run(args),
         Command::Sample(args) => commands::sample::run(args),
         Command::Run(args) => commands::run::run(args),
+        Command::Retrieve(args) => commands::retrieve::run(args),
         Command::Schema => {
             println!("{}", serde_json::to_string_pretty(&motion_core::program::json_schema())?);
             Ok(())

@@ -130,6 +130,12 @@ pub struct TaskReport {
     /// The clean-up and the figures before it (every figure above is measured after it, on the
     /// written joints).
     pub cleanup: CleanupReport,
+    /// What each RG-DNO stage did (RG-DNO runs only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rg_dno: Option<crate::rgdno::RgDnoReport>,
+    /// Why the method that ran is not the one asked for (RG-DNO falling back to DNO).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fallback: Option<String>,
 }
 
 /// The constraint figures of one set of joints.
@@ -244,6 +250,8 @@ pub fn report(
         max_under_floor_m: motions.iter().map(|m| ground_penetration(m)).fold(0.0, f64::max),
         head_neck_incorrect_ratio: bad as f64 / checked.max(1) as f64,
         cleanup,
+        rg_dno: None,
+        fallback: None,
     })
 }
 

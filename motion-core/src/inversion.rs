@@ -21,7 +21,8 @@ use crate::dno::{self, DnoConfig, DnoStep, UnrolledDdim};
 use crate::prior::Prior;
 
 /// Settings of [`invert_motion`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct InversionConfig {
     /// DDIM steps of the sampler the noise is for (default 10, DNO's).
     pub ddim_steps: usize,
@@ -37,6 +38,10 @@ pub struct InversionConfig {
     pub polish_steps: usize,
     /// Peak Adam learning rate of the joint polish, decayed along a cosine (default 0.02).
     pub polish_lr: f64,
+    /// Classifier-free guidance scale of the sampler the noise is for (default 1: the
+    /// conditional model alone). RG-DNO inverts for the guided sampler it then optimises
+    /// through.
+    pub guidance: f64,
 }
 
 impl InversionConfig {
@@ -55,6 +60,7 @@ impl Default for InversionConfig {
             feature_polish_lr: 0.05,
             polish_steps: 100,
             polish_lr: 0.02,
+            guidance: 1.0,
         }
     }
 }
@@ -69,8 +75,8 @@ pub struct Inverted {
 }
 
 /// Finds noise z with `sample(z) ≈ x0` for normalised features `x0` `[batch, frames, 263]`
-/// conditioned on `text` `[batch, text_dim]` (no guidance, so the noise is valid for the
-/// conditional model alone). `on_polish_step` reports both polishes in turn (the feature
+/// conditioned on `text` `[batch, text_dim]`, for the sampler with `config.guidance` (1 by
+/// default: no guidance, so the noise is valid for the conditional model alone). `on_polish_step` reports both polishes in turn (the feature
 /// polish's loss is the normalised-feature MSE, the joint polish's the mean joint error in
 /// metres, per sample).
 pub fn invert_motion(
@@ -80,10 +86,11 @@ pub fn invert_motion(
     config: &InversionConfig,
     mut on_polish_step: impl FnMut(&DnoStep),
 ) -> Result<Inverted> {
-    let solver = UnrolledDdim::new(&prior.mdm, text.clone(), Guidance::none(), config.ddim_steps)?;
-    let z = solver.sampler.invert(&prior.mdm, x0, text, Guidance::none(), config.fixed_point_iterations)?;
+    let guidance = Guidance { scale: config.guidance }.for_text(text)?;
+    let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.ddim_steps)?;
+    let z = solver.sampler.invert(&prior.mdm, x0, text, guidance, config.fixed_point_iterations)?;
     if config.feature_polish_steps == 0 && config.polish_steps == 0 {
-        let x = solver.sampler.sample(&prior.mdm, &z, text, Guidance::none())?;
+        let x = solver.sampler.sample(&prior.mdm, &z, text, guidance)?;
         return Ok(Inverted { z, x });
     }
     let rms = z.sqr()?.mean_keepdim((1, 2))?.sqrt()?;
@@ -110,7 +117,7 @@ pub fn invert_motion(
             .z;
     }
     // The optimiser reports the motion before its last update; sample the final noise.
-    let x = solver.sampler.sample(&prior.mdm, &z, text, Guidance::none())?;
+    let x = solver.sampler.sample(&prior.mdm, &z, text, guidance)?;
     Ok(Inverted { z, x })
 }
 

@@ -21,6 +21,7 @@ pub mod program;
 pub mod quality;
 pub mod render;
 pub mod representation;
+pub mod rgdno;
 pub mod skeleton;
 mod tensor_file;
 pub mod testing;

@@ -72,7 +72,13 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
             }
             eprintln!("{task} / {method}");
             let config = args.generation.config(method);
-            let report = run_program(&prior, &program, &config, &args.out.join(&task).join(method.name()))?;
+            let report = run_program(
+                &prior,
+                &program,
+                &config,
+                &args.generation.rg_source(),
+                &args.out.join(&task).join(method.name()),
+            )?;
             rows.push(ResultRow { task: task.clone(), report });
             std::fs::write(&json_path, serde_json::to_string_pretty(&rows)?)
                 .with_context(|| format!("writing {}", json_path.display()))?;

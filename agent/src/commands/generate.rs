@@ -17,6 +17,8 @@ pub struct RunOptions {
     pub config: GenerationConfig,
     /// The trained prior.
     pub prior: PathBuf,
+    /// Where RG-DNO retrieves from, and its settings.
+    pub rg_source: super::run::RgDnoSource,
     /// Output folder (already holds `program.json`).
     pub out: PathBuf,
 }
@@ -28,7 +30,7 @@ pub fn run(planned: &PlannedTask, options: &RunOptions) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
     let prior = Prior::load(&options.prior, &device)
         .with_context(|| format!("loading the prior {}", options.prior.display()))?;
-    let report = run_program(&prior, &planned.program, &options.config, &options.out)?;
+    let report = run_program(&prior, &planned.program, &options.config, &options.rg_source, &options.out)?;
     print_summary(&report);
     Ok(())
 }

@@ -5,6 +5,7 @@ pub mod bench_tasks;
 pub mod data;
 pub mod generate;
 pub mod report;
+pub mod retrieve;
 pub mod run;
 pub mod sample;
 pub mod task;

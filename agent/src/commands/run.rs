@@ -6,12 +6,15 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use motion_core::constraints::CompiledProgram;
+use motion_core::database::MotionDatabase;
 use motion_core::evaluation::{report, TaskReport};
 use motion_core::generation::{generate, GenerationConfig, Method};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
+use motion_core::rgdno::retrieval::RetrievalCorpus;
+use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
 
 use crate::paths;
 
@@ -26,6 +29,10 @@ pub enum MethodArg {
     IkReg,
     /// Optimise the diffusion start noise (ProgMoGen + DNO: 500 Adam steps, lr 0.05).
     Dno,
+    /// Retrieval-guided DNO: retrieve a database motion for the hardest constraints, invert it,
+    /// blend its noise with random noise through the best mask, then a last DNO round (needs the
+    /// program's relational parse; falls back to DNO, saying why, without one).
+    RgDno,
 }
 
 impl From<MethodArg> for Method {
@@ -35,6 +42,7 @@ impl From<MethodArg> for Method {
             MethodArg::Ik => Method::Ik,
             MethodArg::IkReg => Method::IkReg,
             MethodArg::Dno => Method::Dno,
+            MethodArg::RgDno => Method::RgDno,
         }
     }
 }
@@ -80,9 +88,35 @@ pub struct GenerationArgs {
     /// Trained prior file.
     #[arg(long, default_value_os_t = paths::default_prior())]
     pub prior: PathBuf,
+    /// Motion database that RG-DNO retrieves from (`mogen data build`).
+    #[arg(long, default_value_os_t = paths::default_database())]
+    pub database: PathBuf,
+    /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
+    /// first_lr, segments, mask_kinds, mask_batch, reward, final_steps, final_lr; missing fields
+    /// keep the paper's defaults), e.g. '{"retrieval": {"related_weight": 0.01}}'.
+    #[arg(long, value_parser = parse_rg_dno_config, default_value = "{}")]
+    pub rg_dno: Box<RgDnoConfig>,
+}
+
+fn parse_rg_dno_config(text: &str) -> Result<Box<RgDnoConfig>, String> {
+    serde_json::from_str(text).map_err(|e| format!("not an RG-DNO config: {e}"))
+}
+
+/// Where RG-DNO retrieves from and with which settings.
+#[derive(Debug, Clone)]
+pub struct RgDnoSource {
+    /// The motion database file.
+    pub database: PathBuf,
+    /// The settings.
+    pub config: RgDnoConfig,
 }
 
 impl GenerationArgs {
+    /// The database and settings of RG-DNO.
+    pub fn rg_source(&self) -> RgDnoSource {
+        RgDnoSource { database: self.database.clone(), config: (*self.rg_dno).clone() }
+    }
+
     /// The run settings for `method`.
     pub fn config(&self, method: Method) -> GenerationConfig {
         let mut config = GenerationConfig::new(method);
@@ -134,7 +168,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let prior = Prior::load(&args.generation.prior, &device)
         .with_context(|| format!("loading the prior {}", args.generation.prior.display()))?;
     let config = args.generation.config(args.method.into());
-    let report = run_program(&prior, &program, &config, &args.out)?;
+    let report = run_program(&prior, &program, &config, &args.generation.rg_source(), &args.out)?;
     print_summary(&report);
     Ok(())
 }
@@ -149,11 +183,12 @@ pub fn load_program(path: &Path) -> anyhow::Result<TaskProgram> {
 }
 
 /// Generates motions for `program` and writes features.npy, joints.npy, report.json and
-/// strip.png into `out`, with a progress bar on stderr.
+/// strip.png into `out`, with a progress bar on stderr. RG-DNO retrieves from `rg_source`.
 pub fn run_program(
     prior: &Prior,
     program: &TaskProgram,
     config: &GenerationConfig,
+    rg_source: &RgDnoSource,
     out: &Path,
 ) -> anyhow::Result<TaskReport> {
     let device = candle_core::Device::Cpu;
@@ -163,27 +198,51 @@ pub fn run_program(
         ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} loss {msg} ({elapsed}, eta {eta})")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    bar.set_prefix(config.method.to_string());
     let start = std::time::Instant::now();
-    let generated = generate(prior, program, &compiled, config, &device, |p| {
-        bar.set_length(p.steps as u64);
-        bar.set_position(p.step as u64 + 1);
-        bar.set_message(format!("{:.5} (round {})", p.loss, p.round));
-        // Not a terminal (a log, CI): a plain line every tenth of the run instead of the bar.
-        if bar.is_hidden() && ((p.step + 1) % (p.steps / 10).max(1) == 0 || p.step + 1 == p.steps) {
+    // Not a terminal (a log, CI): a plain line every tenth of a stage instead of the bar.
+    let mut show = |stage: &str, round: usize, step: usize, steps: usize, loss: f64| {
+        bar.set_prefix(stage.to_owned());
+        bar.set_length(steps as u64);
+        bar.set_position(step as u64);
+        bar.set_message(format!("{loss:.5} (round {round})"));
+        if bar.is_hidden() && (step % (steps / 10).max(1) == 0 || step == steps) {
             eprintln!(
-                "{} round {}: step {}/{} loss {:.5} ({:.0} s)",
-                config.method,
-                p.round,
-                p.step + 1,
-                p.steps,
-                p.loss,
+                "{stage} round {round}: step {step}/{steps} loss {loss:.5} ({:.0} s)",
                 start.elapsed().as_secs_f64()
             );
         }
-    })?;
+    };
+    let mut rg_dno = None;
+    let mut fallback = None;
+    let mut config = config.clone();
+    let mut generated = None;
+    if config.method == Method::RgDno {
+        match rg_dno_run(prior, program, &compiled, &config, rg_source, &device, &mut show) {
+            Ok((g, r)) => {
+                generated = Some(g);
+                rg_dno = Some(r);
+            }
+            Err(RgDnoFailure::Fallback(why)) => {
+                eprintln!("RG-DNO falls back to DNO: {why}");
+                fallback = Some(why);
+                config.method = Method::Dno;
+            }
+            Err(RgDnoFailure::Error(error)) => return Err(error),
+        }
+    }
+    let generated = match generated {
+        Some(g) => g,
+        None => {
+            let method = config.method.to_string();
+            generate(prior, program, &compiled, &config, &device, |p| {
+                show(&method, p.round, p.step + 1, p.steps, p.loss)
+            })?
+        }
+    };
     bar.finish_and_clear();
-    let report = report(program, &compiled, &generated, config)?;
+    let mut report = report(program, &compiled, &generated, &config)?;
+    report.rg_dno = rg_dno;
+    report.fallback = fallback;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     prior.to_features(&generated.features)?.write_npy(out.join("features.npy"))?;
     generated.joints.write_npy(out.join("joints.npy"))?;
@@ -198,6 +257,49 @@ pub fn run_program(
     motion_strip(&rows, 8, &program.scene_primitives(), &program.text, &out.join("strip.png"))?;
     eprintln!("wrote {}/{{features.npy,joints.npy,report.json,strip.png}}", out.display());
     Ok(report)
+}
+
+/// Why RG-DNO did not produce motions: a reason to fall back to DNO, or an error.
+enum RgDnoFailure {
+    Fallback(String),
+    Error(anyhow::Error),
+}
+
+/// RG-DNO on `program`, retrieving from the database at `database`.
+fn rg_dno_run(
+    prior: &Prior,
+    program: &TaskProgram,
+    compiled: &CompiledProgram,
+    config: &GenerationConfig,
+    source: &RgDnoSource,
+    device: &candle_core::Device,
+    show: &mut dyn FnMut(&str, usize, usize, usize, f64),
+) -> Result<(motion_core::generation::Generated, RgDnoReport), RgDnoFailure> {
+    if program.relational_parse.is_none() {
+        return Err(RgDnoFailure::Fallback("the program has no relational parse".into()));
+    }
+    let fail = |e: anyhow::Error| RgDnoFailure::Error(e);
+    let database = &source.database;
+    let db = MotionDatabase::load(database)
+        .with_context(|| {
+            format!("reading the retrieval database {} (build it with `mogen data build`)", database.display())
+        })
+        .map_err(fail)?;
+    let rg = &source.config;
+    let clock = std::time::Instant::now();
+    let corpus = RetrievalCorpus::build(&db, compiled.frames(), &rg.retrieval, device).map_err(|e| fail(e.into()))?;
+    eprintln!(
+        "retrieval corpus: {} candidate crops of {} ({:.1} s)",
+        corpus.len(),
+        database.display(),
+        clock.elapsed().as_secs_f64()
+    );
+    let task = RgDnoTask { program, compiled, corpus: &corpus };
+    match generate_rg_dno(prior, task, config, rg, device, |p| show(p.stage.name(), 0, p.step, p.steps, p.loss)) {
+        Ok(done) => Ok(done),
+        Err(e @ (RgDnoError::NoParse | RgDnoError::NothingRetrieved)) => Err(RgDnoFailure::Fallback(e.to_string())),
+        Err(e) => Err(fail(e.into())),
+    }
 }
 
 /// Prints the headline figures of a run.
@@ -232,6 +334,28 @@ pub fn print_summary(report: &TaskReport) {
         }
     }
     println!("  all constraints met by {:.0}% of the samples", 100.0 * report.success_rate);
+    if let Some(why) = &report.fallback {
+        println!("  RG-DNO fell back to DNO: {why}");
+    }
+    if let Some(rg) = &report.rg_dno {
+        if let Some(r) = rg.retrieved.first() {
+            println!(
+                "  retrieved {} resized to {} frames, C_R score {:.4} of {} candidates in {:.1} s; inversion error \
+                 {:.3} m",
+                r.source, report.frames, r.score, rg.candidates, rg.seconds.retrieval, rg.inversion_error_m
+            );
+        }
+        for (i, m) in rg.masks.iter().enumerate() {
+            println!(
+                "  sample {i}: {:?} mask {:0w$b}, F_C {:.4}, reward {:.4}",
+                m.candidate.kind,
+                m.candidate.bits,
+                m.constraint_error,
+                m.reward,
+                w = m.candidate.segments
+            );
+        }
+    }
     let penetration = report.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
     println!(
         "  foot skate {:.3}, max acceleration {:.4} m/frame², max scene penetration {penetration}, head-neck incorrect {:.2}",

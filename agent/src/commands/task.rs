@@ -145,6 +145,7 @@ pub fn run(args: TaskArgs) -> anyhow::Result<()> {
     let options = RunOptions {
         config: args.generation.config(args.method.into()),
         prior: args.generation.prior.clone(),
+        rg_source: args.generation.rg_source(),
         out: args.out.clone(),
     };
     generate::run(&planned, &options)

@@ -46,11 +46,14 @@ pub enum Method {
     /// Optimise the start noise through the prior (ProgMoGen's programmable generation with
     /// DNO's optimiser).
     Dno,
+    /// Retrieval-guided DNO ([`crate::rgdno`]): needs a retrieval corpus, so it runs through
+    /// [`crate::rgdno::generate_rg_dno`], not [`generate`].
+    RgDno,
 }
 
 impl Method {
     /// Every method, baselines first.
-    pub const ALL: [Method; 4] = [Method::Unconstrained, Method::Ik, Method::IkReg, Method::Dno];
+    pub const ALL: [Method; 5] = [Method::Unconstrained, Method::Ik, Method::IkReg, Method::Dno, Method::RgDno];
 
     /// The kebab-case name used in files and on the command line.
     pub fn name(self) -> &'static str {
@@ -59,6 +62,7 @@ impl Method {
             Method::Ik => "ik",
             Method::IkReg => "ik-reg",
             Method::Dno => "dno",
+            Method::RgDno => "rg-dno",
         }
     }
 }
@@ -118,6 +122,27 @@ pub fn jitter_penalty(joints: &Tensor, limit: f64) -> candle_core::Result<Tensor
     let a = crate::constraints::second_difference(joints)?;
     let norm = (a.sqr()?.sum(candle_core::D::Minus1)? + crate::constraints::NORM_EPS)?.sqrt()?;
     (norm - limit)?.relu()?.sqr()?.reshape((batch, ()))?.sum(candle_core::D::Minus1)
+}
+
+/// The criterion every noise-optimising method minimises: per sample `[B]`, the program's
+/// `Σ wᵢ·Eᵢ` on the joints of normalised features `x` `[B, T, 263]`, plus `jitter_weight ×`
+/// [`jitter_penalty`]. `initial` `[B or 1, T, 22, 3]` is what `stay_near_initial` terms compare
+/// with.
+pub fn program_objective<'a>(
+    prior: &'a Prior,
+    compiled: &'a CompiledProgram,
+    initial: &'a Tensor,
+    jitter_weight: f64,
+) -> impl Fn(&Tensor) -> candle_core::Result<Tensor> + 'a {
+    move |x: &Tensor| {
+        let joints = prior.to_joints(x)?;
+        let error = compiled.evaluate(&joints, Some(initial)).map_err(candle_core::Error::wrap)?.total;
+        if jitter_weight > 0.0 {
+            error + (jitter_penalty(&joints, JITTER_LIMIT)? * jitter_weight)?
+        } else {
+            Ok(error)
+        }
+    }
 }
 
 impl GenerationConfig {
@@ -221,17 +246,14 @@ pub fn generate(
         solver = solver.starting_late(start, &x0)?;
     }
     let initial_joints = prior.to_joints(&x0)?;
-    // The program's loss on the recovered joints, plus `jitter_weight ×` the jitter guard.
-    let objective = |x: &Tensor, jitter_weight: f64| -> candle_core::Result<Tensor> {
-        let joints = prior.to_joints(x)?;
-        let error = compiled.evaluate(&joints, Some(&initial_joints)).map_err(candle_core::Error::wrap)?.total;
-        if jitter_weight > 0.0 {
-            error + (jitter_penalty(&joints, JITTER_LIMIT)? * jitter_weight)?
-        } else {
-            Ok(error)
-        }
-    };
+    let objective =
+        |x: &Tensor, jitter_weight: f64| program_objective(prior, compiled, &initial_joints, jitter_weight)(x);
     let (features, loss_history) = match config.method {
+        Method::RgDno => {
+            return Err(GenerationError::Setting(
+                "RG-DNO needs a retrieval corpus: run it with rgdno::generate_rg_dno".into(),
+            ))
+        }
         Method::Unconstrained => (x0, vec![Vec::new(); config.samples]),
         Method::Ik | Method::IkReg => {
             let smoothness = if config.method == Method::IkReg { config.direct.smoothness_weight } else { 0.0 };
@@ -284,7 +306,7 @@ pub fn clean_up(joints: &Tensor, config: &FootLockConfig) -> Result<(Tensor, Vec
 
 /// Whether the scene holds a support more than 1 cm above or below the floor y = 0 (a raised
 /// balance beam, a raised or sunk ground), on which feet must not be planted at y = 0.
-fn has_raised_support(program: &TaskProgram) -> bool {
+pub(crate) fn has_raised_support(program: &TaskProgram) -> bool {
     program.scene_primitives().iter().any(|p| match p {
         Primitive::BalanceBeam(beam) => beam.point_m[1].abs() > 0.01,
         Primitive::Ground(ground) => ground.height_m.abs() > 0.01,

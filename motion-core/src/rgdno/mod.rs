@@ -1,0 +1,486 @@
+//! Retrieval-guided diffusion noise optimisation (RG-DNO, Liu et al.; `../shared/papers/rg-dno-*`
+//! §4, Fig. 2): for a task whose relational parse names its most difficult constraint,
+//!
+//! 1. **groups** (§4.2, Algorithm 1, [`crate::program::TaskProgram::constraint_groups`]): the
+//!    retrieval set `C_R`, the random-noise set `C1` and the retrieved-noise set `C2`;
+//! 2. **retrieval** (§4.3, eqs. 5–6, [`retrieval`]): the database motion `x_R` that best
+//!    satisfies `C_R`;
+//! 3. **inversion** (eq. 7): `z_R = G⁻¹(x_R)` ([`crate::inversion::invert_motion`]);
+//! 4. **two branches** (eqs. 8–9): `z1` from random noise fitted to `C1`, `z2` from `z_R`
+//!    fitted to `C2`, each `N1` DNO steps;
+//! 5. **mask** (eqs. 10, 13, [`mask`], [`reward`]): the best of the binary temporal and spatial
+//!    masks by `F_C(G(z')) + R(G(z'), z')`, all candidates evaluated without gradients, then the
+//!    soft sigmoid blend optimised on the same objective;
+//! 6. **final round** (eq. 12): DNO on the whole task from `z'` (`N2` steps).
+//!
+//! The output goes through the same contact-aware clean-up as every other method.
+
+pub mod mask;
+pub mod retrieval;
+pub mod reward;
+
+use std::time::Instant;
+
+use candle_core::{DType, Device, Tensor, Var, D};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use serde::{Deserialize, Serialize};
+
+use crate::constraints::CompiledProgram;
+use crate::diffusion::noise::gaussian;
+use crate::diffusion::{Denoiser, Guidance};
+use crate::dno::{self, DnoConfig, UnrolledDdim};
+use crate::generation::{
+    clean_up, has_raised_support, program_objective, Generated, GenerationConfig, GenerationError,
+};
+use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
+use crate::prior::Prior;
+use crate::program::TaskProgram;
+use crate::representation::FEATURE_DIM;
+use crate::training::AdamW;
+use mask::{blend, soft_blend, soft_logits, MaskCandidate, MaskKind};
+use retrieval::{retrieve, CandidateSource, RetrievalConfig, RetrievalCorpus, RetrievalQuery};
+use reward::{reward, RewardWeights};
+
+/// Every RG-DNO setting (the paper's defaults, §5.2: N1 = 100 at lr 0.05, N2 = 400 at lr 0.02).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RgDnoConfig {
+    /// Constraint-based retrieval.
+    pub retrieval: RetrievalConfig,
+    /// The inversion of the retrieved motion (its `guidance` is replaced by the run's).
+    pub inversion: InversionConfig,
+    /// DNO steps `N1` of each branch and of the soft blend (default 100).
+    pub first_steps: usize,
+    /// Peak learning rate of the branches and the soft blend (default 0.05).
+    pub first_lr: f64,
+    /// Temporal segments `N_T` (default 8).
+    pub segments: usize,
+    /// Which mask kinds are tried (default both; the supplementary picks by eq. 13).
+    pub mask_kinds: Vec<MaskKind>,
+    /// Mask candidates sampled per batch, per sample (default 16).
+    pub mask_batch: usize,
+    /// The reward weights λ of eq. 14.
+    pub reward: RewardWeights,
+    /// DNO steps `N2` of the final round (default 400).
+    pub final_steps: usize,
+    /// Peak learning rate of the final round (default 0.02).
+    pub final_lr: f64,
+}
+
+impl Default for RgDnoConfig {
+    fn default() -> Self {
+        Self {
+            retrieval: RetrievalConfig::default(),
+            inversion: InversionConfig::default(),
+            first_steps: 100,
+            first_lr: 0.05,
+            segments: 8,
+            mask_kinds: vec![MaskKind::Temporal, MaskKind::Spatial],
+            mask_batch: 16,
+            reward: RewardWeights::default(),
+            final_steps: 400,
+            final_lr: 0.02,
+        }
+    }
+}
+
+/// Why RG-DNO did not run (the caller falls back to DNO and says why).
+#[derive(Debug, thiserror::Error)]
+pub enum RgDnoError {
+    /// The program has no relational parse.
+    #[error("the program has no relational parse, so there is nothing to retrieve")]
+    NoParse,
+    /// No database motion passed the semantic check and the threshold.
+    #[error("no database motion passed the semantic check and the retrieval threshold")]
+    NothingRetrieved,
+    /// Retrieval failed.
+    #[error(transparent)]
+    Retrieval(#[from] retrieval::RetrievalError),
+    /// Generation failed.
+    #[error(transparent)]
+    Generation(#[from] GenerationError),
+}
+
+impl From<candle_core::Error> for RgDnoError {
+    fn from(error: candle_core::Error) -> Self {
+        RgDnoError::Generation(GenerationError::Tensor(error))
+    }
+}
+
+/// A retrieved motion as the report gives it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RetrievedReport {
+    /// Where it comes from.
+    pub source: CandidateSource,
+    /// `Σ w_i·E_i` over `C_R`.
+    pub score: f64,
+    /// `(id, E_i)` per constraint of `C_R`.
+    pub per_constraint: Vec<(String, f64)>,
+}
+
+/// The mask chosen for one sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChosenMask {
+    /// The binary candidate.
+    pub candidate: MaskCandidate,
+    /// `F_C` of its motion.
+    pub constraint_error: f64,
+    /// `R` of its motion and noise.
+    pub reward: f64,
+}
+
+/// Seconds per stage.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageSeconds {
+    /// Scoring the corpus.
+    pub retrieval: f64,
+    /// Inverting `x_R`.
+    pub inversion: f64,
+    /// Fitting `z1` and `z2`.
+    pub branches: f64,
+    /// Evaluating the binary masks.
+    pub masks: f64,
+    /// Optimising the soft blend.
+    pub soft_blend: f64,
+    /// The final DNO round.
+    pub final_round: f64,
+}
+
+/// What each RG-DNO stage did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RgDnoReport {
+    /// `C_R`, `C1`, `C2` by id.
+    pub retrieval_set: Vec<String>,
+    /// `C1`.
+    pub random_noise_set: Vec<String>,
+    /// `C2`.
+    pub retrieved_noise_set: Vec<String>,
+    /// Candidates scored (after the semantic check).
+    pub candidates: usize,
+    /// The retrieved motions, best first; the first is `x_R`.
+    pub retrieved: Vec<RetrievedReport>,
+    /// Mean joint distance of `G(z_R)` to `x_R`, m.
+    pub inversion_error_m: f64,
+    /// `F_{C1}(G(z1))` per sample.
+    pub z1_error: Vec<f64>,
+    /// `F_{C2}(G(z2))` per sample.
+    pub z2_error: Vec<f64>,
+    /// The chosen binary mask per sample.
+    pub masks: Vec<ChosenMask>,
+    /// `F_C + R` after the soft blend, per sample.
+    pub soft_blend_objective: Vec<f64>,
+    /// Seconds per stage.
+    pub seconds: StageSeconds,
+    /// The settings.
+    pub config: RgDnoConfig,
+}
+
+/// A stage of RG-DNO, for progress reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// Polishing the inverted noise.
+    Inversion,
+    /// Fitting `z1` to `C1`.
+    RandomBranch,
+    /// Fitting `z2` to `C2`.
+    RetrievedBranch,
+    /// Evaluating the binary masks (step = candidates done).
+    Masks,
+    /// Optimising the soft blend.
+    SoftBlend,
+    /// The final DNO round.
+    FinalRound,
+}
+
+impl Stage {
+    /// A short name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Inversion => "inversion",
+            Stage::RandomBranch => "z1 (random noise, C1)",
+            Stage::RetrievedBranch => "z2 (retrieved noise, C2)",
+            Stage::Masks => "masks",
+            Stage::SoftBlend => "soft blend",
+            Stage::FinalRound => "final round",
+        }
+    }
+}
+
+/// Progress of a running stage.
+#[derive(Debug, Clone)]
+pub struct StageProgress {
+    /// The stage.
+    pub stage: Stage,
+    /// Steps done.
+    pub step: usize,
+    /// Steps of the stage.
+    pub steps: usize,
+    /// Mean loss over the samples (0 where a stage has none).
+    pub loss: f64,
+}
+
+/// A task as RG-DNO takes it: the program (with its relational parse), compiled, and the
+/// retrieval corpus built for its frame count.
+#[derive(Debug, Clone, Copy)]
+pub struct RgDnoTask<'a> {
+    /// The program.
+    pub program: &'a TaskProgram,
+    /// The program compiled.
+    pub compiled: &'a CompiledProgram,
+    /// Candidates of `program.frames` frames.
+    pub corpus: &'a RetrievalCorpus,
+}
+
+/// Generates `config.samples` motions for `task` with RG-DNO. `config` gives the samples,
+/// seed, guidance, DDIM steps, the DNO regulariser, the jitter guard and the clean-up; `rg` the
+/// RG-DNO stages.
+pub fn generate_rg_dno(
+    prior: &Prior,
+    task: RgDnoTask<'_>,
+    config: &GenerationConfig,
+    rg: &RgDnoConfig,
+    device: &Device,
+    mut progress: impl FnMut(&StageProgress),
+) -> Result<(Generated, RgDnoReport), RgDnoError> {
+    let RgDnoTask { program, compiled, corpus } = task;
+    let start = Instant::now();
+    let groups = program.constraint_groups().ok_or(RgDnoError::NoParse)?;
+    let parse = program.relational_parse.as_ref().ok_or(RgDnoError::NoParse)?;
+    let mut seconds = StageSeconds::default();
+    let batch = config.samples;
+    let frames = compiled.frames();
+    let shape = (batch, frames, FEATURE_DIM);
+
+    // Retrieval (eqs. 5–6).
+    let clock = Instant::now();
+    let c_r = compiled.subset(&groups.retrieval);
+    let query = RetrievalQuery {
+        program: &c_r,
+        most_difficult: &parse.most_difficult,
+        prompt: &program.text,
+        counting: !c_r.count_targets().is_empty(),
+    };
+    let retrieved = retrieve(corpus, &query, &rg.retrieval)?;
+    let best = retrieved.first().ok_or(RgDnoError::NothingRetrieved)?;
+    seconds.retrieval = clock.elapsed().as_secs_f64();
+
+    // The solver, as DNO's.
+    let text = prior.encode_text(&vec![program.text.as_str(); batch], device)?;
+    let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
+    let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.dno.ddim_steps)?;
+
+    // Inversion (eq. 7), once for the batch.
+    let clock = Instant::now();
+    let x_r = prior.mean_std.normalize(&best.features.to_dtype(DType::F32)?.unsqueeze(0)?)?;
+    let inversion =
+        InversionConfig { guidance: config.guidance, ddim_steps: config.dno.ddim_steps, ..rg.inversion.clone() };
+    let polish_steps = inversion.feature_polish_steps + inversion.polish_steps;
+    let mut polished = 0;
+    let inverted = invert_motion(prior, &x_r, &text.narrow(0, 0, 1)?, &inversion, |s| {
+        polished += 1;
+        progress(&StageProgress { stage: Stage::Inversion, step: polished, steps: polish_steps, loss: mean(&s.loss) });
+    })?;
+    let inversion_error_m = scalar(&mean_joint_distance(&prior.to_joints(&inverted.x)?, &prior.to_joints(&x_r)?)?)?;
+    let z_r = inverted.z.broadcast_as(shape)?.contiguous()?;
+    seconds.inversion = clock.elapsed().as_secs_f64();
+
+    // The two branches (eqs. 8–9).
+    let clock = Instant::now();
+    let z0 = gaussian(shape, config.seed, device)?;
+    let initial_joints = prior.to_joints(&solver.sampler.sample(solver.denoiser, &z0, &solver.text, guidance)?)?;
+    let first = DnoConfig {
+        steps: rg.first_steps,
+        lr: rg.first_lr,
+        lr_warmup_steps: rg.first_steps / 10,
+        lr_decay_steps: None,
+        seed: config.seed,
+        restarts: 1,
+        ..config.dno.clone()
+    };
+    let c1 = compiled.subset(&groups.random_noise);
+    let c2 = compiled.subset(&groups.retrieved_noise);
+    let branch = |set: &CompiledProgram, start: &Tensor, stage: Stage, progress: &mut dyn FnMut(&StageProgress)| {
+        let objective = program_objective(prior, set, &initial_joints, config.jitter_weight);
+        dno::optimize(&solver, objective, start, &first, |s| {
+            progress(&StageProgress { stage, step: s.step + 1, steps: s.steps, loss: mean(&s.loss) })
+        })
+    };
+    let z1 = branch(&c1, &z0, Stage::RandomBranch, &mut progress)?;
+    let z2 = branch(&c2, &z_r, Stage::RetrievedBranch, &mut progress)?;
+    seconds.branches = clock.elapsed().as_secs_f64();
+
+    // Binary masks (eq. 13), no gradients.
+    let clock = Instant::now();
+    let full = program_objective(prior, compiled, &initial_joints, config.jitter_weight);
+    let mut rng = StdRng::seed_from_u64(config.seed ^ 0x0052_4744_4e4f);
+    let candidates: Vec<MaskCandidate> =
+        MaskCandidate::all(rg.segments).into_iter().filter(|c| rg.mask_kinds.contains(&c.kind)).collect();
+    let (masks, best_masks) = choose_masks(
+        &candidates,
+        (&z1.z, &z2.z),
+        &solver,
+        &full,
+        prior,
+        &rg.reward,
+        rg.mask_batch.max(1),
+        &mut rng,
+        &mut |done| progress(&StageProgress { stage: Stage::Masks, step: done, steps: candidates.len(), loss: 0.0 }),
+    )?;
+    seconds.masks = clock.elapsed().as_secs_f64();
+
+    // Soft blend (supp. A): logits M' from the chosen masks, Adam on F_C + R.
+    let clock = Instant::now();
+    let logits = Var::from_tensor(&soft_logits(&best_masks)?)?;
+    let mut adam = AdamW::new(vec![logits.clone()], 0.0)?;
+    let blend_schedule =
+        DnoConfig { steps: rg.first_steps, lr: rg.first_lr, lr_warmup_steps: 0, ..DnoConfig::default() };
+    let mut soft_blend_objective = vec![f64::NAN; batch];
+    for step in 0..rg.first_steps {
+        let z = soft_blend(logits.as_tensor(), &z1.z, &z2.z)?;
+        let x = dno::Solver::solve(&solver, &z)?;
+        let joints = prior.to_joints(&x)?;
+        let terms = reward(&joints, &z, &rg.reward, &mut rng)?;
+        let objective = (full(&x)? + terms.total)?;
+        soft_blend_objective = to_vec(&objective)?;
+        let mut grads = objective.sum_all()?.backward()?;
+        let grad = grads
+            .remove(logits.as_tensor())
+            .ok_or_else(|| candle_core::Error::Msg("no gradient reached the mask".into()))?;
+        let norm = grad.sqr()?.flatten_from(1)?.sum(D::Minus1)?.maximum(1e-24)?.sqrt()?;
+        grads.insert(logits.as_tensor(), grad.broadcast_div(&norm.reshape((batch, 1, 1))?)?);
+        adam.step(&grads, blend_schedule.learning_rate(step))?;
+        progress(&StageProgress {
+            stage: Stage::SoftBlend,
+            step: step + 1,
+            steps: rg.first_steps,
+            loss: mean(&soft_blend_objective),
+        });
+    }
+    let z_blend = soft_blend(logits.as_tensor(), &z1.z, &z2.z)?.detach();
+    seconds.soft_blend = clock.elapsed().as_secs_f64();
+
+    // Final round (eq. 12).
+    let clock = Instant::now();
+    let last =
+        DnoConfig { steps: rg.final_steps, lr: rg.final_lr, seed: config.seed, restarts: 1, ..config.dno.clone() };
+    let run = dno::optimize(&solver, &full, &z_blend, &last, |s| {
+        progress(&StageProgress { stage: Stage::FinalRound, step: s.step + 1, steps: s.steps, loss: mean(&s.loss) })
+    })?;
+    // The optimiser reports the motion before its last update; sample the final noise.
+    let features = solver.sampler.sample(solver.denoiser, &run.z, &solver.text, guidance)?;
+    seconds.final_round = clock.elapsed().as_secs_f64();
+
+    let raw_joints = prior.to_joints(&features)?;
+    let mut lock = config.foot_lock.clone();
+    lock.plant_on_floor &= !has_raised_support(program);
+    let (joints, foot_lock) = clean_up(&raw_joints, &lock)?;
+    let generated = Generated {
+        features,
+        joints,
+        raw_joints,
+        foot_lock,
+        initial_joints: initial_joints.clone(),
+        loss_history: run.history.into_iter().map(|h| h.loss).collect(),
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    let report = RgDnoReport {
+        retrieval_set: groups.retrieval,
+        random_noise_set: groups.random_noise,
+        retrieved_noise_set: groups.retrieved_noise,
+        candidates: corpus.len(),
+        retrieved: retrieved
+            .iter()
+            .map(|r| RetrievedReport {
+                source: r.source.clone(),
+                score: r.score,
+                per_constraint: r.per_constraint.clone(),
+            })
+            .collect(),
+        inversion_error_m,
+        z1_error: z1.loss,
+        z2_error: z2.loss,
+        masks,
+        soft_blend_objective,
+        seconds,
+        config: rg.clone(),
+    };
+    Ok((generated, report))
+}
+
+/// Eq. 13 per sample: every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient) and
+/// scored by `F_C + R`; returns each sample's best candidate and its mask `[B, T, 263]`.
+#[allow(clippy::too_many_arguments)]
+fn choose_masks<M: Denoiser + ?Sized>(
+    candidates: &[MaskCandidate],
+    (z1, z2): (&Tensor, &Tensor),
+    solver: &UnrolledDdim<'_, M>,
+    objective: &dyn Fn(&Tensor) -> candle_core::Result<Tensor>,
+    prior: &Prior,
+    weights: &RewardWeights,
+    per_batch: usize,
+    rng: &mut StdRng,
+    done: &mut dyn FnMut(usize),
+) -> Result<(Vec<ChosenMask>, Tensor), RgDnoError> {
+    let (batch, frames, _) = z1.dims3()?;
+    let device = z1.device();
+    let mut best: Vec<Option<(ChosenMask, f64)>> = vec![None; batch];
+    for (chunk_index, chunk) in candidates.chunks(per_batch).enumerate() {
+        let masks = chunk
+            .iter()
+            .map(|c| c.tensor(frames, device)?.broadcast_as((1, frames, FEATURE_DIM))?.contiguous())
+            .collect::<candle_core::Result<Vec<_>>>()?;
+        // Rows ordered candidate-major: row k·B + b is candidate k on sample b.
+        let z = Tensor::cat(&masks.iter().map(|m| blend(m, z1, z2)).collect::<candle_core::Result<Vec<_>>>()?, 0)?;
+        let text = solver.text.repeat((chunk.len(), 1))?;
+        let x = solver.sampler.sample(solver.denoiser, &z, &text, solver.guidance)?;
+        let joints = prior.to_joints(&x)?;
+        let constraint = to_vec(&tile_objective(objective, &x, chunk.len(), batch)?)?;
+        let terms = to_vec(&reward(&joints, &z, weights, rng)?.total)?;
+        for (k, candidate) in chunk.iter().enumerate() {
+            for b in 0..batch {
+                let (c, r) = (constraint[k * batch + b], terms[k * batch + b]);
+                let total = c + r;
+                if total.is_finite() && best[b].as_ref().is_none_or(|(_, t)| total < *t) {
+                    best[b] = Some((ChosenMask { candidate: *candidate, constraint_error: c, reward: r }, total));
+                }
+            }
+        }
+        done(((chunk_index + 1) * per_batch).min(candidates.len()));
+    }
+    let chosen: Vec<ChosenMask> = best
+        .into_iter()
+        .map(|b| b.map(|(m, _)| m))
+        .collect::<Option<Vec<_>>>()
+        .ok_or_else(|| GenerationError::Setting("every mask candidate gave a non-finite objective".into()))?;
+    let tensors = chosen
+        .iter()
+        .map(|m| m.candidate.tensor(frames, device)?.broadcast_as((1, frames, FEATURE_DIM))?.contiguous())
+        .collect::<candle_core::Result<Vec<_>>>()?;
+    Ok((chosen, Tensor::cat(&tensors, 0)?.to_dtype(z1.dtype())?))
+}
+
+/// The objective (built for `batch` rows, e.g. with a `[B, T, 22, 3]` initial motion) on
+/// `copies·batch` rows, evaluated copy by copy.
+fn tile_objective(
+    objective: &dyn Fn(&Tensor) -> candle_core::Result<Tensor>,
+    x: &Tensor,
+    copies: usize,
+    batch: usize,
+) -> candle_core::Result<Tensor> {
+    let parts =
+        (0..copies).map(|k| objective(&x.narrow(0, k * batch, batch)?)).collect::<candle_core::Result<Vec<_>>>()?;
+    Tensor::cat(&parts, 0)
+}
+
+fn to_vec(t: &Tensor) -> candle_core::Result<Vec<f64>> {
+    t.to_dtype(DType::F64)?.to_vec1::<f64>()
+}
+
+fn scalar(t: &Tensor) -> candle_core::Result<f64> {
+    Ok(mean(&to_vec(t)?))
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len().max(1) as f64
+}

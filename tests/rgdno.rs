@@ -1,0 +1,148 @@
+//! RG-DNO end to end on the shipped catalog and prior: retrieval finds a planted crop, and a tiny
+//! configuration of the whole method runs through every stage.
+
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use candle_core::{DType, Device};
+use e2e_tests::fixtures;
+use motion_core::constraints::CompiledProgram;
+use motion_core::database::catalog::Catalog;
+use motion_core::database::{DatabaseConfig, MotionDatabase};
+use motion_core::generation::{GenerationConfig, Method};
+use motion_core::prior::Prior;
+use motion_core::program::TaskProgram;
+use motion_core::rgdno::mask::MaskKind;
+use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalCorpus, RetrievalQuery};
+use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoTask};
+
+fn database() -> MotionDatabase {
+    let (sources, _) = Catalog::read(&fixtures().join("mocap/catalog.json")).unwrap().load().unwrap();
+    let config = DatabaseConfig { speeds: vec![1.0], loop_seconds: 4.0, ..DatabaseConfig::default() };
+    MotionDatabase::build(&sources, &config).unwrap()
+}
+
+/// A program that pins the pelvis and both wrists of `joints` `[T, 22, 3]` at four keyframes.
+fn pinned_program(joints: &candle_core::Tensor, frames: usize) -> TaskProgram {
+    let joints = joints.to_dtype(DType::F64).unwrap().to_vec3::<f64>().unwrap();
+    let mut constraints = Vec::new();
+    for t in [0, frames / 3, 2 * frames / 3, frames - 1] {
+        for (name, j) in [("pelvis", 0), ("left_wrist", 20), ("right_wrist", 21)] {
+            let p = &joints[t][j];
+            constraints.push(format!(
+                r#"{{"id": "c{}", "expr": {{"op": "equal", "quantity": {{"kind": "position", "of": {{"joint": "{name}"}}, "axes": "xyz"}},
+                   "target": [{}, {}, {}], "frames": {{"keyframes": [{{"frame": {t}}}]}}}}}}"#,
+                constraints.len() + 1,
+                p[0],
+                p[1],
+                p[2]
+            ));
+        }
+    }
+    let text = format!(
+        r#"{{"text": "a person moves", "frames": {frames}, "constraints": [{}],
+            "relational_parse": {{"most_difficult": "c1", "connected": [], "conflicting": [], "retrieval_confidence": 1.0}}}}"#,
+        constraints.join(",")
+    );
+    TaskProgram::from_json_validated(&text).unwrap()
+}
+
+#[test]
+fn retrieval_finds_a_planted_crop_and_the_semantic_check_filters() {
+    let device = Device::Cpu;
+    let db = database();
+    let frames = 60;
+    let config = RetrievalConfig::default();
+    let corpus = RetrievalCorpus::build(&db, frames, &config, &device).unwrap();
+    assert!(corpus.len() > 100, "{} candidates", corpus.len());
+    // Plant: some crawl crop away from its sequence's start.
+    let planted = (0..corpus.len())
+        .find(|&i| {
+            let s = corpus.source(i).unwrap();
+            s.label.contains("crawl") && s.start == 20 && s.frames == frames
+        })
+        .unwrap();
+    let source = corpus.source(planted).unwrap().clone();
+    let whole = db.sequences()[source.sequence].clone();
+    let raw = db
+        .window_slice(
+            &motion_core::database::Window { sequence: source.sequence, start: 0, frames: whole.frames },
+            20,
+            frames,
+        )
+        .unwrap()
+        .to_vec();
+    let features = candle_core::Tensor::from_vec(raw, (1, frames, 263), &device).unwrap();
+    let joints = motion_core::representation::recover_from_ric(&features).unwrap().squeeze(0).unwrap();
+    let program = pinned_program(&joints, frames);
+    // Every pin counts fully: the score is the sum of all twelve.
+    let all: Vec<String> = program.constraints.iter().map(|c| c.id.clone()).collect();
+    let compiled = CompiledProgram::compile(&program, &device).unwrap().subset(&all);
+    let config = RetrievalConfig { related_weight: 1.0, ..config };
+    let query = RetrievalQuery { program: &compiled, most_difficult: "c1", prompt: &program.text, counting: false };
+    let found = retrieve(&corpus, &query, &config).unwrap();
+    assert_eq!(found[0].source, source, "best: {:?}", found[0].source);
+    assert!(found[0].score < 1e-6, "{}", found[0].score);
+    assert!(found.len() == config.top_k && found.windows(2).all(|w| w[0].score <= w[1].score));
+    // The same pins with a prompt that contradicts the crawl's direction drop every forward crop.
+    let backwards = RetrievalQuery { prompt: "a person crawls backwards", ..query };
+    let found = retrieve(&corpus, &backwards, &config).unwrap();
+    assert!(found.iter().all(|r| !r.source.label.contains("forward")), "{:?}", found[0].source);
+    // A threshold below every score keeps nothing.
+    let strict = RetrievalConfig { threshold: Some(-1.0), ..config };
+    assert!(retrieve(&corpus, &query, &strict).unwrap().is_empty());
+}
+
+#[test]
+fn a_tiny_rg_dno_run_goes_through_every_stage() {
+    let device = Device::Cpu;
+    let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &device).unwrap();
+    let text = std::fs::read_to_string(fixtures().join("tasks/rgdno_task2_low_barrier.json")).unwrap();
+    // Task-2 shortened to 40 frames: the barrier at 0.5 < z < 1.0, the target at z = 1.5.
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["frames"] = 40.into();
+    json["constraints"][0]["expr"]["args"][0]["primitive"]["z_range_m"] = serde_json::json!([0.5, 1.0]);
+    for arg in 0..2 {
+        json["constraints"][1]["expr"]["args"][arg]["target"] = serde_json::json!([1.5]);
+    }
+    let program = TaskProgram::from_json_validated(&json.to_string()).unwrap();
+    let compiled = CompiledProgram::compile(&program, &device).unwrap();
+    let db = database();
+    let rg = RgDnoConfig {
+        first_steps: 3,
+        final_steps: 3,
+        segments: 2,
+        mask_kinds: vec![MaskKind::Temporal],
+        inversion: motion_core::inversion::InversionConfig {
+            feature_polish_steps: 2,
+            polish_steps: 2,
+            fixed_point_iterations: 1,
+            ..Default::default()
+        },
+        ..RgDnoConfig::default()
+    };
+    let corpus = RetrievalCorpus::build(&db, 40, &rg.retrieval, &device).unwrap();
+    let mut config = GenerationConfig::new(Method::RgDno);
+    config.samples = 2;
+    config.guidance = 1.0;
+    let mut stages = Vec::new();
+    let task = RgDnoTask { program: &program, compiled: &compiled, corpus: &corpus };
+    let (generated, report) = generate_rg_dno(&prior, task, &config, &rg, &device, |p| {
+        if stages.last() != Some(&p.stage) {
+            stages.push(p.stage);
+        }
+    })
+    .unwrap();
+    use motion_core::rgdno::Stage::*;
+    assert_eq!(stages, vec![Inversion, RandomBranch, RetrievedBranch, Masks, SoftBlend, FinalRound]);
+    assert_eq!(generated.joints.dims(), &[2, 40, 22, 3]);
+    let values = generated.joints.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    assert!(values.iter().all(|v| v.is_finite()));
+    // C_R is the barrier with the target; the retrieved motion keeps low under it: a crawl.
+    assert_eq!(report.retrieval_set, vec!["c1".to_owned(), "c2".to_owned()]);
+    assert!(report.retrieved[0].source.label.contains("crawl"), "{:?}", report.retrieved[0].source);
+    assert_eq!(report.masks.len(), 2);
+    assert!(report.masks.iter().all(|m| m.candidate.kind == MaskKind::Temporal && m.candidate.bits < 4));
+    assert!(report.inversion_error_m.is_finite() && report.soft_blend_objective.iter().all(|v| v.is_finite()));
+    assert_eq!(generated.loss_history[0].len(), 3);
+}
