@@ -145,4 +145,15 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     assert!(report.masks.iter().all(|m| m.candidate.kind == MaskKind::Temporal && m.candidate.bits < 4));
     assert!(report.inversion_error_m.is_finite() && report.soft_blend_objective.iter().all(|v| v.is_finite()));
     assert_eq!(generated.loss_history[0].len(), 3);
+
+    // Settings the stages cannot run with are errors naming the field, never a panic.
+    for (bad, field) in [
+        (RgDnoConfig { segments: 40, ..rg.clone() }, "segments"),
+        (RgDnoConfig { segments: 0, ..rg.clone() }, "segments"),
+        (RgDnoConfig { mask_kinds: vec![], ..rg.clone() }, "mask_kinds"),
+        (RgDnoConfig { final_lr: f64::NAN, ..rg.clone() }, "final_lr"),
+    ] {
+        let err = generate_rg_dno(&prior, task, &config, &bad, &device, |_| {}).err().unwrap().to_string();
+        assert!(err.contains(field), "{err}");
+    }
 }

@@ -85,6 +85,48 @@ impl Default for RgDnoConfig {
     }
 }
 
+/// Most temporal segments `N_T` (2^12 = 4,096 temporal candidates).
+pub const MAX_SEGMENTS: usize = 12;
+
+impl RgDnoConfig {
+    /// Errors on settings the stages cannot run with, naming the field.
+    pub fn validate(&self, frames: usize) -> Result<(), GenerationError> {
+        let bad = |message: String| Err(GenerationError::Setting(message));
+        if !(1..=MAX_SEGMENTS.min(frames)).contains(&self.segments) {
+            return bad(format!(
+                "rg_dno.segments must be between 1 and {} (and at most the {frames} frames), got {}",
+                MAX_SEGMENTS, self.segments
+            ));
+        }
+        if self.mask_kinds.is_empty() {
+            return bad("rg_dno.mask_kinds must name at least one of \"temporal\", \"spatial\"".into());
+        }
+        if self.first_steps == 0 || self.final_steps == 0 {
+            return bad(format!(
+                "rg_dno.first_steps and final_steps must be at least 1, got {} and {}",
+                self.first_steps, self.final_steps
+            ));
+        }
+        for (name, value) in [("first_lr", self.first_lr), ("final_lr", self.final_lr)] {
+            if !(value.is_finite() && value > 0.0) {
+                return bad(format!("rg_dno.{name} must be a positive number, got {value}"));
+            }
+        }
+        let w = &self.reward;
+        for (name, value) in [
+            ("jitter", w.jitter),
+            ("foot_skate", w.foot_skate),
+            ("decorrelation", w.decorrelation),
+            ("semantic", w.semantic),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return bad(format!("rg_dno.reward.{name} must be finite and ≥ 0, got {value}"));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Why RG-DNO did not run (the caller falls back to DNO and says why).
 #[derive(Debug, thiserror::Error)]
 pub enum RgDnoError {
@@ -244,6 +286,10 @@ pub fn generate_rg_dno(
     mut progress: impl FnMut(&StageProgress),
 ) -> Result<(Generated, RgDnoReport), RgDnoError> {
     let RgDnoTask { program, compiled, corpus } = task;
+    rg.validate(compiled.frames())?;
+    if config.samples == 0 {
+        return Err(GenerationError::Setting("samples must be at least 1".into()).into());
+    }
     let start = Instant::now();
     let groups = program.constraint_groups().ok_or(RgDnoError::NoParse)?;
     let parse = program.relational_parse.as_ref().ok_or(RgDnoError::NoParse)?;
