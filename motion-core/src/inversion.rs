@@ -76,9 +76,9 @@ pub struct Inverted {
 
 /// Finds noise z with `sample(z) ≈ x0` for normalised features `x0` `[batch, frames, 263]`
 /// conditioned on `text` `[batch, text_dim]`, for the sampler with `config.guidance` (1 by
-/// default: no guidance, so the noise is valid for the conditional model alone). `on_polish_step` reports both polishes in turn (the feature
-/// polish's loss is the normalised-feature MSE, the joint polish's the mean joint error in
-/// metres, per sample).
+/// default: no guidance, so the noise is valid for the conditional model alone).
+/// `on_polish_step` reports both polishes in turn (the feature polish's loss is the
+/// normalised-feature MSE, the joint polish's the mean joint error in metres, per sample).
 pub fn invert_motion(
     prior: &Prior,
     x0: &Tensor,

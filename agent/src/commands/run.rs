@@ -212,31 +212,30 @@ pub fn run_program(
             );
         }
     };
-    let mut rg_dno = None;
     let mut fallback = None;
     let mut config = config.clone();
-    let mut generated = None;
-    if config.method == Method::RgDno {
+    let rg_run = if config.method == Method::RgDno {
         match rg_dno_run(prior, program, &compiled, &config, rg_source, &device, &mut show) {
-            Ok((g, r)) => {
-                generated = Some(g);
-                rg_dno = Some(r);
-            }
+            Ok(done) => Some(done),
             Err(RgDnoFailure::Fallback(why)) => {
                 eprintln!("RG-DNO falls back to DNO: {why}");
                 fallback = Some(why);
                 config.method = Method::Dno;
+                None
             }
             Err(RgDnoFailure::Error(error)) => return Err(error),
         }
-    }
-    let generated = match generated {
-        Some(g) => g,
+    } else {
+        None
+    };
+    let (generated, rg_dno) = match rg_run {
+        Some((generated, rg_report)) => (generated, Some(rg_report)),
         None => {
             let method = config.method.to_string();
-            generate(prior, program, &compiled, &config, &device, |p| {
+            let generated = generate(prior, program, &compiled, &config, &device, |p| {
                 show(&method, p.round, p.step + 1, p.steps, p.loss)
-            })?
+            })?;
+            (generated, None)
         }
     };
     bar.finish_and_clear();

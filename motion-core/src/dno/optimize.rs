@@ -221,7 +221,7 @@ fn merge_rows(old: DnoResult, new: DnoResult, take: &[bool]) -> Result<DnoResult
 
 /// ‖t_b‖₂ over all non-batch elements, floored at [`NORM_FLOOR`], `[batch]`. The floor is
 /// applied before the square root, so the gradient at t_b = 0 is 0, not NaN.
-pub(super) fn per_sample_norm(t: &Tensor) -> Result<Tensor> {
+pub(crate) fn per_sample_norm(t: &Tensor) -> Result<Tensor> {
     t.sqr()?.flatten_from(1)?.sum(D::Minus1)?.maximum(NORM_FLOOR * NORM_FLOOR)?.sqrt()
 }
 

@@ -246,8 +246,6 @@ pub fn generate(
         solver = solver.starting_late(start, &x0)?;
     }
     let initial_joints = prior.to_joints(&x0)?;
-    let objective =
-        |x: &Tensor, jitter_weight: f64| program_objective(prior, compiled, &initial_joints, jitter_weight)(x);
     let (features, loss_history) = match config.method {
         Method::RgDno => {
             return Err(GenerationError::Setting(
@@ -257,13 +255,14 @@ pub fn generate(
         Method::Unconstrained => (x0, vec![Vec::new(); config.samples]),
         Method::Ik | Method::IkReg => {
             let smoothness = if config.method == Method::IkReg { config.direct.smoothness_weight } else { 0.0 };
-            direct::optimize_motion(&x0, &|x: &Tensor| objective(x, 0.0), &config.direct, smoothness, |step, loss| {
+            let plain = program_objective(prior, compiled, &initial_joints, 0.0);
+            direct::optimize_motion(&x0, &plain, &config.direct, smoothness, |step, loss| {
                 progress(&Progress { round: 0, step, steps: config.direct.steps, loss })
             })?
         }
         Method::Dno => {
             let dno = DnoConfig { seed: config.seed, ..config.dno.clone() };
-            let guarded = |x: &Tensor| objective(x, config.jitter_weight);
+            let guarded = program_objective(prior, compiled, &initial_joints, config.jitter_weight);
             let run = optimize_with_restarts(&solver as &dyn Solver, guarded, shape, device, &dno, |round, s| {
                 let loss = s.loss.iter().sum::<f64>() / s.loss.len().max(1) as f64;
                 progress(&Progress { round, step: s.step, steps: s.steps, loss })
@@ -272,6 +271,21 @@ pub fn generate(
             (run.best.x, history)
         }
     };
+    finish(prior, program, config, features, initial_joints, loss_history, start)
+}
+
+/// What every method ends with: the joints of `features`, the clean-up (with its floor
+/// planting off for programs on a raised support) and the [`Generated`] record, timed from
+/// `start`.
+pub(crate) fn finish(
+    prior: &Prior,
+    program: &TaskProgram,
+    config: &GenerationConfig,
+    features: Tensor,
+    initial_joints: Tensor,
+    loss_history: Vec<Vec<f64>>,
+    start: Instant,
+) -> Result<Generated, GenerationError> {
     let raw_joints = prior.to_joints(&features)?;
     let mut lock = config.foot_lock.clone();
     lock.plant_on_floor &= !has_raised_support(program);
@@ -306,7 +320,7 @@ pub fn clean_up(joints: &Tensor, config: &FootLockConfig) -> Result<(Tensor, Vec
 
 /// Whether the scene holds a support more than 1 cm above or below the floor y = 0 (a raised
 /// balance beam, a raised or sunk ground), on which feet must not be planted at y = 0.
-pub(crate) fn has_raised_support(program: &TaskProgram) -> bool {
+fn has_raised_support(program: &TaskProgram) -> bool {
     program.scene_primitives().iter().any(|p| match p {
         Primitive::BalanceBeam(beam) => beam.point_m[1].abs() > 0.01,
         Primitive::Ground(ground) => ground.height_m.abs() > 0.01,

@@ -21,7 +21,7 @@ pub mod reward;
 
 use std::time::Instant;
 
-use candle_core::{DType, Device, Tensor, Var, D};
+use candle_core::{DType, Device, Tensor, Var};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
@@ -30,9 +30,7 @@ use crate::constraints::CompiledProgram;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{Denoiser, Guidance};
 use crate::dno::{self, DnoConfig, UnrolledDdim};
-use crate::generation::{
-    clean_up, has_raised_support, program_objective, Generated, GenerationConfig, GenerationError,
-};
+use crate::generation::{finish, program_objective, Generated, GenerationConfig, GenerationError};
 use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
 use crate::prior::Prior;
 use crate::program::TaskProgram;
@@ -198,7 +196,7 @@ pub struct RgDnoReport {
     pub random_noise_set: Vec<String>,
     /// `C2`.
     pub retrieved_noise_set: Vec<String>,
-    /// Candidates scored (after the semantic check).
+    /// Candidates in the corpus (before the semantic check).
     pub candidates: usize,
     /// The retrieved motions, best first; the first is `x_R`.
     pub retrieved: Vec<RetrievedReport>,
@@ -393,7 +391,8 @@ pub fn generate_rg_dno(
         let grad = grads
             .remove(logits.as_tensor())
             .ok_or_else(|| candle_core::Error::Msg("no gradient reached the mask".into()))?;
-        let norm = grad.sqr()?.flatten_from(1)?.sum(D::Minus1)?.maximum(1e-24)?.sqrt()?;
+        // Per-sample gradient normalisation, as DNO's loop.
+        let norm = dno::per_sample_norm(&grad)?;
         grads.insert(logits.as_tensor(), grad.broadcast_div(&norm.reshape((batch, 1, 1))?)?);
         adam.step(&grads, blend_schedule.learning_rate(step))?;
         progress(&StageProgress {
@@ -417,19 +416,8 @@ pub fn generate_rg_dno(
     let features = solver.sampler.sample(solver.denoiser, &run.z, &solver.text, guidance)?;
     seconds.final_round = clock.elapsed().as_secs_f64();
 
-    let raw_joints = prior.to_joints(&features)?;
-    let mut lock = config.foot_lock.clone();
-    lock.plant_on_floor &= !has_raised_support(program);
-    let (joints, foot_lock) = clean_up(&raw_joints, &lock)?;
-    let generated = Generated {
-        features,
-        joints,
-        raw_joints,
-        foot_lock,
-        initial_joints: initial_joints.clone(),
-        loss_history: run.history.into_iter().map(|h| h.loss).collect(),
-        seconds: start.elapsed().as_secs_f64(),
-    };
+    let history = run.history.into_iter().map(|h| h.loss).collect();
+    let generated = finish(prior, program, config, features, initial_joints.clone(), history, start)?;
     let report = RgDnoReport {
         retrieval_set: groups.retrieval,
         random_noise_set: groups.random_noise,

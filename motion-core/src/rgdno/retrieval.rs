@@ -144,8 +144,6 @@ pub struct Retrieved {
     pub per_constraint: Vec<(String, f64)>,
     /// Raw features `[T, 263]`.
     pub features: Tensor,
-    /// Joints `[T, 22, 3]`.
-    pub joints: Tensor,
 }
 
 impl RetrievalCorpus {
@@ -299,7 +297,6 @@ pub fn retrieve(
                     (corpus.frames, FEATURE_DIM),
                     corpus.joints.device(),
                 )?,
-                joints: corpus.joints.get(i)?,
             })
         })
         .collect()
