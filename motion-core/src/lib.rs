@@ -9,6 +9,7 @@ pub mod database;
 pub mod diffusion;
 pub mod dno;
 pub mod evaluation;
+pub mod export;
 pub mod generation;
 pub mod import;
 pub mod inversion;
