@@ -11,8 +11,11 @@
 //! Every writer builds its file in memory and writes it with [`write_atomically`]: a failure
 //! leaves no half-written file behind.
 
+pub mod bvh;
+pub mod gltf;
 pub mod rotations;
 pub mod scene;
+pub mod viewer;
 
 use std::path::{Path, PathBuf};
 
