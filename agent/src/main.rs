@@ -79,6 +79,9 @@ fn main() -> anyhow::Result<()> {
         .without_time()
         .init();
     let cli = Cli::parse();
+    if let Err(error) = paths::fixtures() {
+        tracing::warn!("{error}");
+    }
     let Some(command) = cli.command else { return commands::task::run(cli.task) };
     match command {
         Command::Data(cmd) => commands::data::run(cmd),

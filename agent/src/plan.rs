@@ -105,7 +105,7 @@ mod tests {
     use super::*;
 
     fn task(name: &str) -> PathBuf {
-        crate::paths::fixtures_dir().join("tasks").join(name)
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fixtures/tasks").join(name)
     }
 
     #[test]
