@@ -1,1 +1,427 @@
-//! Placeholder: being written (issue 16).
+//! BVH (Biovision hierarchy) text of a [`RotationTrack`].
+//!
+//! # What the file holds
+//! - **Hierarchy**: the 22 joints under their snake_case names, which are SMPL's (`pelvis`,
+//!   `left_hip`, …, `right_wrist`), `pelvis` the `ROOT`, children in joint-index order. Each
+//!   `OFFSET` is the track's [`RigSkeleton::offsets_m`](super::RigSkeleton) entry (the joint's
+//!   offset from its parent in the parent's rest frame; every rest frame is the world's); the
+//!   root's is `0 0 0`, so readers that add the root OFFSET to its position channels and readers
+//!   that replace it agree. The five end joints (head, wrists, feet) carry an `End Site`
+//!   [`END_SITE_M`] further along their own bone.
+//! - **Channels**: the root has `Xposition Yposition Zposition Zrotation Xrotation Yrotation`,
+//!   every other joint `Zrotation Xrotation Yrotation`. Root positions are the pelvis, world.
+//! - **Rotations**: Euler angles in degrees, intrinsic, applied as BVH readers apply channels,
+//!   left to right: the local rotation is `L = Rz(z) · Rx(x) · Ry(y)` (column vectors; the same
+//!   rotation read extrinsically is y about the world y, then x, then z). A joint's world
+//!   transform is `parent_world · Translate(OFFSET) · L`; the root's is `Translate(position) · L`.
+//!   This is the track's own forward kinematics, so a reader poses exactly its joints.
+//! - **Continuity**: each frame's angles are, of the two Euler triples of the rotation (`(z, x, y)`
+//!   and `(z + 180, 180 − x, y + 180)`) shifted by whole turns, the one nearest the previous
+//!   frame's, so no channel jumps by about 360° between frames and keyframe interpolation (as in
+//!   Blender) never spins a joint the long way round. Angles may leave (−180°, 180°].
+//! - **Motion**: `Frames` = the track's frames, `Frame Time` = 1 / fps seconds.
+//! - **Axes**: the project's ([`crate::skeleton`]): right-handed, **y up**, the character starts
+//!   facing **+z**, **+x is its left**. Blender's BVH import with its defaults (forward −Z, up Y)
+//!   puts our `(x, y, z)` at Blender's `(x, −z, y)`: upright, facing −Y, left at +X.
+//! - **Units**: [`BvhUnit`]: metres (default) or centimetres, for offsets and root positions.
+//!   Lengths are written with 6 decimals in metres (4 in centimetres), angles with 4; trailing
+//!   zeros are dropped.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use glam::{DQuat, DVec3, EulerRot};
+
+use super::{write_atomically, ExportError, RotationTrack};
+use crate::skeleton::{Joint, NUM_JOINTS};
+
+/// Length of each End Site along its joint's bone, m: about the head above the SMPL head joint,
+/// the hand beyond the wrist and the toes beyond the ball of the foot.
+pub const END_SITE_M: f64 = 0.1;
+
+/// Decimals of angles, degrees (1e-4° moves a point 1 m away by 2 µm).
+const ANGLE_DECIMALS: usize = 4;
+
+/// Decimals of `Frame Time`, seconds.
+const FRAME_TIME_DECIMALS: usize = 9;
+
+/// The length unit of a written BVH file.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum BvhUnit {
+    /// Metres (the project's unit).
+    #[default]
+    Metres,
+    /// Centimetres (what Mixamo and MotionBuilder exports use).
+    Centimetres,
+}
+
+impl BvhUnit {
+    /// File units per metre.
+    pub fn per_metre(self) -> f64 {
+        match self {
+            BvhUnit::Metres => 1.0,
+            BvhUnit::Centimetres => 100.0,
+        }
+    }
+
+    /// The unit's name as manifests write it (`tests/blender/check_bvh.py` reads it back):
+    /// `metres` or `centimetres`.
+    pub fn name(self) -> &'static str {
+        match self {
+            BvhUnit::Metres => "metres",
+            BvhUnit::Centimetres => "centimetres",
+        }
+    }
+
+    /// Decimals of a length in this unit: micrometre precision.
+    fn decimals(self) -> usize {
+        match self {
+            BvhUnit::Metres => 6,
+            BvhUnit::Centimetres => 4,
+        }
+    }
+}
+
+/// The BVH text of `track` in `unit` (see the module doc for every convention), for a track as
+/// [`RotationTrack::solve`] makes it: at least one frame, a root position per frame
+/// ([`write_bvh`] checks both).
+pub fn bvh_text(track: &RotationTrack, unit: BvhUnit) -> String {
+    let order = hierarchy_order();
+    let mut out = String::from("HIERARCHY\n");
+    write_joint(&mut out, track, unit, Joint::Pelvis, 0);
+    let frame_time = number(1.0 / track.fps, FRAME_TIME_DECIMALS);
+    let _ = write!(out, "MOTION\nFrames: {}\nFrame Time: {frame_time}\n", track.frames());
+    let mut previous: Option<[DVec3; NUM_JOINTS]> = None;
+    for (local, root) in track.local.iter().zip(&track.root_m) {
+        let angles: [DVec3; NUM_JOINTS] = std::array::from_fn(|j| euler_zxy_near(local[j], previous.map(|p| p[j])));
+        previous = Some(angles);
+        let position = *root * unit.per_metre();
+        let mut values: Vec<String> = position.to_array().map(|v| number(v, unit.decimals())).to_vec();
+        for j in &order {
+            values.extend(angles[j.index()].to_array().map(|a| number(a.to_degrees(), ANGLE_DECIMALS)));
+        }
+        out.push_str(&values.join(" "));
+        out.push('\n');
+    }
+    out
+}
+
+/// Writes [`bvh_text`] to `path` atomically. Fails on a track without frames or whose root
+/// positions and rotations differ in length, and when writing fails.
+pub fn write_bvh(path: &Path, track: &RotationTrack, unit: BvhUnit) -> Result<(), ExportError> {
+    if track.frames() == 0 || track.root_m.len() != track.frames() {
+        return Err(ExportError::Shape(format!(
+            "{}: a BVH needs at least one frame and a root position per frame, found {} rotation and {} \
+             root frames",
+            path.display(),
+            track.frames(),
+            track.root_m.len()
+        )));
+    }
+    write_atomically(path, bvh_text(track, unit).as_bytes())
+}
+
+/// The children of `joint` in index order.
+fn children(joint: Joint) -> impl Iterator<Item = Joint> {
+    Joint::ALL.into_iter().filter(move |c| c.parent() == Some(joint))
+}
+
+/// Joints depth first from the pelvis, children in index order: the order of the hierarchy and
+/// of the channels on a motion line.
+fn hierarchy_order() -> Vec<Joint> {
+    let mut order = Vec::with_capacity(NUM_JOINTS);
+    let mut stack = vec![Joint::Pelvis];
+    while let Some(j) = stack.pop() {
+        order.push(j);
+        let mut kids: Vec<Joint> = children(j).collect();
+        kids.reverse();
+        stack.extend(kids);
+    }
+    order
+}
+
+/// Appends the block of `joint` and its descendants, indented by `depth` levels.
+fn write_joint(out: &mut String, track: &RotationTrack, unit: BvhUnit, joint: Joint, depth: usize) {
+    let pad = "  ".repeat(depth);
+    let offset = track.skeleton.offsets_m[joint.index()];
+    let (keyword, channels) = match joint.parent() {
+        None => ("ROOT", "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"),
+        Some(_) => ("JOINT", "CHANNELS 3 Zrotation Xrotation Yrotation"),
+    };
+    let _ = writeln!(out, "{pad}{keyword} {}\n{pad}{{", joint.name());
+    let _ = writeln!(out, "{pad}  OFFSET {}\n{pad}  {channels}", vector(offset, unit));
+    let mut kids = children(joint).peekable();
+    if kids.peek().is_none() {
+        let direction = offset.try_normalize().unwrap_or(joint.raw_offset());
+        let tip = vector(direction * END_SITE_M, unit);
+        let _ = writeln!(out, "{pad}  End Site\n{pad}  {{\n{pad}    OFFSET {tip}\n{pad}  }}");
+    }
+    for kid in kids {
+        write_joint(out, track, unit, kid, depth + 1);
+    }
+    let _ = writeln!(out, "{pad}}}");
+}
+
+/// A length vector in metres as three numbers in `unit`.
+fn vector(v_m: DVec3, unit: BvhUnit) -> String {
+    (v_m * unit.per_metre()).to_array().map(|c| number(c, unit.decimals())).join(" ")
+}
+
+/// `v` with `decimals` places, trailing zeros dropped and `-0` written `0`.
+fn number(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    let trimmed = if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.') } else { &s };
+    if trimmed == "-0" { "0" } else { trimmed }.to_owned()
+}
+
+/// Angles `(z, x, y)`, rad, with `q = Rz(z) · Rx(x) · Ry(y)`: of the two Euler triples of `q`
+/// and their whole-turn shifts, the one nearest `previous` (the principal triple without one).
+fn euler_zxy_near(q: DQuat, previous: Option<DVec3>) -> DVec3 {
+    use std::f64::consts::{PI, TAU};
+    let (z, x, y) = q.to_euler(EulerRot::ZXY);
+    let principal = DVec3::new(z, x, y);
+    let Some(previous) = previous else { return principal };
+    // Rz(z + π) · Rx(π − x) · Ry(y + π) = Rz(z) · Rx(x) · Ry(y).
+    let twin = DVec3::new(z + PI, PI - x, y + PI);
+    let near = |c: DVec3| c + ((previous - c) / TAU).round() * TAU;
+    let (a, b) = (near(principal), near(twin));
+    if a.distance_squared(previous) <= b.distance_squared(previous) {
+        a
+    } else {
+        b
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+
+    use super::*;
+    use crate::database::catalog::{Catalog, SourceFormat};
+    use crate::import::bvh::{Bvh, BvhClip, BvhOptions, LengthUnit, Rig};
+    use crate::import::isaaclab::IsaacAmpClip;
+    use crate::import::{deepmimic, resample, MocapClip};
+    use crate::skeleton::Pose;
+
+    fn mocap(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap").join(name)
+    }
+
+    /// Parses `text` with the project's importer (rig and unit detected).
+    fn import(text: &str) -> BvhClip {
+        let path = Path::new("export.bvh");
+        let (bvh, warnings) = Bvh::parse(text, path).unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        let (clip, warnings) = BvhClip::from_bvh("export", &bvh, &BvhOptions::default(), path).unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        clip
+    }
+
+    /// Largest distance between the joints of two motions, m.
+    fn max_distance(a: &[Pose], b: &[Pose]) -> f64 {
+        assert_eq!(a.len(), b.len());
+        a.iter().zip(b).flat_map(|(p, q)| p.iter().zip(q).map(|(u, v)| u.distance(*v))).fold(0.0, f64::max)
+    }
+
+    /// Every frame of an imported export, posed at its frame times with the file's own lengths.
+    fn imported_poses(clip: &BvhClip) -> Vec<Pose> {
+        let dt = clip.animation().frame_time_s();
+        (0..clip.animation().frames()).map(|k| clip.mapped_pose_at(k as f64 * dt)).collect()
+    }
+
+    /// Solves `poses`, writes them in `unit` and reads them back: the largest distances of the
+    /// read joints from the track's forward kinematics and from `poses`, and the solve's own
+    /// largest distance from `poses` (its [`SolveFit`](super::super::SolveFit)), m.
+    fn round_trip(poses: &[Pose], unit: BvhUnit) -> [f64; 3] {
+        let track = RotationTrack::solve(poses, 20.0, 0).unwrap();
+        let clip = import(&bvh_text(&track, unit));
+        let expected_unit = match unit {
+            BvhUnit::Metres => LengthUnit::Metres,
+            BvhUnit::Centimetres => LengthUnit::Centimetres,
+        };
+        assert_eq!((clip.rig(), clip.animation().unit()), (Rig::Smpl, expected_unit));
+        assert!((clip.fps() - 20.0).abs() < 1e-9);
+        let read = imported_poses(&clip);
+        [max_distance(&read, &track.forward_kinematics()), max_distance(&read, poses), track.fit(poses).max_m]
+    }
+
+    #[test]
+    fn every_shipped_clip_comes_back_as_solved() {
+        let catalog = Catalog::read(&mocap("catalog.json")).unwrap();
+        let (sources, _) = catalog.load().unwrap();
+        let mut clips: Vec<(String, SourceFormat, Box<dyn MocapClip>)> =
+            catalog.clips.iter().zip(sources).map(|(entry, s)| (s.name, entry.format, s.clip)).collect();
+        // Shipped but not in the catalog.
+        let (bank, _) = BvhClip::read(&mocap("bvhtoolbox/test_mocapbank.bvh"), &BvhOptions::default()).unwrap();
+        clips.push(("test_mocapbank".into(), SourceFormat::Bvh, Box::new(bank)));
+        for name in ["humanoid_dance", "humanoid_run", "humanoid_walk"] {
+            let (clip, _) = IsaacAmpClip::read(&mocap(&format!("isaaclab/{name}.npz"))).unwrap();
+            clips.push((name.into(), SourceFormat::IsaaclabAmp, Box::new(clip)));
+        }
+        assert_eq!(clips.len(), 27);
+        let mut worst: Vec<(SourceFormat, [f64; 3])> = Vec::new();
+        for (name, family, clip) in &clips {
+            let poses = resample(clip.as_ref(), 1.0, None);
+            let [to_track, to_input, fit] = round_trip(&poses, BvhUnit::Metres);
+            println!(
+                "{family:?}/{name}: {} frames, file vs track {to_track:.1e} m, vs input {to_input:.1e} m (solve {fit:.1e} m)",
+                poses.len()
+            );
+            assert!(to_track < 1e-4, "{name}: {to_track} m from the track");
+            assert!(to_input < fit + 1e-4, "{name}: {to_input} m from the input, the solve {fit} m");
+            match worst.iter_mut().find(|(f, _)| f == family) {
+                Some((_, w)) => *w = std::array::from_fn(|k| w[k].max([to_track, to_input, fit][k])),
+                None => worst.push((*family, [to_track, to_input, fit])),
+            }
+        }
+        for (family, [to_track, to_input, fit]) in worst {
+            println!(
+                "{family:?}: largest file vs track {to_track:.1e} m, vs input {to_input:.1e} m (solve {fit:.1e} m)"
+            );
+        }
+    }
+
+    /// A track on the rest skeleton of the canonical pose with one frame of `local` rotations.
+    fn one_frame(local: [DQuat; NUM_JOINTS], root: DVec3) -> RotationTrack {
+        let skeleton = RotationTrack::solve(&[deepmimic::rest_pose()], 20.0, 0).unwrap().skeleton;
+        RotationTrack { skeleton, root_m: vec![root], local: vec![local], fps: 20.0 }
+    }
+
+    /// The values of the motion line of frame `k`.
+    fn motion_line(text: &str, k: usize) -> Vec<f64> {
+        let start = text.lines().position(|l| l.starts_with("Frame Time")).unwrap() + 1;
+        text.lines().nth(start + k).unwrap().split(' ').map(|v| v.parse().unwrap()).collect()
+    }
+
+    #[test]
+    fn a_known_rotation_is_written_and_read_back() {
+        let mut local = [DQuat::IDENTITY; NUM_JOINTS];
+        local[0] = DQuat::from_rotation_y(90f64.to_radians());
+        local[Joint::LeftElbow.index()] = DQuat::from_rotation_x(-60f64.to_radians());
+        local[Joint::RightHip.index()] = DQuat::from_euler(EulerRot::ZXY, 0.3, -0.4, 0.5);
+        let track = one_frame(local, DVec3::new(1.0, 0.9, -2.0));
+        let text = bvh_text(&track, BvhUnit::Metres);
+        let lines: Vec<&str> = text.lines().map(str::trim).collect();
+        assert_eq!(
+            lines[..5],
+            [
+                "HIERARCHY",
+                "ROOT pelvis",
+                "{",
+                "OFFSET 0 0 0",
+                "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"
+            ]
+        );
+        assert_eq!(lines.iter().filter(|l| l.starts_with("JOINT ")).count(), 21);
+        assert_eq!(lines.iter().filter(|l| **l == "End Site").count(), 5);
+        assert!(text.contains("Frames: 1\nFrame Time: 0.05\n"), "{text}");
+        // Depth first: pelvis, left leg (4 joints), right leg, then the spine.
+        let order = hierarchy_order();
+        assert_eq!(
+            order[..6],
+            [Joint::Pelvis, Joint::LeftHip, Joint::LeftKnee, Joint::LeftAnkle, Joint::LeftFoot, Joint::RightHip]
+        );
+        let values = motion_line(&text, 0);
+        assert_eq!(values.len(), 6 + 21 * 3);
+        assert_eq!(values[..6], [1.0, 0.9, -2.0, 0.0, 0.0, 90.0]);
+        let channels = |j: Joint| {
+            let k = order.iter().position(|o| *o == j).unwrap();
+            values[3 + 3 * k..6 + 3 * k].to_vec()
+        };
+        assert_eq!(channels(Joint::LeftElbow), [0.0, -60.0, 0.0]);
+        let hip: Vec<f64> = [0.3f64, -0.4, 0.5].map(|a| (a.to_degrees() * 1e4).round() / 1e4).to_vec();
+        assert_eq!(channels(Joint::RightHip), hip);
+        // The importer poses the track's own joints.
+        let read = imported_poses(&import(&text));
+        assert!(max_distance(&read, &track.forward_kinematics()) < 1e-5);
+        // An End Site continues its bone by 0.1 m: the head's is straight up at rest.
+        let head = text.find("JOINT head").unwrap();
+        let tip = &text[head..][text[head..].find("End Site").unwrap()..];
+        let offset = tip.lines().nth(2).unwrap().trim();
+        let v: Vec<f64> = offset.trim_start_matches("OFFSET ").split(' ').map(|v| v.parse().unwrap()).collect();
+        let rest_neck_head = track.skeleton.offsets_m[Joint::Head.index()].normalize() * END_SITE_M;
+        assert!((DVec3::from_slice(&v) - rest_neck_head).length() < 1e-6, "{offset}");
+    }
+
+    #[test]
+    fn angles_are_continuous_through_full_turns_and_gimbal_lock() {
+        // The root spins twice about y while a knee swings past 90° about x, 7° a frame.
+        let frames: Vec<[DQuat; NUM_JOINTS]> = (0..26)
+            .map(|k| {
+                let mut local = [DQuat::IDENTITY; NUM_JOINTS];
+                local[0] = DQuat::from_rotation_y((29.0 * k as f64).to_radians());
+                local[Joint::LeftKnee.index()] = DQuat::from_rotation_x((7.0 * k as f64).to_radians());
+                local
+            })
+            .collect();
+        let mut track = one_frame(frames[0], DVec3::ZERO);
+        track.root_m = vec![DVec3::ZERO; frames.len()];
+        track.local = frames;
+        let text = bvh_text(&track, BvhUnit::Metres);
+        let knee = 3 + 3 * hierarchy_order().iter().position(|j| *j == Joint::LeftKnee).unwrap();
+        for k in 1..track.frames() {
+            let (a, b) = (motion_line(&text, k - 1), motion_line(&text, k));
+            assert!((b[5] - a[5] - 29.0).abs() < 1e-3, "root y, frame {k}: {} → {}", a[5], b[5]);
+            assert!(
+                (b[knee + 1] - a[knee + 1] - 7.0).abs() < 1e-3,
+                "knee x, frame {k}: {:?} → {:?}",
+                &a[knee..knee + 3],
+                &b[knee..knee + 3]
+            );
+            assert!(
+                b[knee].abs() < 1e-3 && b[knee + 2].abs() < 1e-3,
+                "knee z, y at frame {k}: {:?}",
+                &b[knee..knee + 3]
+            );
+        }
+        assert!((motion_line(&text, 25)[5] - 725.0).abs() < 1e-3);
+        let read = imported_poses(&import(&text));
+        assert!(max_distance(&read, &track.forward_kinematics()) < 1e-5);
+    }
+
+    #[test]
+    fn centimetres_give_the_same_joints() {
+        let path = mocap("deepmimic/humanoid3d_cartwheel.txt");
+        let (clip, _) = deepmimic::DeepMimicClip::read(&path).unwrap();
+        let poses = resample(&clip, 1.0, None);
+        let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
+        let (metres, centimetres) = (bvh_text(&track, BvhUnit::Metres), bvh_text(&track, BvhUnit::Centimetres));
+        let hip = track.skeleton.offsets_m[Joint::LeftHip.index()];
+        assert!(metres.contains(&format!("OFFSET {}", vector(hip, BvhUnit::Metres))));
+        assert!(centimetres.contains(&format!("OFFSET {}", vector(hip, BvhUnit::Centimetres))));
+        assert_eq!(
+            motion_line(&centimetres, 3)[..3],
+            (track.root_m[3] * 100.0).to_array().map(|v| (v * 1e4).round() / 1e4)
+        );
+        let (m, cm) = (imported_poses(&import(&metres)), imported_poses(&import(&centimetres)));
+        assert!(max_distance(&m, &cm) < 1e-5, "{}", max_distance(&m, &cm));
+        assert_eq!([BvhUnit::Metres.name(), BvhUnit::Centimetres.name()], ["metres", "centimetres"]);
+        let [to_track, to_input, fit] = round_trip(&poses, BvhUnit::Centimetres);
+        assert!(to_track < 1e-4 && to_input < fit + 1e-4, "{to_track} {to_input} {fit}");
+    }
+
+    #[test]
+    fn numbers_are_compact() {
+        assert_eq!(number(0.05, 9), "0.05");
+        assert_eq!(number(-0.0000001, 6), "0");
+        assert_eq!(number(12.0, 4), "12");
+        assert_eq!(number(-1.23456789, 4), "-1.2346");
+        assert_eq!(number(1.0 / 30.0, 9), "0.033333333");
+    }
+
+    #[test]
+    fn write_bvh_refuses_empty_or_ragged_tracks_and_writes_the_text() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a").join("motion.bvh");
+        let track = one_frame([DQuat::IDENTITY; NUM_JOINTS], DVec3::Y);
+        write_bvh(&path, &track, BvhUnit::Centimetres).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), bvh_text(&track, BvhUnit::Centimetres));
+        let mut ragged = track.clone();
+        ragged.root_m.push(DVec3::ZERO);
+        let err = write_bvh(&path, &ragged, BvhUnit::Metres).unwrap_err().to_string();
+        assert!(err.contains("motion.bvh") && err.contains("1 rotation and 2 root"), "{err}");
+        let empty = RotationTrack { root_m: vec![], local: vec![], ..track };
+        assert!(write_bvh(&dir.path().join("b.bvh"), &empty, BvhUnit::Metres).is_err());
+        assert!(!dir.path().join("b.bvh").exists());
+    }
+}

@@ -24,6 +24,10 @@ pub struct BvhOptions {
 /// lerped root), the rig map picks the 22 points, and bone lengths are retargeted to those of
 /// [`deepmimic::rest_pose`] with [`retarget_bone_lengths`] (bone directions kept, the root
 /// trajectory scaled by the leg-length ratio). Not cyclic.
+///
+/// The project's own exports ([`Rig::Smpl`]) come back as written from
+/// [`BvhClip::mapped_pose_at`] (the file's joints and bone lengths); [`MocapClip::pose_at`]
+/// retargets them like any other rig's, so that a database built from them stays on one skeleton.
 #[derive(Debug, Clone)]
 pub struct BvhClip {
     name: String,

@@ -1,7 +1,7 @@
 //! Joint maps from common BVH rigs to the 22 joints.
 
 use super::Bvh;
-use crate::skeleton::NUM_JOINTS;
+use crate::skeleton::{Joint, NUM_JOINTS};
 use Source::{At, Between, TowardEnd};
 
 /// Where one of our joints sits on a source rig.
@@ -33,11 +33,15 @@ pub enum Rig {
     /// LeftCollar, LeftShoulder, LeftElbow, LeftWrist, LeftHip, LeftKnee, LeftAnkle and an End
     /// Site at the toe tip instead of a toe joint.
     HipsChestChest2,
+    /// The project's own export ([`crate::export::bvh`]): the 22 joints under their snake_case
+    /// names, which are SMPL's (`pelvis`, `left_hip`, …), each at its own node. Its
+    /// [`BvhClip::mapped_pose_at`](super::BvhClip::mapped_pose_at) is the exported motion itself.
+    Smpl,
 }
 
 impl Rig {
     /// Every rig, in detection order.
-    pub const ALL: [Rig; 4] = [Rig::Cmu, Rig::Mixamo, Rig::HipsAbChest, Rig::HipsChestChest2];
+    pub const ALL: [Rig; 5] = [Rig::Cmu, Rig::Mixamo, Rig::HipsAbChest, Rig::HipsChestChest2, Rig::Smpl];
 
     /// Display name.
     pub fn name(self) -> &'static str {
@@ -46,6 +50,7 @@ impl Rig {
             Rig::Mixamo => "Mixamo",
             Rig::HipsAbChest => "Hips/Ab/Chest",
             Rig::HipsChestChest2 => "Hips/Chest/Chest2",
+            Rig::Smpl => "SMPL",
         }
     }
 
@@ -160,6 +165,7 @@ impl Rig {
                 At("LeftWrist"),
                 At("RightWrist"),
             ],
+            Rig::Smpl => Joint::ALL.map(|j| At(j.name())),
         }
     }
 
