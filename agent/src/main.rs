@@ -37,13 +37,18 @@ enum Command {
     Data(commands::data::DataCommand),
     /// Train the motion prior on a database (resumable; progress and loss on stderr).
     Train(commands::train::TrainArgs),
-    /// Unconstrained motions from the prior for a text prompt (npy + PNG strip).
+    /// Unconstrained motions from the prior for a text prompt (npy, PNG strip, BVH, GLB, viewer
+    /// page).
     Sample(commands::sample::SampleArgs),
-    /// Generate motions for a constraint program file (npy, JSON report, PNG strip).
+    /// Generate motions for a constraint program file (npy, JSON report, PNG strip, BVH, GLB,
+    /// viewer page).
     Run(commands::run::RunArgs),
     /// RG-DNO's constraint-based retrieval for a program: the database crops that best satisfy
     /// its retrieval set C_R, and the best crop of each label.
     Retrieve(commands::retrieve::RetrieveArgs),
+    /// Motions already made (an output folder or a joints.npy) to BVH, GLB (skinned figure and
+    /// the task's scene) and the self-contained 3-D viewer page.
+    Export(commands::export::ExportArgs),
     /// Print the JSON Schema of constraint programs (what `run` accepts).
     Schema,
     /// Reports: `prior` compares unconstrained samples with the training data per label.
@@ -89,6 +94,7 @@ fn main() -> anyhow::Result<()> {
         Command::Sample(args) => commands::sample::run(args),
         Command::Run(args) => commands::run::run(args),
         Command::Retrieve(args) => commands::retrieve::run(args),
+        Command::Export(args) => commands::export::run(args),
         Command::Schema => {
             println!("{}", serde_json::to_string_pretty(&motion_core::program::json_schema())?);
             Ok(())

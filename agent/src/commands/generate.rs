@@ -19,7 +19,7 @@ pub struct RunOptions {
     pub prior: PathBuf,
     /// Where RG-DNO retrieves from, and its settings.
     pub rg_source: super::run::RgDnoSource,
-    /// Output folder (already holds `program.json`).
+    /// Output folder.
     pub out: PathBuf,
 }
 

@@ -7,15 +7,18 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use motion_core::constraints::CompiledProgram;
 use motion_core::database::MotionDatabase;
+use motion_core::export::bvh::BvhUnit;
 use motion_core::evaluation::{report, TaskReport};
 use motion_core::generation::{generate, GenerationConfig, Method};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
+use motion_core::skeleton::FPS;
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
 use motion_core::rgdno::retrieval::RetrievalCorpus;
 use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
 
+use super::export::write_all;
 use crate::paths;
 
 /// A generation method on the command line.
@@ -157,7 +160,9 @@ pub struct RunArgs {
     /// network's motion, before the foot clean-up), joints.npy [n, frames, 22, 3] (m, y up, 20
     /// fps, bones at the rest lengths, after the clean-up: the output), report.json (every
     /// constraint in natural units with pass/fail, before and after the clean-up), strip.png
-    /// (world coordinates, the scene drawn).
+    /// (world coordinates, the scene drawn), program.json, sample_<i>/motion.bvh and
+    /// sample_<i>/motion.glb (rotations on a rigid skeleton; the GLB has a skinned figure and the
+    /// scene), viewer.html (3-D, offline) and export.json (the files and the rotation fit).
     #[arg(long, short, default_value = "out/run")]
     out: PathBuf,
 }
@@ -254,7 +259,21 @@ pub fn run_program(
         .map(|(i, p)| StripRow { label: format!("{} sample {i} (seed {})", config.method, config.seed), poses: p })
         .collect();
     motion_strip(&rows, 8, &program.scene_primitives(), &program.text, &out.join("strip.png"))?;
-    eprintln!("wrote {}/{{features.npy,joints.npy,report.json,strip.png}}", out.display());
+    let program_path = out.join("program.json");
+    std::fs::write(&program_path, program.to_json_pretty()? + "\n")
+        .with_context(|| format!("writing {}", program_path.display()))?;
+    eprintln!("wrote {}/{{program.json,features.npy,joints.npy,report.json,strip.png}}", out.display());
+    let labels = (0..poses.len()).map(|i| format!("{} sample {i} (seed {})", config.method, config.seed)).collect();
+    write_all(
+        out,
+        &program.text,
+        FPS,
+        &poses,
+        labels,
+        program.scene_primitives(),
+        Some(serde_json::to_value(&report)?),
+        BvhUnit::Metres,
+    )?;
     Ok(report)
 }
 

@@ -5,12 +5,15 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use motion_core::cleanup::FootLockConfig;
+use motion_core::export::bvh::BvhUnit;
+use motion_core::skeleton::FPS;
 use motion_core::diffusion::Guidance;
 use motion_core::generation::clean_up;
 use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
 
+use super::export::write_all;
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -44,7 +47,7 @@ pub struct SampleArgs {
     no_foot_lock: bool,
     /// Output folder: joints.npy [n, frames, 22, 3] (m, y up, after the foot clean-up),
     /// features.npy [n, frames, 263] (de-normalised, the root velocity as decoded, before the
-    /// clean-up), strip.png.
+    /// clean-up), strip.png, sample_<i>/motion.{bvh,glb}, viewer.html, export.json.
     #[arg(long, short, default_value = "out/sample")]
     out: PathBuf,
 }
@@ -102,5 +105,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         .collect();
     motion_strip(&rows, 8, &[], &args.prompt, &args.out.join("strip.png"))?;
     println!("wrote {}/{{joints.npy,features.npy,strip.png}}", args.out.display());
+    let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
+    write_all(&args.out, &args.prompt, FPS, &poses, labels, Vec::new(), None, BvhUnit::Metres)?;
     Ok(())
 }

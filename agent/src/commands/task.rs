@@ -5,7 +5,6 @@ use std::time::Duration;
 
 use agent::llm::{ApiKey, ClientConfig, Llm, LlmSettings, OutputMode, ReplySource, RetryPolicy, DEFAULT_MODEL};
 use agent::plan::{plan_from_file, plan_task, PlanSettings, PlannedTask};
-use anyhow::Context;
 use clap::Args;
 
 use super::generate::{self, RunOptions};
@@ -33,7 +32,8 @@ pub struct TaskArgs {
     method: MethodArg,
     #[command(flatten)]
     generation: GenerationArgs,
-    /// Output folder: program.json, features.npy, joints.npy, report.json, strip.png.
+    /// Output folder: program.json, features.npy, joints.npy, report.json, strip.png,
+    /// sample_<i>/motion.bvh and .glb, viewer.html (3-D, offline), export.json.
     #[arg(long, short, default_value = "out/task")]
     out: PathBuf,
     /// Repair rounds per LLM stage when an answer is invalid.
@@ -137,11 +137,6 @@ pub fn run(args: TaskArgs) -> anyhow::Result<()> {
         println!("dry run: the program is valid; stopping before generation");
         return Ok(());
     }
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let program_path = args.out.join("program.json");
-    std::fs::write(&program_path, planned.program.to_json_pretty()? + "\n")
-        .with_context(|| format!("writing {}", program_path.display()))?;
-    eprintln!("wrote {}", program_path.display());
     let options = RunOptions {
         config: args.generation.config(args.method.into()),
         prior: args.generation.prior.clone(),

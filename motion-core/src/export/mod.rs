@@ -13,12 +13,14 @@
 
 pub mod bvh;
 pub mod gltf;
+mod outputs;
 pub mod rotations;
 pub mod scene;
 pub mod viewer;
 
 use std::path::{Path, PathBuf};
 
+pub use outputs::{read_joints_npy, write_outputs, ExportInput, ExportManifest, ExportedSample, Probe};
 pub use rotations::{RigSkeleton, RotationTrack, SolveFit};
 pub use scene::{scene_boxes, SceneBox, SceneExtent, SceneRole};
 
@@ -40,6 +42,14 @@ pub enum ExportError {
     /// Nothing to export, or samples of different lengths where one length is needed.
     #[error("cannot export: {0}")]
     Shape(String),
+    /// Reading an input file failed.
+    #[error("{path}: {message}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
     /// Writing a file failed.
     #[error("{path}: {message}")]
     Write {

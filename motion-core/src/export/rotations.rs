@@ -178,6 +178,18 @@ struct Branch {
     right: Joint,
 }
 
+impl Branch {
+    /// The joints whose parent is the branching joint.
+    fn children(&self) -> impl Iterator<Item = Joint> + '_ {
+        Joint::ALL.into_iter().filter(|c| c.parent() == Some(self.joint))
+    }
+}
+
+/// Rounds of (rest directions of a branch's children, the branch's frames) refinement.
+const BRANCH_REFINEMENTS: usize = 3;
+/// Small-rotation steps of a branch fit.
+const WAHBA_ITERATIONS: usize = 50;
+
 const BRANCHES: [Branch; 2] = [
     Branch { joint: Joint::Pelvis, up: Joint::Spine1, left: Joint::LeftHip, right: Joint::RightHip },
     Branch { joint: Joint::Spine3, up: Joint::Neck, left: Joint::LeftCollar, right: Joint::RightCollar },
@@ -203,7 +215,7 @@ fn branch_frame(branch: &Branch, pose: &Pose) -> Option<DQuat> {
 }
 
 /// Bone lengths (motion means) along the canonical rest directions, the branching joints'
-/// children along their mean directions in the branch frame.
+/// children along their mean directions in the branch frame (refined with the fitted frames).
 fn rig_skeleton(poses: &[Pose]) -> RigSkeleton {
     let rest = deepmimic::rest_pose();
     let mut offsets = [DVec3::ZERO; NUM_JOINTS];
@@ -214,41 +226,70 @@ fn rig_skeleton(poses: &[Pose]) -> RigSkeleton {
         offsets[j.index()] = direction * length;
     }
     for branch in &BRANCHES {
-        let children = Joint::ALL.into_iter().filter(|c| c.parent() == Some(branch.joint));
-        for child in children {
-            let mean: DVec3 = poses
-                .iter()
-                .filter_map(|p| {
-                    let frame = branch_frame(branch, p)?;
-                    (frame.inverse() * (p[child.index()] - p[branch.joint.index()])).try_normalize()
-                })
-                .sum();
-            if let Some(direction) = mean.try_normalize() {
-                offsets[child.index()] = direction * offsets[child.index()].length();
+        let mut frames: Vec<Option<DQuat>> = poses.iter().map(|p| branch_frame(branch, p)).collect();
+        for _ in 0..BRANCH_REFINEMENTS {
+            for child in branch.children() {
+                let mean: DVec3 = poses
+                    .iter()
+                    .zip(&frames)
+                    .filter_map(|(p, frame)| {
+                        (frame.as_ref()?.inverse() * (p[child.index()] - p[branch.joint.index()])).try_normalize()
+                    })
+                    .sum();
+                if let Some(direction) = mean.try_normalize() {
+                    offsets[child.index()] = direction * offsets[child.index()].length();
+                }
+            }
+            for (frame, pose) in frames.iter_mut().zip(poses) {
+                *frame = frame.map(|f| fit_branch(branch, f, &offsets, pose, pose[branch.joint.index()]));
             }
         }
     }
     RigSkeleton { offsets_m: offsets }
 }
 
-/// Global rotation of every joint of one pose on `skeleton`.
+/// The rotation that best maps the rest offsets of `branch`'s children onto their bones in
+/// `pose` as seen from `at` (least squares in metres: Wahba's problem), by small-rotation steps
+/// from `start`.
+fn fit_branch(branch: &Branch, start: DQuat, offsets: &[DVec3; NUM_JOINTS], pose: &Pose, at: DVec3) -> DQuat {
+    let mut rotation = start;
+    for _ in 0..WAHBA_ITERATIONS {
+        let (mut torque, mut scale) = (DVec3::ZERO, 0.0);
+        for child in branch.children() {
+            let (from, to) = (rotation * offsets[child.index()], pose[child.index()] - at);
+            torque += from.cross(to);
+            scale += from.length() * to.length();
+        }
+        if scale <= 0.0 {
+            break;
+        }
+        let step = torque / scale;
+        rotation = (DQuat::from_scaled_axis(step) * rotation).normalize();
+        if step.length() < 1e-12 {
+            break;
+        }
+    }
+    rotation
+}
+
+/// Global rotation of every joint of one pose on `skeleton`. A joint with one child aims its
+/// bone from where forward kinematics put the joint at the child's position, so an offset at a
+/// branch does not carry down the limb.
 fn global_rotations(pose: &Pose, skeleton: &RigSkeleton) -> [DQuat; NUM_JOINTS] {
     let mut global = [DQuat::IDENTITY; NUM_JOINTS];
+    let mut placed = [pose[0]; NUM_JOINTS];
     for j in Joint::ALL {
         let parent = j.parent().map_or(DQuat::IDENTITY, |p| global[p.index()]);
+        if let Some(p) = j.parent() {
+            placed[j.index()] = placed[p.index()] + parent * skeleton.offsets_m[j.index()];
+        }
         global[j.index()] = if let Some(branch) = BRANCHES.iter().find(|b| b.joint == j) {
-            // The rest frame of a branch is the world's only approximately (its children's rest
-            // directions are means): map the rest frame of the offsets onto the pose's.
-            let rest = two_vector_frame(
-                skeleton.offsets_m[branch.up.index()],
-                skeleton.offsets_m[branch.left.index()] - skeleton.offsets_m[branch.right.index()],
-            );
-            match (branch_frame(branch, pose), rest) {
-                (Some(now), Some(rest)) => (now * rest.inverse()).normalize(),
-                _ => parent,
+            match branch_frame(branch, pose) {
+                Some(start) => fit_branch(branch, start, &skeleton.offsets_m, pose, placed[j.index()]),
+                None => parent,
             }
         } else if let Some(child) = aim_child(j) {
-            let bone = pose[child.index()] - pose[j.index()];
+            let bone = pose[child.index()] - placed[j.index()];
             let rest = parent * skeleton.offsets_m[child.index()];
             match (rest.try_normalize(), bone.try_normalize()) {
                 (Some(from), Some(to)) if bone.length() > DEGENERATE_M => {
@@ -266,7 +307,10 @@ fn global_rotations(pose: &Pose, skeleton: &RigSkeleton) -> [DQuat; NUM_JOINTS] 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::import::{deepmimic::DeepMimicClip, MocapClip};
+    use crate::database::catalog::Catalog;
+    use crate::import::bvh::{BvhClip, BvhOptions};
+    use crate::import::isaaclab::IsaacAmpClip;
+    use crate::import::{deepmimic::DeepMimicClip, resample, MocapClip};
 
     /// A pose on a rigid skeleton: the rest pose with the left elbow bent by `elbow` about +x,
     /// the whole body turned by `yaw` about +y and moved to `at`.
@@ -310,6 +354,40 @@ mod tests {
                 assert!(a.dot(b) >= 0.0);
             }
         }
+    }
+
+    /// The shipped clips keep their bone lengths, but not the shape of the two branches: the
+    /// DeepMimic neck sits on the head's body and the collars on the chest's, and the BVH rigs'
+    /// hips and collars are points along bones of different bodies. No rotation of one rigid
+    /// skeleton reproduces that; the fit spreads it over the branch's children (measured: mean
+    /// at most 2.4 mm, max 34 mm, on the neck, collars and hips only).
+    #[test]
+    fn forward_kinematics_reproduces_every_shipped_clip_up_to_its_branch_shape() {
+        let mocap = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap");
+        let catalog = Catalog::read(&mocap.join("catalog.json")).unwrap();
+        let (sources, _) = catalog.load().unwrap();
+        let mut clips: Vec<(String, Box<dyn MocapClip>)> = sources.into_iter().map(|s| (s.name, s.clip)).collect();
+        let (bank, _) = BvhClip::read(&mocap.join("bvhtoolbox/test_mocapbank.bvh"), &BvhOptions::default()).unwrap();
+        clips.push(("test_mocapbank".into(), Box::new(bank)));
+        for name in ["humanoid_dance", "humanoid_run", "humanoid_walk"] {
+            let (clip, _) = IsaacAmpClip::read(&mocap.join(format!("isaaclab/{name}.npz"))).unwrap();
+            clips.push((name.into(), Box::new(clip)));
+        }
+        let (mut worst, mut worst_mean) = ((String::new(), 0.0), 0.0_f64);
+        for (name, clip) in &clips {
+            let poses = resample(clip.as_ref(), 1.0, None);
+            let fit = RotationTrack::solve(&poses, 20.0, 0).unwrap().fit(&poses);
+            println!("{name}: mean {:.2} mm, max {:.2} mm", fit.mean_m * 1e3, fit.max_m * 1e3);
+            worst_mean = worst_mean.max(fit.mean_m);
+            if ["humanoid3d_walk", "humanoid3d_run"].contains(&name.as_str()) {
+                // Clips whose branches are rigid come back exactly.
+                assert!(fit.max_m < 1e-6, "{name}: {fit:?}");
+            }
+            if fit.max_m > worst.1 {
+                worst = (name.clone(), fit.max_m);
+            }
+        }
+        assert!(worst.1 < 0.035 && worst_mean < 0.003, "{worst:?}, worst mean {worst_mean}");
     }
 
     #[test]

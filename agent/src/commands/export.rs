@@ -1,0 +1,93 @@
+//! `mogen export`: motions already made (an output folder, a `joints.npy`) → BVH, GLB and the
+//! viewer page; and the same files for every command that generates motions.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+use motion_core::export::bvh::BvhUnit;
+use motion_core::export::{read_joints_npy, write_outputs, ExportInput, ExportManifest};
+use motion_core::program::Primitive;
+use motion_core::skeleton::{Pose, FPS};
+
+use super::run::load_program;
+
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// An output folder of `mogen` (its joints.npy, with program.json and report.json when
+    /// present) or a joints.npy file: [frames, 22, 3] or [samples, frames, 22, 3], metres, y up,
+    /// +z forward, +x the character's left, the 22 SMPL joints in HumanML3D order.
+    input: PathBuf,
+    /// Output folder (default: the input folder, or the folder of the npy file).
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+    /// A constraint program whose scene (walls, barriers, ...) is drawn (default: program.json
+    /// next to the joints, when there is one).
+    #[arg(long, value_name = "FILE")]
+    program: Option<PathBuf>,
+    /// Frames per second of the motion.
+    #[arg(long, default_value_t = FPS)]
+    fps: f64,
+    /// Write BVH in centimetres instead of metres.
+    #[arg(long)]
+    centimetres: bool,
+}
+
+pub fn run(args: ExportArgs) -> anyhow::Result<()> {
+    let (joints, folder) = if args.input.is_dir() {
+        (args.input.join("joints.npy"), args.input.clone())
+    } else {
+        let folder = args.input.parent().map(Path::to_path_buf).unwrap_or_default();
+        (args.input.clone(), folder)
+    };
+    let motions = read_joints_npy(&joints)?;
+    let program_path = args.program.clone().or_else(|| Some(folder.join("program.json")).filter(|p| p.is_file()));
+    let program = program_path.as_deref().map(load_program).transpose()?;
+    let report_path = folder.join("report.json");
+    let report = if report_path.is_file() {
+        let text = std::fs::read_to_string(&report_path).with_context(|| format!("reading {}", report_path.display()))?;
+        Some(serde_json::from_str(&text).with_context(|| format!("{} is not JSON", report_path.display()))?)
+    } else {
+        None
+    };
+    let title = program.as_ref().map_or_else(|| joints.display().to_string(), |p| p.text.clone());
+    let scene = program.as_ref().map(|p| p.scene_primitives()).unwrap_or_default();
+    let out = args.out.unwrap_or(folder);
+    let unit = if args.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
+    let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
+    write_all(&out, &title, args.fps, &motions, labels, scene, report, unit)?;
+    Ok(())
+}
+
+/// Writes the BVH and GLB of every motion, the viewer page and `export.json` into `out`, and
+/// prints what was written with the rotation solve's fit. `labels` name the motions.
+#[allow(clippy::too_many_arguments)]
+pub fn write_all(
+    out: &Path,
+    title: &str,
+    fps: f64,
+    motions: &[Vec<Pose>],
+    labels: Vec<String>,
+    scene: Vec<Primitive>,
+    report: Option<serde_json::Value>,
+    unit: BvhUnit,
+) -> anyhow::Result<ExportManifest> {
+    let input = ExportInput {
+        title: title.to_owned(),
+        fps,
+        samples: labels.into_iter().zip(motions).map(|(label, p)| (label, p.as_slice())).collect(),
+        scene,
+        report,
+        bvh_unit: unit,
+    };
+    let manifest = write_outputs(out, &input).with_context(|| format!("exporting into {}", out.display()))?;
+    let worst = manifest.samples.iter().map(|s| s.fit_max_m).fold(0.0, f64::max);
+    eprintln!(
+        "wrote {}/{{sample_*/motion.bvh,sample_*/motion.glb,viewer.html,export.json}} ({} samples; rigid-skeleton \
+         fit: joints within {:.1} mm of the motion)",
+        out.display(),
+        manifest.samples.len(),
+        worst * 1000.0
+    );
+    Ok(manifest)
+}

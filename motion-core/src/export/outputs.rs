@@ -1,0 +1,185 @@
+//! Every output file of a set of motions at once: per sample a BVH and a GLB, one viewer page
+//! and a manifest (`export.json`) with the rotation solve's fit and a few probe positions that
+//! other tools' imports are checked against.
+//!
+//! Layout under the output folder:
+//! - `sample_<i>/motion.bvh`, `sample_<i>/motion.glb` (i from 0);
+//! - `viewer.html`;
+//! - `export.json` ([`ExportManifest`]).
+//!
+//! Every motion is validated (frames, finite positions, frame rate) and solved before the first
+//! file is written, so bad input writes nothing; each file is written whole
+//! ([`super::write_atomically`]).
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use super::bvh::{write_bvh, BvhUnit};
+use super::gltf::write_glb;
+use super::rotations::{RotationTrack, SolveFit};
+use super::scene::{scene_boxes, SceneExtent};
+use super::viewer::{write_viewer, ViewerInput, ViewerSample};
+use super::{write_atomically, ExportError};
+use crate::program::Primitive;
+use crate::quality::tensor_to_poses;
+use crate::skeleton::{Joint, Pose, NUM_JOINTS};
+
+/// The joints whose forward-kinematics positions the manifest lists.
+const PROBE_JOINTS: [Joint; 5] = [Joint::Pelvis, Joint::Head, Joint::LeftWrist, Joint::RightFoot, Joint::LeftKnee];
+
+/// What to export.
+#[derive(Debug, Clone)]
+pub struct ExportInput<'a> {
+    /// Title of the viewer page (the prompt or task).
+    pub title: String,
+    /// Frames per second of every motion.
+    pub fps: f64,
+    /// Each sample: label and joint positions (m, project axes).
+    pub samples: Vec<(String, &'a [Pose])>,
+    /// The task's scene primitives (drawn in the GLBs and the viewer).
+    pub scene: Vec<Primitive>,
+    /// The task's `report.json`, shown by the viewer; `None` for motions without a task.
+    pub report: Option<serde_json::Value>,
+    /// Length unit of the BVH files.
+    pub bvh_unit: BvhUnit,
+}
+
+/// One joint's position at one frame, by forward kinematics of the solved track.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Probe {
+    /// Joint name.
+    pub joint: &'static str,
+    /// Frame, from 0.
+    pub frame: usize,
+    /// Position, m, project axes.
+    pub position_m: [f64; 3],
+}
+
+/// One sample's files and fit.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ExportedSample {
+    /// Label.
+    pub label: String,
+    /// Frames.
+    pub frames: usize,
+    /// BVH file, relative to the output folder.
+    pub bvh: String,
+    /// GLB file, relative to the output folder.
+    pub glb: String,
+    /// Mean distance between the input joints and forward kinematics of the rotations, m.
+    pub fit_mean_m: f64,
+    /// Largest such distance, m.
+    pub fit_max_m: f64,
+    /// Positions to check imports against.
+    pub probes: Vec<Probe>,
+}
+
+/// `export.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ExportManifest {
+    /// The axes and units of every file.
+    pub axes: &'static str,
+    /// Frames per second.
+    pub fps: f64,
+    /// BVH length unit.
+    pub bvh_unit: &'static str,
+    /// The viewer page, relative to the output folder.
+    pub viewer: &'static str,
+    /// Every sample.
+    pub samples: Vec<ExportedSample>,
+}
+
+/// Writes every output of `input` under `out` and returns the manifest (also written).
+pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManifest, ExportError> {
+    if input.samples.is_empty() {
+        return Err(ExportError::Shape("no motions to export".into()));
+    }
+    let tracks = input
+        .samples
+        .iter()
+        .enumerate()
+        .map(|(i, (_, poses))| RotationTrack::solve(poses, input.fps, i))
+        .collect::<Result<Vec<_>, _>>()?;
+    let motions: Vec<Vec<Pose>> = input.samples.iter().map(|(_, p)| p.to_vec()).collect();
+    let boxes = scene_boxes(&input.scene, SceneExtent::of(&motions));
+    let viewer = ViewerInput {
+        title: input.title.clone(),
+        fps: input.fps,
+        samples: input
+            .samples
+            .iter()
+            .map(|(label, poses)| ViewerSample { label: label.clone(), poses: poses.to_vec() })
+            .collect(),
+        scene: boxes.clone(),
+        report: input.report.clone(),
+    };
+    let mut samples = Vec::with_capacity(tracks.len());
+    for (i, (track, (label, poses))) in tracks.iter().zip(&input.samples).enumerate() {
+        let (bvh, glb) = (format!("sample_{i}/motion.bvh"), format!("sample_{i}/motion.glb"));
+        write_bvh(&out.join(&bvh), track, input.bvh_unit)?;
+        write_glb(&out.join(&glb), label, track, &boxes)?;
+        let SolveFit { mean_m, max_m } = track.fit(poses);
+        samples.push(ExportedSample {
+            label: label.clone(),
+            frames: track.frames(),
+            bvh,
+            glb,
+            fit_mean_m: mean_m,
+            fit_max_m: max_m,
+            probes: probes(track),
+        });
+    }
+    write_viewer(&out.join("viewer.html"), &viewer)?;
+    let manifest = ExportManifest {
+        axes: "metres; right-handed, y up, +z the direction the motion starts facing, +x the character's left (glTF's axes)",
+        fps: input.fps,
+        bvh_unit: input.bvh_unit.name(),
+        viewer: "viewer.html",
+        samples,
+    };
+    let json = serde_json::to_string_pretty(&manifest).map_err(|e| ExportError::Shape(e.to_string()))?;
+    write_atomically(&out.join("export.json"), json.as_bytes())?;
+    Ok(manifest)
+}
+
+/// [`PROBE_JOINTS`] at the first frame, a third, two thirds and the last frame.
+fn probes(track: &RotationTrack) -> Vec<Probe> {
+    let fk = track.forward_kinematics();
+    let last = fk.len().saturating_sub(1);
+    let mut frames = vec![0, last / 3, 2 * last / 3, last];
+    frames.dedup();
+    frames
+        .into_iter()
+        .flat_map(|frame| {
+            let pose = fk[frame];
+            PROBE_JOINTS.map(move |j| Probe { joint: j.name(), frame, position_m: pose[j.index()].to_array() })
+        })
+        .collect()
+}
+
+/// Reads joint positions from an npy file of shape `[frames, 22, 3]` (one motion) or
+/// `[samples, frames, 22, 3]`, m. Non-finite values are left for [`RotationTrack::solve`] to
+/// name; a missing file or another shape is an error naming the file.
+pub fn read_joints_npy(path: &Path) -> Result<Vec<Vec<Pose>>, ExportError> {
+    let fail = |message: String| ExportError::Read { path: path.into(), message };
+    if !path.is_file() {
+        return Err(fail("no such file".into()));
+    }
+    let tensor = candle_core::Tensor::read_npy(path).map_err(|e| fail(format!("not an npy array: {e}")))?;
+    let tensor = match tensor.dims() {
+        [_, joints, 3] if *joints == NUM_JOINTS => tensor.unsqueeze(0),
+        [_, _, joints, 3] if *joints == NUM_JOINTS => Ok(tensor),
+        dims => {
+            return Err(fail(format!(
+                "shape {dims:?}; expected [frames, {NUM_JOINTS}, 3] or [samples, frames, {NUM_JOINTS}, 3]"
+            )))
+        }
+    }
+    .map_err(|e| fail(e.to_string()))?;
+    let (samples, frames) = (tensor.dim(0).unwrap_or(0), tensor.dim(1).unwrap_or(0));
+    if samples == 0 || frames == 0 {
+        return Err(fail(format!("{samples} samples of {frames} frames: nothing to export")));
+    }
+    tensor_to_poses(&tensor).map_err(|e| fail(e.to_string()))
+}
