@@ -84,9 +84,9 @@ fn main() -> anyhow::Result<()> {
         .without_time()
         .init();
     let cli = Cli::parse();
-    if let Err(error) = paths::fixtures() {
-        tracing::warn!("{error}");
-    }
+    // Every command's defaults come from here; without them a default path would fail later
+    // with a less helpful message.
+    paths::fixtures()?;
     let Some(command) = cli.command else { return commands::task::run(cli.task) };
     match command {
         Command::Data(cmd) => commands::data::run(cmd),

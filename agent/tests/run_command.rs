@@ -27,7 +27,17 @@ fn run_writes_motion_report_and_picture() {
     let out = dir.path().join("out");
     let output = mogen(&["run", &program, "--method", "dno", "--steps", "2", "--out", &out.display().to_string()]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    for file in ["features.npy", "joints.npy", "report.json", "strip.png"] {
+    for file in [
+        "features.npy",
+        "joints.npy",
+        "report.json",
+        "strip.png",
+        "program.json",
+        "sample_0/motion.bvh",
+        "sample_0/motion.glb",
+        "viewer.html",
+        "export.json",
+    ] {
         assert!(out.join(file).is_file(), "{file} missing");
     }
     let report: serde_json::Value =

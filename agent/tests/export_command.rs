@@ -1,0 +1,98 @@
+//! `mogen export` as a user calls it: motions they already have become BVH, GLB and the viewer;
+//! bad input gets an error naming the problem and writes nothing.
+
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use candle_core::{Device, Tensor};
+
+fn mogen(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mogen")).args(args).output().unwrap()
+}
+
+/// A standing figure drifting forward: `[samples, frames, 22, 3]` built from the canonical
+/// rest pose, with the pelvis 0.9 m up.
+fn standing(samples: usize, frames: usize) -> Vec<f32> {
+    let rest = motion_core::import::deepmimic::rest_pose();
+    let mut out = Vec::new();
+    for s in 0..samples {
+        for t in 0..frames {
+            for p in rest {
+                let q = p + glam::DVec3::new(0.3 * s as f64, 0.9, 0.05 * t as f64);
+                out.extend([q.x as f32, q.y as f32, q.z as f32]);
+            }
+        }
+    }
+    out
+}
+
+fn files_under(dir: &Path) -> usize {
+    if !dir.exists() {
+        return 0;
+    }
+    std::fs::read_dir(dir).unwrap().count()
+}
+
+#[test]
+fn a_joints_file_becomes_bvh_glb_and_the_viewer() {
+    let dir = tempfile::tempdir().unwrap();
+    let npy = dir.path().join("joints.npy");
+    Tensor::from_vec(standing(2, 30), (2, 30, 22, 3), &Device::Cpu).unwrap().write_npy(&npy).unwrap();
+    let out = dir.path().join("exported");
+    let output = mogen(&["export", &npy.display().to_string(), "--out", &out.display().to_string(), "--centimetres"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    for file in ["sample_0/motion.bvh", "sample_1/motion.glb", "viewer.html", "export.json"] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    let bvh = std::fs::read_to_string(out.join("sample_1/motion.bvh")).unwrap();
+    assert!(bvh.contains("Frames: 30") && bvh.contains("Frame Time: 0.05"), "{bvh}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).unwrap()).unwrap();
+    assert_eq!(manifest["bvh_unit"], "centimetres");
+    assert_eq!(manifest["samples"].as_array().unwrap().len(), 2);
+    // A rigid figure is reproduced by the rotations.
+    assert!(manifest["samples"][0]["fit_max_m"].as_f64().unwrap() < 1e-6);
+
+    // One motion `[frames, 22, 3]` works too, into the npy's own folder.
+    let single = dir.path().join("one").join("joints.npy");
+    std::fs::create_dir_all(single.parent().unwrap()).unwrap();
+    Tensor::from_vec(standing(1, 12), (12, 22, 3), &Device::Cpu).unwrap().write_npy(&single).unwrap();
+    let output = mogen(&["export", &single.display().to_string()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(dir.path().join("one/sample_0/motion.glb").is_file());
+}
+
+#[test]
+fn bad_input_is_named_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let out_arg = out.display().to_string();
+    let check = |input: &Path, expected: &[&str]| {
+        let output = mogen(&["export", &input.display().to_string(), "--out", &out_arg]);
+        let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+        assert!(!output.status.success(), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        for needle in expected {
+            assert!(stderr.contains(needle), "{needle:?} not in {stderr}");
+        }
+        assert_eq!(files_under(&out), 0, "{stderr}");
+    };
+    check(&dir.path().join("missing.npy"), &["missing.npy", "no such file"]);
+
+    let wrong = dir.path().join("wrong.npy");
+    Tensor::zeros((4, 21, 3), candle_core::DType::F32, &Device::Cpu).unwrap().write_npy(&wrong).unwrap();
+    check(&wrong, &["wrong.npy", "[4, 21, 3]", "[frames, 22, 3]"]);
+
+    let text = dir.path().join("text.npy");
+    std::fs::write(&text, "not an array").unwrap();
+    check(&text, &["text.npy", "not an npy array"]);
+
+    let mut values = standing(2, 5);
+    values[(5 + 2) * 66 + 3 * 3 + 1] = f32::NAN; // sample 1, frame 2, spine1, y
+    let nan = dir.path().join("nan.npy");
+    Tensor::from_vec(values, (2, 5, 22, 3), &Device::Cpu).unwrap().write_npy(&nan).unwrap();
+    check(&nan, &["sample 1", "frame 2", "spine1", "not finite"]);
+}
