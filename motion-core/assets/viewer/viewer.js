@@ -216,7 +216,7 @@
     group.add(label);
     scene.add(group);
     const positions = joints.map(() => new THREE.Vector3());
-    return { sample, group, jointMeshes, boneMeshes, label, positions, colour: mid };
+    return { sample, index, group, jointMeshes, boneMeshes, label, positions, colour: mid };
   });
 
   const direction = new THREE.Vector3();
@@ -240,7 +240,8 @@
       if (length > 1e-9) mesh.quaternion.setFromUnitVectors(UP, direction.divideScalar(length));
     });
     figure.label.position.copy(figure.positions[HEAD]);
-    figure.label.position.y += 0.25;
+    // Stacked by sample, so figures that start together keep readable labels.
+    figure.label.position.y += 0.25 + 0.16 * figure.index;
   }
 
   // Camera: from the character's right and front, far enough to hold every joint.
