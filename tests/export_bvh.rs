@@ -8,6 +8,7 @@ use candle_core::Device;
 use e2e_tests::fixtures;
 use motion_core::diffusion::Guidance;
 use motion_core::export::bvh::{write_bvh, BvhUnit};
+use motion_core::export::rotations::ANIMATED_OFFSETS;
 use motion_core::export::RotationTrack;
 use motion_core::import::bvh::{BvhClip, BvhOptions, LengthUnit, Rig};
 use motion_core::prior::Prior;
@@ -31,6 +32,10 @@ fn a_sampled_motion_comes_back_from_bvh_as_solved() {
     let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
     let fk = track.forward_kinematics();
     let fit = track.fit(&poses);
+    let moved = (0..track.frames())
+        .flat_map(|t| ANIMATED_OFFSETS.map(|j| track.offset_m(t, j).distance(track.skeleton.offsets_m[j.index()])))
+        .fold(0.0, f64::max);
+    println!("animated offsets move at most {:.1} mm from rest", moved * 1e3);
     let dir = tempfile::tempdir().unwrap();
     for (unit, read_as) in [(BvhUnit::Metres, LengthUnit::Metres), (BvhUnit::Centimetres, LengthUnit::Centimetres)] {
         let path = dir.path().join(format!("{unit:?}.bvh"));

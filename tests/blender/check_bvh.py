@@ -19,8 +19,13 @@ default axes, forward -Z and up Y. That maps our (x, y, z) to Blender's (x, -z, 
 Z up, the character faces -Y, and its left stays at +X. BVH frame k is keyed at Blender frame
 k + 1 (the importer's `frame_start`). For every sample the script checks that the armature has 22
 bones, that the action is keyed on frames 1..frames, that the scene runs at the export's frame rate,
-and that the head of each probed bone (our joint is the bone's head) is within 1 cm of the probe
-in world space. It exits 1 with one line per failure, or prints a summary and exits 0.
+that exactly the pelvis and the six joints with animated offsets (hips, spine1, neck, collars) have
+location curves, and that the head of each probed bone (our joint is the bone's head) is within 1 cm
+of the probe in world space. It exits 1 with one line per failure, or prints a summary and exits 0.
+
+Those seven joints have position channels. Blender's importer reads them as the exporter means, as
+replacing the joint's OFFSET for the frame: the pose location is (channels - OFFSET) in the bone's
+rest frame, so the probes below them check the offset animation.
 
 Debian bookworm's Blender 3.4 importer opens the file with mode 'rU', which Python 3.11 rejects;
 the importer module's `open` is replaced, while importing, by one that drops the 'U'.
@@ -37,6 +42,7 @@ from mathutils import Vector
 
 TOLERANCE_M = 0.01
 BONES = 22
+TRANSLATED_BONES = {"pelvis", "left_hip", "right_hip", "spine1", "neck", "left_collar", "right_collar"}
 METRES_PER_UNIT = {"metres": 1.0, "centimetres": 0.01}
 
 
@@ -110,6 +116,9 @@ def check_sample(root, sample, fps, metres_per_unit):
         failures.append(f"{where}: the armature has no keyframes")
     elif (min(keys), max(keys)) != (1.0, float(frames)):
         failures.append(f"{where}: keyed on frames {min(keys):g}..{max(keys):g}, expected 1..{frames}")
+    translated = {c.data_path.split('"')[1] for c in action.fcurves if c.data_path.endswith(".location")} if action else set()
+    if translated != TRANSLATED_BONES:
+        failures.append(f"{where}: bones with location curves {sorted(translated)}, expected {sorted(TRANSLATED_BONES)}")
     scene = bpy.context.scene
     scene_fps = scene.render.fps / scene.render.fps_base
     if abs(scene_fps - fps) > 1e-3 * fps:

@@ -9,7 +9,8 @@ importer into an empty scene whose frame rate is the export's, and checks:
   pose (node translations summed down the tree);
 - the animation spans `frames` frames: the importer puts time t (s) at scene frame t * scene fps,
   so with the scene at the export's rate frame k of the export is scene frame k;
-- every probe joint's world position at its frame is within 1 cm of `position_m`.
+- every probe joint's world position at its frame is within 1 cm of `position_m` (the pelvis, hips,
+  spine1, neck and collars have translation channels, so the probes below them check those too).
 
 Axes: the export's are glTF's (metres, y up); Blender's importer turns them to z up, so a point
 (x, y, z) of the export is (x, -z, y) in Blender.

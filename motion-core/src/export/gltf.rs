@@ -8,8 +8,10 @@
 //! - **Skin** over the 22 joint nodes in [`Joint::ALL`] order (skin joint `i` is node `i`); each
 //!   inverse bind matrix inverts its joint's rest global transform, a pure translation.
 //! - **Animation**, named after the label: at every frame `k` (time `k / fps` s, `LINEAR`) the
-//!   local rotation of every joint ([`RotationTrack::local`]) and the pelvis translation
-//!   ([`RotationTrack::root_m`]).
+//!   local rotation of every joint ([`RotationTrack::local`]), the pelvis translation
+//!   ([`RotationTrack::root_m`]) and the translation of the six joints with animated offsets
+//!   ([`ANIMATED_OFFSETS`]: hips, spine1, neck, collars), their offset from their parent at that
+//!   frame ([`RotationTrack::offset_m`]). So the file poses the track's forward kinematics.
 //! - **Body**: a capsule round every bone and spheres for the head and hands, each vertex bound
 //!   with weight 1 to one joint (a bone's capsule to the bone's parent joint); one material.
 //! - **Scene**: every [`SceneBox`] an unskinned node of its name holding a unit cube scaled to
@@ -34,6 +36,7 @@ use json::mesh::{Mode, Semantic};
 use json::validation::{Checked, Checked::Valid, USize64};
 use json::{Index, Root};
 
+use super::rotations::ANIMATED_OFFSETS;
 use super::{write_atomically, ExportError, RotationTrack, SceneBox, SceneRole};
 use crate::skeleton::{Joint, Pose};
 
@@ -52,7 +55,8 @@ pub fn write_glb(path: &Path, label: &str, track: &RotationTrack, scene: &[Scene
 
 /// The GLB of one sample: `track` on its skeleton with a skinned body, its animation named
 /// `label`, and the `scene` boxes. Fails on an empty track, a frame rate that is not positive,
-/// root positions and rotations of different lengths, or a value that is not finite.
+/// root positions, animated offsets and rotations of different lengths, or a value that is not
+/// finite.
 pub fn glb_bytes(label: &str, track: &RotationTrack, scene: &[SceneBox]) -> Result<Vec<u8>, ExportError> {
     check(label, track, scene)?;
     let mut glb = Builder::default();
@@ -73,18 +77,29 @@ fn check(label: &str, track: &RotationTrack, scene: &[SceneBox]) -> Result<(), E
     if track.root_m.len() != frames {
         return fail(format!("{} root positions for {frames} frames of rotations", track.root_m.len()));
     }
+    if track.animated_offsets_m.len() != frames {
+        return fail(format!(
+            "{} frames of animated offsets for {frames} of rotations",
+            track.animated_offsets_m.len()
+        ));
+    }
     if !(track.fps.is_finite() && track.fps > 0.0) {
         return fail(format!("frame rate {} is not a positive number", track.fps));
     }
     if let Some(j) = track.skeleton.offsets_m.iter().position(|o| !o.is_finite()) {
         return fail(format!("the rest offset of `{}` is not finite", Joint::ALL[j].name()));
     }
-    for (frame, (root, local)) in track.root_m.iter().zip(&track.local).enumerate() {
+    for (frame, ((root, local), offsets)) in
+        track.root_m.iter().zip(&track.local).zip(&track.animated_offsets_m).enumerate()
+    {
         if !root.is_finite() {
             return fail(format!("frame {frame}: the pelvis position {root} is not finite"));
         }
         if let Some(j) = local.iter().position(|q| !q.is_finite()) {
             return fail(format!("frame {frame}: the rotation of `{}` is not finite", Joint::ALL[j].name()));
+        }
+        if let Some(k) = offsets.iter().position(|o| !o.is_finite()) {
+            return fail(format!("frame {frame}: the offset of `{}` is not finite", ANIMATED_OFFSETS[k].name()));
         }
     }
     let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
@@ -105,7 +120,7 @@ fn non_empty<T>(items: impl Iterator<Item = T>) -> Option<Vec<T>> {
 }
 
 /// The 22 joint nodes, in index order: the pelvis rests where the motion starts, every other
-/// joint at its offset from its parent, all unrotated.
+/// joint at its rest offset from its parent, all unrotated.
 fn joint_nodes(root: &mut Root, track: &RotationTrack) {
     for joint in Joint::ALL {
         let rest = match joint.parent() {
@@ -354,13 +369,22 @@ fn scene_box_nodes(glb: &mut Builder, scene: &[SceneBox]) -> Vec<Index<json::Nod
     nodes
 }
 
-/// The animation `label`: pelvis translation and every joint's rotation at every frame.
+/// The animation `label`: the pelvis translation, the translations of the [`ANIMATED_OFFSETS`]
+/// joints and every joint's rotation at every frame.
 fn animation(glb: &mut Builder, label: &str, track: &RotationTrack) {
     let times: Vec<f32> = (0..track.frames()).map(|k| (k as f64 / track.fps) as f32).collect();
     let input = glb.accessor(Values::F32(&times), Type::Scalar, None);
     let translation = floats3(&track.root_m);
     let mut outputs =
         vec![(node(Joint::Pelvis), Property::Translation, glb.accessor(Values::F32(&translation), Type::Vec3, None))];
+    for joint in ANIMATED_OFFSETS {
+        let offsets: Vec<DVec3> = (0..track.frames()).map(|k| track.offset_m(k, joint)).collect();
+        outputs.push((
+            node(joint),
+            Property::Translation,
+            glb.accessor(Values::F32(&floats3(&offsets)), Type::Vec3, None),
+        ));
+    }
     for joint in Joint::ALL {
         let rotations: Vec<f32> =
             track.local.iter().flat_map(|frame| frame[joint.index()].as_quat().to_array()).collect();
@@ -431,12 +455,14 @@ mod tests {
     use crate::import::{deepmimic::DeepMimicClip, MocapClip};
     use crate::skeleton::NUM_JOINTS;
 
-    /// The first `frames` frames of the shipped DeepMimic walk at 20 fps, solved.
-    fn walk(frames: usize) -> RotationTrack {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic/humanoid3d_walk.txt");
+    /// The first `frames` frames of the shipped DeepMimic kick at 20 fps (a clip whose branch
+    /// offsets move), and their solve.
+    fn kick(frames: usize) -> (Vec<Pose>, RotationTrack) {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic/humanoid3d_kick.txt");
         let (clip, _) = DeepMimicClip::read(&path).unwrap();
         let poses: Vec<Pose> = (0..frames).map(|k| clip.pose_at(k as f64 / 20.0)).collect();
-        RotationTrack::solve(&poses, 20.0, 0).unwrap()
+        let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
+        (poses, track)
     }
 
     fn wall() -> SceneBox {
@@ -530,9 +556,9 @@ mod tests {
     }
 
     #[test]
-    fn the_animation_reproduces_forward_kinematics() {
-        let track = walk(40);
-        let glb = Glb::read(&glb_bytes("walk", &track, &[]).unwrap());
+    fn the_animation_reproduces_forward_kinematics_and_the_input() {
+        let (poses, track) = kick(40);
+        let glb = Glb::read(&glb_bytes("kick", &track, &[]).unwrap());
         let root = &glb.root;
         let mut problems = Vec::new();
         root.validate(root, json::Path::new, &mut |path, error| problems.push(format!("{}: {error}", path())));
@@ -544,8 +570,15 @@ mod tests {
             assert_eq!(root.nodes[node.value()].name.as_deref(), Some(j.name()));
         }
         let animation = &root.animations[0];
-        assert_eq!(animation.name.as_deref(), Some("walk"));
-        assert_eq!(animation.channels.len(), NUM_JOINTS + 1);
+        assert_eq!(animation.name.as_deref(), Some("kick"));
+        assert_eq!(animation.channels.len(), NUM_JOINTS + 1 + ANIMATED_OFFSETS.len());
+        let translated: Vec<&str> = animation
+            .channels
+            .iter()
+            .filter(|c| c.target.path == Valid(Property::Translation))
+            .map(|c| root.nodes[c.target.node.value()].name.as_deref().unwrap())
+            .collect();
+        assert_eq!(translated, ["pelvis", "left_hip", "right_hip", "spine1", "neck", "left_collar", "right_collar"]);
         let input = &root.accessors[animation.samplers[0].input.value()];
         assert_eq!(input.count.0, 40);
         let times = glb.floats(animation.samplers[0].input);
@@ -555,17 +588,18 @@ mod tests {
 
         let pelvis = glb.node_named("pelvis");
         let fk = track.forward_kinematics();
-        let mut worst = 0.0_f64;
-        for (k, pose) in fk.iter().enumerate() {
+        let (mut to_track, mut to_input) = (0.0_f64, 0.0_f64);
+        for (k, (pose, input)) in fk.iter().zip(&poses).enumerate() {
             let world = glb.world(Some(k));
             assert!(world[pelvis].w_axis.truncate().distance(track.root_m[k]) < 1e-5);
             for j in Joint::ALL {
                 let at = world[glb.node_named(j.name())].w_axis.truncate();
-                worst = worst.max(at.distance(pose[j.index()]));
+                to_track = to_track.max(at.distance(pose[j.index()]));
+                to_input = to_input.max(at.distance(input[j.index()]));
             }
         }
-        eprintln!("largest distance between the GLB's animation and forward kinematics: {worst:.2e} m");
-        assert!(worst < 1e-5, "{worst}");
+        eprintln!("largest distance of the GLB's joints from forward kinematics {to_track:.2e} m, from the input {to_input:.2e} m");
+        assert!(to_track < 1e-5 && to_input < 1e-5, "{to_track} {to_input}");
 
         // The rest pose is the bind pose: every joint's rest transform times its inverse bind
         // matrix is the identity.
@@ -579,7 +613,7 @@ mod tests {
 
     #[test]
     fn a_scene_box_is_a_node_of_its_own() {
-        let track = walk(3);
+        let (_, track) = kick(3);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("sample_0").join("motion.glb");
         write_glb(&path, "walk", &track, &[wall()]).unwrap();
@@ -599,11 +633,17 @@ mod tests {
 
     #[test]
     fn bad_input_is_an_error() {
-        let track = walk(2);
-        let empty = RotationTrack { root_m: vec![], local: vec![], ..track.clone() };
+        let (_, track) = kick(2);
+        let empty = RotationTrack { root_m: vec![], local: vec![], animated_offsets_m: vec![], ..track.clone() };
         assert!(glb_bytes("walk", &empty, &[]).unwrap_err().to_string().contains("no frames"));
         let short = RotationTrack { root_m: track.root_m[..1].to_vec(), ..track.clone() };
         assert!(glb_bytes("walk", &short, &[]).is_err());
+        let short = RotationTrack { animated_offsets_m: track.animated_offsets_m[..1].to_vec(), ..track.clone() };
+        assert!(glb_bytes("walk", &short, &[]).unwrap_err().to_string().contains("animated offsets"));
+        let mut broken = track.clone();
+        broken.animated_offsets_m[1][3].y = f64::INFINITY;
+        let err = glb_bytes("walk", &broken, &[]).unwrap_err().to_string();
+        assert!(err.contains("frame 1") && err.contains("`neck`"), "{err}");
         let mut broken = track.clone();
         broken.local[1][Joint::LeftElbow.index()].x = f64::NAN;
         let err = glb_bytes("walk", &broken, &[]).unwrap_err().to_string();

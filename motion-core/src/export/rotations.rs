@@ -1,26 +1,41 @@
-//! Joint rotations on one rigid skeleton, solved from joint positions (inverse kinematics), and
-//! their forward kinematics.
+//! Joint rotations on one skeleton of rigid bones, solved from joint positions (inverse
+//! kinematics), and their forward kinematics.
 //!
 //! Our motions are joint positions. Animation tools want a skeleton with fixed offsets and a
-//! rotation per joint per frame. [`RotationTrack::solve`] finds them on the 22-joint chain:
+//! rotation per joint per frame. [`RotationTrack::solve`] finds, on the 22-joint chain, a
+//! rotation for every joint, the root (pelvis) translation, and a small offset animation on the
+//! six [`ANIMATED_OFFSETS`] joints:
 //!
 //! - **Skeleton** ([`RigSkeleton`]): each bone keeps the motion's mean length. Its rest direction
 //!   is that of the canonical rest pose ([`deepmimic::rest_pose`]: standing, arms hanging down,
 //!   feet flat, facing +z), except for the children of the two branching joints, the pelvis
-//!   (hips, spine) and spine3 (neck, collars), whose rest directions are their mean directions
-//!   in the branching joint's frame over the motion. So a rigid body, such as a shipped clip,
-//!   is reproduced exactly.
-//! - **Branching joints**: the global rotation is the frame of two directions, up = the spine
-//!   bone (pelvis → spine1, spine3 → neck) and across = right → left hip or collar (HumanML3D's
-//!   facing joints); this carries the twist of the trunk.
+//!   (hips, spine1) and spine3 (neck, collars), whose rest directions are their mean directions
+//!   in the branching joint's frame over the motion.
+//! - **Branching joints**: the rotation that best maps the rest offsets of the three children
+//!   onto where the input puts them (least squares: Wahba's problem), started from the frame of
+//!   up = the spine bone and across = right → left hip or collar (HumanML3D's facing joints);
+//!   this carries the twist of the trunk, and is the best pose for a reader that ignores the
+//!   offset animation.
+//! - **Animated offsets** ([`ANIMATED_OFFSETS`], [`RotationTrack::animated_offsets_m`]): the
+//!   children of a branching joint do not keep one shape in our data (the DeepMimic neck sits on
+//!   the head's body and the collars on the chest's; the BVH rigs' hips and collars are points
+//!   interpolated along bones of different bodies), so no rotation of the branch places all
+//!   three; the fit alone misses the shipped clips by up to 34 mm. Each of these six joints
+//!   therefore has, per frame, its own offset from its parent: the rest offset's length (bones
+//!   stay rigid) along the direction, in the branching joint's solved frame, of the input joint.
+//!   On the shipped clips these offsets move at most 33 mm from rest (Boxing_Toes; mean over
+//!   a clip at most 6 mm, zero on the DeepMimic walk and run, whose branches are rigid); on a
+//!   sample of the prior at most 2 mm (measured 1.6–1.8 mm on `mogen sample` and `mogen run`).
 //! - **Other joints with a child**: the rotation that swings the parent's frame so the bone
-//!   points at its child, with no twist about the bone (HumanML3D's `inverse_kinematics_np`).
+//!   points, from where forward kinematics put the joint, at its child, with no twist about the
+//!   bone (HumanML3D's `inverse_kinematics_np`); so an error does not carry down the limb.
 //! - **End joints** (head, wrists, feet): the parent's rotation (local identity).
 //!
-//! Forward kinematics: `p_child = p_parent + G_parent · offset_child`, `G_child = G_parent ·
-//! L_child`, from the pelvis position (the root translation). Where the input's bones are rigid
-//! and its branching joints keep their shape, this reproduces every joint; otherwise the
-//! difference is reported by [`SolveFit`].
+//! Forward kinematics: `p_child = p_parent + G_parent · offset_child(t)`, `G_child = G_parent ·
+//! L_child`, from the pelvis position (the root translation), where `offset_child(t)` is the
+//! skeleton's offset except for the six animated ones ([`RotationTrack::offset_m`]). Where the
+//! input's bones keep their lengths (every shipped clip does), this reproduces every joint to
+//! rounding; otherwise the difference, the bones' change of length, is reported by [`SolveFit`].
 
 use glam::{DMat3, DQuat, DVec3};
 
@@ -30,6 +45,20 @@ use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
 /// Below this length (m) a direction is taken as undefined and the parent's frame is kept.
 const DEGENERATE_M: f64 = 1e-9;
+
+/// The joints whose offset from their parent is animated ([`RotationTrack::animated_offsets_m`]):
+/// the children of the two branching joints, the pelvis (hips, spine1) and spine3 (neck,
+/// collars), in index order.
+pub const ANIMATED_OFFSETS: [Joint; 6] =
+    [Joint::LeftHip, Joint::RightHip, Joint::Spine1, Joint::Neck, Joint::LeftCollar, Joint::RightCollar];
+
+/// Offsets of the [`ANIMATED_OFFSETS`] joints at one frame, in that order, m.
+pub type AnimatedOffsets = [DVec3; ANIMATED_OFFSETS.len()];
+
+/// The position of `joint` in [`ANIMATED_OFFSETS`], if its offset is animated.
+fn animated_slot(joint: Joint) -> Option<usize> {
+    ANIMATED_OFFSETS.iter().position(|j| *j == joint)
+}
 
 /// A skeleton of fixed bone offsets.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,8 +89,8 @@ pub struct SolveFit {
     pub max_m: f64,
 }
 
-/// One motion as a rotation track: root translation and local joint rotations per frame on a
-/// [`RigSkeleton`].
+/// One motion as a rotation track on a [`RigSkeleton`]: per frame the root translation, the local
+/// rotation of every joint and the offsets of the six [`ANIMATED_OFFSETS`] joints.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RotationTrack {
     /// The skeleton.
@@ -71,6 +100,10 @@ pub struct RotationTrack {
     /// Rotation of each joint relative to its parent per frame (the pelvis's is global), unit
     /// quaternions; consecutive frames lie in the same hemisphere.
     pub local: Vec<[DQuat; NUM_JOINTS]>,
+    /// Offset of each [`ANIMATED_OFFSETS`] joint from its parent in the parent's frame per frame,
+    /// m, `[frames][6]`: the skeleton's rest offset of that joint, same length, turned to the
+    /// direction of the input joint. Every other joint's offset is the skeleton's at every frame.
+    pub animated_offsets_m: Vec<AnimatedOffsets>,
     /// Frames per second.
     pub fps: f64,
 }
@@ -88,9 +121,11 @@ impl RotationTrack {
         check_finite(poses, sample)?;
         let skeleton = rig_skeleton(poses);
         let mut local = Vec::with_capacity(poses.len());
+        let mut animated_offsets_m = Vec::with_capacity(poses.len());
         let mut previous: Option<[DQuat; NUM_JOINTS]> = None;
         for pose in poses {
-            let global = global_rotations(pose, &skeleton);
+            let (global, offsets) = solve_pose(pose, &skeleton);
+            animated_offsets_m.push(offsets);
             let mut frame: [DQuat; NUM_JOINTS] = std::array::from_fn(|j| {
                 let parent = Joint::ALL[j].parent().map_or(DQuat::IDENTITY, |p| global[p.index()]);
                 (parent.inverse() * global[j]).normalize()
@@ -105,12 +140,21 @@ impl RotationTrack {
             previous = Some(frame);
             local.push(frame);
         }
-        Ok(Self { skeleton, root_m: poses.iter().map(|p| p[0]).collect(), local, fps })
+        Ok(Self { skeleton, root_m: poses.iter().map(|p| p[0]).collect(), local, animated_offsets_m, fps })
     }
 
     /// Frames in the track.
     pub fn frames(&self) -> usize {
         self.local.len()
+    }
+
+    /// Offset of `joint` from its parent in the parent's frame at `frame`, m: the animated offset
+    /// of an [`ANIMATED_OFFSETS`] joint, the skeleton's for any other (zero for the pelvis).
+    pub fn offset_m(&self, frame: usize, joint: Joint) -> DVec3 {
+        match animated_slot(joint) {
+            Some(k) => self.animated_offsets_m[frame][k],
+            None => self.skeleton.offsets_m[joint.index()],
+        }
     }
 
     /// Global rotation of every joint at `frame`.
@@ -131,7 +175,7 @@ impl RotationTrack {
                 let mut pose = [self.root_m[t]; NUM_JOINTS];
                 for j in Joint::ALL.into_iter().skip(1) {
                     let parent = j.parent().map_or(0, Joint::index);
-                    pose[j.index()] = pose[parent] + global[parent] * self.skeleton.offsets_m[j.index()];
+                    pose[j.index()] = pose[parent] + global[parent] * self.offset_m(t, j);
                 }
                 pose
             })
@@ -157,12 +201,7 @@ fn check_finite(poses: &[Pose], sample: usize) -> Result<(), ExportError> {
     for (frame, pose) in poses.iter().enumerate() {
         for (j, p) in pose.iter().enumerate() {
             if !p.is_finite() {
-                return Err(ExportError::NonFinite {
-                    sample,
-                    frame,
-                    joint: Joint::ALL[j].name(),
-                    value: p.to_array(),
-                });
+                return Err(ExportError::NonFinite { sample, frame, joint: Joint::ALL[j].name(), value: p.to_array() });
             }
         }
     }
@@ -272,16 +311,31 @@ fn fit_branch(branch: &Branch, start: DQuat, offsets: &[DVec3; NUM_JOINTS], pose
     rotation
 }
 
-/// Global rotation of every joint of one pose on `skeleton`. A joint with one child aims its
-/// bone from where forward kinematics put the joint at the child's position, so an offset at a
-/// branch does not carry down the limb.
-fn global_rotations(pose: &Pose, skeleton: &RigSkeleton) -> [DQuat; NUM_JOINTS] {
+/// Global rotation of every joint of one pose on `skeleton`, and the offsets of the
+/// [`ANIMATED_OFFSETS`] joints. Joints are placed by forward kinematics as they are solved: a
+/// branching joint's children at their rest lengths along their input directions, and a joint
+/// with one child aims its bone from where it was placed at the child's input position, so an
+/// error does not carry down the limb.
+fn solve_pose(pose: &Pose, skeleton: &RigSkeleton) -> ([DQuat; NUM_JOINTS], AnimatedOffsets) {
     let mut global = [DQuat::IDENTITY; NUM_JOINTS];
     let mut placed = [pose[0]; NUM_JOINTS];
+    let mut animated = ANIMATED_OFFSETS.map(|j| skeleton.offsets_m[j.index()]);
     for j in Joint::ALL {
         let parent = j.parent().map_or(DQuat::IDENTITY, |p| global[p.index()]);
         if let Some(p) = j.parent() {
-            placed[j.index()] = placed[p.index()] + parent * skeleton.offsets_m[j.index()];
+            let rest = skeleton.offsets_m[j.index()];
+            let offset = match animated_slot(j) {
+                Some(k) => {
+                    let input = parent.inverse() * (pose[j.index()] - placed[p.index()]);
+                    animated[k] = match input.try_normalize() {
+                        Some(direction) if input.length() > DEGENERATE_M => direction * rest.length(),
+                        _ => rest,
+                    };
+                    animated[k]
+                }
+                None => rest,
+            };
+            placed[j.index()] = placed[p.index()] + parent * offset;
         }
         global[j.index()] = if let Some(branch) = BRANCHES.iter().find(|b| b.joint == j) {
             match branch_frame(branch, pose) {
@@ -301,16 +355,46 @@ fn global_rotations(pose: &Pose, skeleton: &RigSkeleton) -> [DQuat; NUM_JOINTS] 
             parent
         };
     }
-    global
+    (global, animated)
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
-    use crate::database::catalog::Catalog;
+    use crate::database::catalog::{Catalog, SourceFormat};
     use crate::import::bvh::{BvhClip, BvhOptions};
     use crate::import::isaaclab::IsaacAmpClip;
     use crate::import::{deepmimic::DeepMimicClip, resample, MocapClip};
+
+    /// Every shipped clip (the catalog's, the mocapbank BVH and the three Isaac Lab AMP clips)
+    /// with its name and format, resampled to 20 fps.
+    pub(in crate::export) fn shipped_clips() -> Vec<(String, SourceFormat, Vec<Pose>)> {
+        let mocap = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap");
+        let catalog = Catalog::read(&mocap.join("catalog.json")).unwrap();
+        let (sources, _) = catalog.load().unwrap();
+        let mut clips: Vec<(String, SourceFormat, Box<dyn MocapClip>)> =
+            catalog.clips.iter().zip(sources).map(|(entry, s)| (s.name, entry.format, s.clip)).collect();
+        let (bank, _) = BvhClip::read(&mocap.join("bvhtoolbox/test_mocapbank.bvh"), &BvhOptions::default()).unwrap();
+        clips.push(("test_mocapbank".into(), SourceFormat::Bvh, Box::new(bank)));
+        for name in ["humanoid_dance", "humanoid_run", "humanoid_walk"] {
+            let (clip, _) = IsaacAmpClip::read(&mocap.join(format!("isaaclab/{name}.npz"))).unwrap();
+            clips.push((name.into(), SourceFormat::IsaaclabAmp, Box::new(clip)));
+        }
+        assert_eq!(clips.len(), 27);
+        clips.into_iter().map(|(name, family, clip)| (name, family, resample(clip.as_ref(), 1.0, None))).collect()
+    }
+
+    /// Largest and mean distance of the animated offsets from their rest offsets, m.
+    fn offset_motion(track: &RotationTrack) -> (f64, f64) {
+        let distances: Vec<f64> = track
+            .animated_offsets_m
+            .iter()
+            .flat_map(|frame| {
+                ANIMATED_OFFSETS.iter().zip(frame).map(|(j, o)| o.distance(track.skeleton.offsets_m[j.index()]))
+            })
+            .collect();
+        (distances.iter().copied().fold(0.0, f64::max), distances.iter().sum::<f64>() / distances.len() as f64)
+    }
 
     /// A pose on a rigid skeleton: the rest pose with the left elbow bent by `elbow` about +x,
     /// the whole body turned by `yaw` about +y and moved to `at`.
@@ -318,7 +402,13 @@ mod tests {
         let mut local = [DQuat::IDENTITY; NUM_JOINTS];
         local[0] = DQuat::from_rotation_y(yaw);
         local[Joint::LeftElbow.index()] = DQuat::from_rotation_x(elbow);
-        let track = RotationTrack { skeleton: *skeleton, root_m: vec![at], local: vec![local], fps: 20.0 };
+        let track = RotationTrack {
+            skeleton: *skeleton,
+            root_m: vec![at],
+            local: vec![local],
+            animated_offsets_m: vec![ANIMATED_OFFSETS.map(|j| skeleton.offsets_m[j.index()])],
+            fps: 20.0,
+        };
         (track.forward_kinematics()[0], local)
     }
 
@@ -342,7 +432,8 @@ mod tests {
 
     #[test]
     fn forward_kinematics_reproduces_a_real_clip() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic/humanoid3d_walk.txt");
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic/humanoid3d_walk.txt");
         let (clip, _) = DeepMimicClip::read(&path).unwrap();
         let poses: Vec<Pose> = (0..60).map(|k| clip.pose_at(k as f64 / 20.0)).collect();
         let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
@@ -358,36 +449,60 @@ mod tests {
 
     /// The shipped clips keep their bone lengths, but not the shape of the two branches: the
     /// DeepMimic neck sits on the head's body and the collars on the chest's, and the BVH rigs'
-    /// hips and collars are points along bones of different bodies. No rotation of one rigid
-    /// skeleton reproduces that; the fit spreads it over the branch's children (measured: mean
-    /// at most 2.4 mm, max 34 mm, on the neck, collars and hips only).
+    /// hips and collars are points along bones of different bodies. The branch fit alone missed
+    /// them by up to 34 mm (neck, collars, hips); the animated offsets take up the rest.
     #[test]
-    fn forward_kinematics_reproduces_every_shipped_clip_up_to_its_branch_shape() {
-        let mocap = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap");
-        let catalog = Catalog::read(&mocap.join("catalog.json")).unwrap();
-        let (sources, _) = catalog.load().unwrap();
-        let mut clips: Vec<(String, Box<dyn MocapClip>)> = sources.into_iter().map(|s| (s.name, s.clip)).collect();
-        let (bank, _) = BvhClip::read(&mocap.join("bvhtoolbox/test_mocapbank.bvh"), &BvhOptions::default()).unwrap();
-        clips.push(("test_mocapbank".into(), Box::new(bank)));
-        for name in ["humanoid_dance", "humanoid_run", "humanoid_walk"] {
-            let (clip, _) = IsaacAmpClip::read(&mocap.join(format!("isaaclab/{name}.npz"))).unwrap();
-            clips.push((name.into(), Box::new(clip)));
-        }
-        let (mut worst, mut worst_mean) = ((String::new(), 0.0), 0.0_f64);
-        for (name, clip) in &clips {
-            let poses = resample(clip.as_ref(), 1.0, None);
-            let fit = RotationTrack::solve(&poses, 20.0, 0).unwrap().fit(&poses);
-            println!("{name}: mean {:.2} mm, max {:.2} mm", fit.mean_m * 1e3, fit.max_m * 1e3);
-            worst_mean = worst_mean.max(fit.mean_m);
-            if ["humanoid3d_walk", "humanoid3d_run"].contains(&name.as_str()) {
-                // Clips whose branches are rigid come back exactly.
-                assert!(fit.max_m < 1e-6, "{name}: {fit:?}");
-            }
-            if fit.max_m > worst.1 {
-                worst = (name.clone(), fit.max_m);
+    fn forward_kinematics_reproduces_every_shipped_clip() {
+        let mut worst: Vec<(SourceFormat, [f64; 3])> = Vec::new();
+        for (name, family, poses) in shipped_clips() {
+            let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
+            let fit = track.fit(&poses);
+            let (moved, moved_mean) = offset_motion(&track);
+            println!(
+                "{family:?}/{name}: FK mean {:.1e} m, max {:.1e} m; animated offsets from rest: max {:.1} mm, mean \
+                 {:.1} mm",
+                fit.mean_m,
+                fit.max_m,
+                moved * 1e3,
+                moved_mean * 1e3
+            );
+            // Issue 16 asks for 1 cm; bones of constant length come back to rounding.
+            assert!(fit.max_m < 1e-6, "{name}: {fit:?}");
+            let figures = [fit.max_m, moved, moved_mean];
+            match worst.iter_mut().find(|(f, _)| *f == family) {
+                Some((_, w)) => *w = std::array::from_fn(|k| w[k].max(figures[k])),
+                None => worst.push((family, figures)),
             }
         }
-        assert!(worst.1 < 0.035 && worst_mean < 0.003, "{worst:?}, worst mean {worst_mean}");
+        for (family, [fit, moved, moved_mean]) in worst {
+            println!(
+                "{family:?}: FK max {fit:.1e} m; animated offsets from rest: max {:.1} mm, largest mean {:.1} mm",
+                moved * 1e3,
+                moved_mean * 1e3
+            );
+        }
+    }
+
+    #[test]
+    fn animated_offsets_keep_their_rest_length_and_belong_to_the_branches() {
+        let children: Vec<Joint> = BRANCHES.iter().flat_map(Branch::children).collect();
+        let mut animated = ANIMATED_OFFSETS.to_vec();
+        animated.sort_by_key(|j| j.index());
+        assert_eq!(animated, children);
+        // A clip whose branches change shape most, so the offsets do move.
+        let (name, _, poses) = shipped_clips().into_iter().find(|(name, _, _)| name == "boxing_toes_20fps").unwrap();
+        let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
+        assert_eq!(track.animated_offsets_m.len(), track.frames());
+        assert!(offset_motion(&track).0 > 0.01, "{name}: {:?}", offset_motion(&track));
+        for t in 0..track.frames() {
+            for j in Joint::ALL {
+                let (offset, rest) = (track.offset_m(t, j), track.skeleton.offsets_m[j.index()]);
+                assert!((offset.length() - rest.length()).abs() < 1e-12, "{name} frame {t} {}", j.name());
+                if !ANIMATED_OFFSETS.contains(&j) {
+                    assert_eq!(offset, rest);
+                }
+            }
+        }
     }
 
     #[test]

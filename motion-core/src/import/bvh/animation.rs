@@ -182,6 +182,25 @@ mod tests {
     }
 
     #[test]
+    fn position_channels_of_a_non_root_joint_replace_its_offset_in_the_parents_frame() {
+        // As the exporter writes the joints with animated offsets (and Blender reads them): the
+        // arm's position channels are its offset from the root in the root's turned frame.
+        let moved = TINY
+            .replace(
+                "CHANNELS 3 Zrotation Xrotation Yrotation",
+                "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+            )
+            .replace("0 0 0 0 0 0 0 0 0", "0 0 0 0 0 0 1 0 0 0 0 0")
+            .replace("1 2 3 90 0 0 0 0 90", "1 2 3 90 0 0 0 2 0 0 0 0");
+        let a = animation(&moved, LengthUnit::Metres, UpAxis::Y);
+        assert!(close(&a.positions_at(0.0), &[[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]));
+        // Root at (1, 2, 3) turned 90° about z: arm = root + Rz90·(0, 2, 0), tip = arm + Rz90·(1, 0, 0).
+        assert!(close(&a.positions_at(0.5), &[[1.0, 2.0, 3.0], [-1.0, 2.0, 3.0], [-1.0, 3.0, 3.0]]));
+        // The rest skeleton keeps the OFFSET.
+        assert!(close(&a.rest_positions(), &[[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]));
+    }
+
+    #[test]
     fn position_channels_units_and_z_up() {
         // A position channel on a non-root joint replaces that component of its OFFSET.
         let moved = TINY
