@@ -1,12 +1,17 @@
-//! Pictures: stick-figure strips of motions and line plots, as PNG files with no system
+//! Pictures: stick-figure strips and animated GIFs of motions and line plots, with no system
 //! dependencies.
 
+mod animation;
+mod draw;
 mod font;
+mod layout;
 mod plot;
 mod strip;
 
+pub use animation::{motion_gif, GifOptions};
+pub use layout::StripRow;
 pub use plot::{line_plot, Series};
-pub use strip::{motion_strip, StripRow};
+pub use strip::motion_strip;
 
 /// Errors writing a picture.
 #[derive(Debug, thiserror::Error)]
@@ -14,7 +19,7 @@ pub enum RenderError {
     /// Nothing to draw or an impossible size.
     #[error("cannot draw: {0}")]
     Empty(String),
-    /// Encoding or writing the PNG failed.
+    /// Encoding or writing the picture failed.
     #[error("{path}: {message}")]
     Write {
         /// The file.

@@ -4,8 +4,8 @@ use std::path::Path;
 
 use tiny_skia::{Color, Pixmap};
 
+use super::draw::line;
 use super::font::{char_width, draw_text};
-use super::strip::line;
 use super::{save_png, RenderError};
 
 /// One line of a plot.
