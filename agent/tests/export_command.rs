@@ -42,9 +42,10 @@ fn a_joints_file_becomes_bvh_glb_and_the_viewer() {
     let npy = dir.path().join("joints.npy");
     Tensor::from_vec(standing(2, 30), (2, 30, 22, 3), &Device::Cpu).unwrap().write_npy(&npy).unwrap();
     let out = dir.path().join("exported");
-    let output = mogen(&["export", &npy.display().to_string(), "--out", &out.display().to_string(), "--centimetres"]);
+    let output =
+        mogen(&["export", &npy.display().to_string(), "--out", &out.display().to_string(), "--centimetres", "--gif"]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    for file in ["sample_0/motion.bvh", "sample_1/motion.glb", "viewer.html", "export.json"] {
+    for file in ["sample_0/motion.bvh", "sample_1/motion.glb", "viewer.html", "export.json", "motion.gif"] {
         assert!(out.join(file).is_file(), "{file} missing");
     }
     let bvh = std::fs::read_to_string(out.join("sample_1/motion.bvh")).unwrap();
@@ -63,6 +64,7 @@ fn a_joints_file_becomes_bvh_glb_and_the_viewer() {
     let output = mogen(&["export", &single.display().to_string()]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert!(dir.path().join("one/sample_0/motion.glb").is_file());
+    assert!(!dir.path().join("one/motion.gif").exists(), "a GIF only on request");
 }
 
 #[test]

@@ -78,6 +78,7 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
                 &config,
                 &args.generation.rg_source(),
                 &args.out.join(&task).join(method.name()),
+                args.generation.formats,
             )?;
             rows.push(ResultRow { task: task.clone(), report });
             std::fs::write(&json_path, serde_json::to_string_pretty(&rows)?)

@@ -8,6 +8,7 @@ use clap::Args;
 use motion_core::export::bvh::BvhUnit;
 use motion_core::export::{read_joints_npy, write_outputs, ExportInput, ExportManifest};
 use motion_core::program::Primitive;
+use motion_core::render::{motion_gif, GifOptions, StripRow};
 use motion_core::skeleton::{Pose, FPS};
 
 use super::run::load_program;
@@ -28,9 +29,20 @@ pub struct ExportArgs {
     /// Frames per second of the motion.
     #[arg(long, default_value_t = FPS)]
     fps: f64,
+    #[command(flatten)]
+    formats: ExportFormats,
+}
+
+/// Choices about the exported files, shared by every command that writes them.
+#[derive(Debug, Clone, Copy, Default, Args)]
+pub struct ExportFormats {
+    /// Also write motion.gif: the side and top views in world coordinates, animated at the
+    /// motion's frame rate.
+    #[arg(long)]
+    pub gif: bool,
     /// Write BVH in centimetres instead of metres.
     #[arg(long)]
-    centimetres: bool,
+    pub centimetres: bool,
 }
 
 pub fn run(args: ExportArgs) -> anyhow::Result<()> {
@@ -53,14 +65,14 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     let title = program.as_ref().map_or_else(|| joints.display().to_string(), |p| p.text.clone());
     let scene = program.as_ref().map(|p| p.scene_primitives()).unwrap_or_default();
     let out = args.out.unwrap_or(folder);
-    let unit = if args.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
-    write_all(&out, &title, args.fps, &motions, labels, scene, report, unit)?;
+    write_all(&out, &title, args.fps, &motions, labels, scene, report, args.formats)?;
     Ok(())
 }
 
-/// Writes the BVH and GLB of every motion, the viewer page and `export.json` into `out`, and
-/// prints what was written with the rotation solve's fit. `labels` name the motions.
+/// Writes the BVH and GLB of every motion, the viewer page, `export.json` and, when asked,
+/// `motion.gif` into `out`, and prints what was written with the rotation solve's fit.
+/// `labels` name the motions.
 #[allow(clippy::too_many_arguments)]
 pub fn write_all(
     out: &Path,
@@ -70,15 +82,16 @@ pub fn write_all(
     labels: Vec<String>,
     scene: Vec<Primitive>,
     report: Option<serde_json::Value>,
-    unit: BvhUnit,
+    formats: ExportFormats,
 ) -> anyhow::Result<ExportManifest> {
+    let bvh_unit = if formats.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
     let input = ExportInput {
         title: title.to_owned(),
         fps,
         samples: labels.into_iter().zip(motions).map(|(label, p)| (label, p.as_slice())).collect(),
         scene,
         report,
-        bvh_unit: unit,
+        bvh_unit,
     };
     let manifest = write_outputs(out, &input).with_context(|| format!("exporting into {}", out.display()))?;
     let worst = manifest.samples.iter().map(|s| s.fit_max_m).fold(0.0, f64::max);
@@ -89,5 +102,12 @@ pub fn write_all(
         manifest.samples.len(),
         worst * 1000.0
     );
+    if formats.gif {
+        let rows: Vec<StripRow<'_>> =
+            input.samples.iter().map(|(label, poses)| StripRow { label: label.clone(), poses }).collect();
+        let path = out.join("motion.gif");
+        motion_gif(&rows, &input.scene, title, &GifOptions::default(), &path)?;
+        eprintln!("wrote {}", path.display());
+    }
     Ok(manifest)
 }

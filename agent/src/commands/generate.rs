@@ -21,6 +21,8 @@ pub struct RunOptions {
     pub rg_source: super::run::RgDnoSource,
     /// Output folder.
     pub out: PathBuf,
+    /// Choices about the exported files.
+    pub formats: super::export::ExportFormats,
 }
 
 /// Generates the motions of `planned` into `options.out` with the configured method (DNO by
@@ -30,7 +32,7 @@ pub fn run(planned: &PlannedTask, options: &RunOptions) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
     let prior = Prior::load(&options.prior, &device)
         .with_context(|| format!("loading the prior {}", options.prior.display()))?;
-    let report = run_program(&prior, &planned.program, &options.config, &options.rg_source, &options.out)?;
+    let report = run_program(&prior, &planned.program, &options.config, &options.rg_source, &options.out, options.formats)?;
     print_summary(&report);
     Ok(())
 }

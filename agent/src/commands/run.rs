@@ -7,7 +7,6 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use motion_core::constraints::CompiledProgram;
 use motion_core::database::MotionDatabase;
-use motion_core::export::bvh::BvhUnit;
 use motion_core::evaluation::{report, TaskReport};
 use motion_core::generation::{generate, GenerationConfig, Method};
 use motion_core::prior::Prior;
@@ -18,7 +17,7 @@ use motion_core::render::{motion_strip, StripRow};
 use motion_core::rgdno::retrieval::RetrievalCorpus;
 use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
 
-use super::export::write_all;
+use super::export::{write_all, ExportFormats};
 use crate::paths;
 
 /// A generation method on the command line.
@@ -91,6 +90,8 @@ pub struct GenerationArgs {
     /// Trained prior file.
     #[arg(long, default_value_os_t = paths::default_prior())]
     pub prior: PathBuf,
+    #[command(flatten)]
+    pub formats: ExportFormats,
     /// Motion database that RG-DNO retrieves from (`mogen data build`).
     #[arg(long, default_value_os_t = paths::default_database())]
     pub database: PathBuf,
@@ -173,7 +174,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let prior = Prior::load(&args.generation.prior, &device)
         .with_context(|| format!("loading the prior {}", args.generation.prior.display()))?;
     let config = args.generation.config(args.method.into());
-    let report = run_program(&prior, &program, &config, &args.generation.rg_source(), &args.out)?;
+    let report =
+        run_program(&prior, &program, &config, &args.generation.rg_source(), &args.out, args.generation.formats)?;
     print_summary(&report);
     Ok(())
 }
@@ -195,6 +197,7 @@ pub fn run_program(
     config: &GenerationConfig,
     rg_source: &RgDnoSource,
     out: &Path,
+    formats: ExportFormats,
 ) -> anyhow::Result<TaskReport> {
     let device = candle_core::Device::Cpu;
     let compiled = CompiledProgram::compile(program, &device)?;
@@ -272,7 +275,7 @@ pub fn run_program(
         labels,
         program.scene_primitives(),
         Some(serde_json::to_value(&report)?),
-        BvhUnit::Metres,
+        formats,
     )?;
     Ok(report)
 }

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use motion_core::cleanup::FootLockConfig;
-use motion_core::export::bvh::BvhUnit;
 use motion_core::skeleton::FPS;
 use motion_core::diffusion::Guidance;
 use motion_core::generation::clean_up;
@@ -13,7 +12,7 @@ use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
 
-use super::export::write_all;
+use super::export::{write_all, ExportFormats};
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -45,6 +44,8 @@ pub struct SampleArgs {
     /// Switch off the contact-aware clean-up (foot locking with leg IK) of the samples.
     #[arg(long)]
     no_foot_lock: bool,
+    #[command(flatten)]
+    formats: ExportFormats,
     /// Output folder: joints.npy [n, frames, 22, 3] (m, y up, after the foot clean-up),
     /// features.npy [n, frames, 263] (de-normalised, the root velocity as decoded, before the
     /// clean-up), strip.png, sample_<i>/motion.{bvh,glb}, viewer.html, export.json.
@@ -106,6 +107,6 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     motion_strip(&rows, 8, &[], &args.prompt, &args.out.join("strip.png"))?;
     println!("wrote {}/{{joints.npy,features.npy,strip.png}}", args.out.display());
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
-    write_all(&args.out, &args.prompt, FPS, &poses, labels, Vec::new(), None, BvhUnit::Metres)?;
+    write_all(&args.out, &args.prompt, FPS, &poses, labels, Vec::new(), None, args.formats)?;
     Ok(())
 }

@@ -142,6 +142,7 @@ pub fn run(args: TaskArgs) -> anyhow::Result<()> {
         prior: args.generation.prior.clone(),
         rg_source: args.generation.rg_source(),
         out: args.out.clone(),
+        formats: args.generation.formats,
     };
     generate::run(&planned, &options)
 }

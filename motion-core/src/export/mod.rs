@@ -21,7 +21,7 @@ pub mod viewer;
 use std::path::{Path, PathBuf};
 
 pub use outputs::{read_joints_npy, write_outputs, ExportInput, ExportManifest, ExportedSample, Probe};
-pub use rotations::{RigSkeleton, RotationTrack, SolveFit};
+pub use rotations::{RigSkeleton, RotationTrack, SolveFit, ANIMATED_OFFSETS};
 pub use scene::{scene_boxes, SceneBox, SceneExtent, SceneRole};
 
 /// Errors turning motions into files.

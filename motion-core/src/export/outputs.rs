@@ -25,8 +25,18 @@ use crate::program::Primitive;
 use crate::quality::tensor_to_poses;
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
-/// The joints whose forward-kinematics positions the manifest lists.
-const PROBE_JOINTS: [Joint; 5] = [Joint::Pelvis, Joint::Head, Joint::LeftWrist, Joint::RightFoot, Joint::LeftKnee];
+/// The joints whose forward-kinematics positions the manifest lists: the root, ends of the
+/// limbs and head, and children of both branching joints (their offsets are animated).
+const PROBE_JOINTS: [Joint; 8] = [
+    Joint::Pelvis,
+    Joint::Head,
+    Joint::LeftWrist,
+    Joint::RightFoot,
+    Joint::LeftKnee,
+    Joint::Neck,
+    Joint::RightCollar,
+    Joint::LeftHip,
+];
 
 /// What to export.
 #[derive(Debug, Clone)]
