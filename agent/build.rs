@@ -13,7 +13,8 @@ const EMBEDDED: [&str; 4] = ["model/prior.safetensors", "llm/recorded", "tasks",
 
 fn files_under(path: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
     if path.is_dir() {
-        let mut entries: Vec<PathBuf> = std::fs::read_dir(path)?.map(|e| e.map(|e| e.path())).collect::<Result<_, _>>()?;
+        let mut entries: Vec<PathBuf> =
+            std::fs::read_dir(path)?.map(|e| e.map(|e| e.path())).collect::<Result<_, _>>()?;
         entries.sort();
         for entry in entries {
             files_under(&entry, out)?;
@@ -45,7 +46,9 @@ fn main() -> std::io::Result<()> {
     }
     table.push_str("];\n");
     let hex: String = digest.finalize().iter().take(6).map(|b| format!("{b:02x}")).collect();
-    table.push_str(&format!("/// SHA-256 (first 12 hex digits) of the paths and bytes.\npub const DIGEST: &str = {hex:?};\n"));
+    table.push_str(&format!(
+        "/// SHA-256 (first 12 hex digits) of the paths and bytes.\npub const DIGEST: &str = {hex:?};\n"
+    ));
     let out = PathBuf::from(std::env::var("OUT_DIR").map_err(std::io::Error::other)?);
     std::fs::write(out.join("embedded_fixtures.rs"), table)
 }

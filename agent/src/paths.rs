@@ -140,8 +140,14 @@ mod tests {
             data_dir(vars(&[("MOGEN_DATA_DIR", "/d"), ("XDG_DATA_HOME", "/x"), ("HOME", "/h")])),
             Some(PathBuf::from("/d").join(&name))
         );
-        assert_eq!(data_dir(vars(&[("XDG_DATA_HOME", "/x"), ("HOME", "/h")])), Some(PathBuf::from("/x/mogen").join(&name)));
-        assert_eq!(data_dir(vars(&[("MOGEN_DATA_DIR", ""), ("HOME", "/h")])), Some(PathBuf::from("/h/.local/share/mogen").join(&name)));
+        assert_eq!(
+            data_dir(vars(&[("XDG_DATA_HOME", "/x"), ("HOME", "/h")])),
+            Some(PathBuf::from("/x/mogen").join(&name))
+        );
+        assert_eq!(
+            data_dir(vars(&[("MOGEN_DATA_DIR", ""), ("HOME", "/h")])),
+            Some(PathBuf::from("/h/.local/share/mogen").join(&name))
+        );
         assert_eq!(data_dir(vars(&[])), None);
     }
 
@@ -151,7 +157,11 @@ mod tests {
         let dir = unpack_defaults(&temp.path().join(folder_name())).unwrap();
         let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures");
         for relative in ["model/prior.safetensors", "mocap/catalog.json", "tasks/rgdno_task2_low_barrier.json"] {
-            assert_eq!(std::fs::read(dir.join(relative)).unwrap(), std::fs::read(source.join(relative)).unwrap(), "{relative}");
+            assert_eq!(
+                std::fs::read(dir.join(relative)).unwrap(),
+                std::fs::read(source.join(relative)).unwrap(),
+                "{relative}"
+            );
         }
         let recorded = |d: &Path| std::fs::read_dir(d.join("llm/recorded")).unwrap().count();
         assert_eq!(recorded(&dir), recorded(&source));

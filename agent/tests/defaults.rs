@@ -30,7 +30,8 @@ fn installed_mogen(cwd: &Path, home: &Path, data_dir: Option<&Path>, args: &[&st
 }
 
 fn unpacked(root: &Path) -> Vec<String> {
-    std::fs::read_dir(root).map_or(Vec::new(), |d| d.map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect())
+    std::fs::read_dir(root)
+        .map_or(Vec::new(), |d| d.map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect())
 }
 
 #[test]

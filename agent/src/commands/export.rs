@@ -57,7 +57,8 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     let program = program_path.as_deref().map(load_program).transpose()?;
     let report_path = folder.join("report.json");
     let report = if report_path.is_file() {
-        let text = std::fs::read_to_string(&report_path).with_context(|| format!("reading {}", report_path.display()))?;
+        let text =
+            std::fs::read_to_string(&report_path).with_context(|| format!("reading {}", report_path.display()))?;
         Some(serde_json::from_str(&text).with_context(|| format!("{} is not JSON", report_path.display()))?)
     } else {
         None

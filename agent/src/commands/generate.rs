@@ -32,7 +32,8 @@ pub fn run(planned: &PlannedTask, options: &RunOptions) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
     let prior = Prior::load(&options.prior, &device)
         .with_context(|| format!("loading the prior {}", options.prior.display()))?;
-    let report = run_program(&prior, &planned.program, &options.config, &options.rg_source, &options.out, options.formats)?;
+    let report =
+        run_program(&prior, &planned.program, &options.config, &options.rg_source, &options.out, options.formats)?;
     print_summary(&report);
     Ok(())
 }

@@ -11,11 +11,11 @@ use motion_core::evaluation::{report, TaskReport};
 use motion_core::generation::{generate, GenerationConfig, Method};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
-use motion_core::skeleton::FPS;
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
 use motion_core::rgdno::retrieval::RetrievalCorpus;
 use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
+use motion_core::skeleton::FPS;
 
 use super::export::{write_all, ExportFormats};
 use crate::paths;

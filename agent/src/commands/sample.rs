@@ -5,12 +5,12 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use motion_core::cleanup::FootLockConfig;
-use motion_core::skeleton::FPS;
 use motion_core::diffusion::Guidance;
 use motion_core::generation::clean_up;
 use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
+use motion_core::skeleton::FPS;
 
 use super::export::{write_all, ExportFormats};
 use crate::paths;

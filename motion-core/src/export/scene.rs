@@ -190,18 +190,25 @@ mod tests {
         let gap = Primitive::Gap(Gap { centre_x_m: 0.0, width_m: 0.4, margin_m: 0.1, z_range_m: Some([0.5, 3.5]) });
         let boxes = scene_boxes(&[gap], extent());
         assert_eq!(boxes.len(), 2);
-        let inner: Vec<f64> = boxes.iter().map(|b| b.centre_m[0] - b.half_extents_m[0] * b.centre_m[0].signum()).collect();
+        let inner: Vec<f64> =
+            boxes.iter().map(|b| b.centre_m[0] - b.half_extents_m[0] * b.centre_m[0].signum()).collect();
         assert!((inner[0] - 0.2).abs() < 1e-12 && (inner[1] + 0.2).abs() < 1e-12, "{inner:?}");
         assert!((boxes[0].centre_m[2] - 2.0).abs() < 1e-12 && (boxes[0].half_extents_m[2] - 1.5).abs() < 1e-12);
     }
 
     #[test]
     fn a_barrier_starts_at_its_underside_and_spans_the_motion() {
-        let bar = Primitive::OverheadBarrier(OverheadBarrier { underside_height_m: 0.5, margin_m: 0.0, z_range_m: [2.0, 3.0] });
+        let bar = Primitive::OverheadBarrier(OverheadBarrier {
+            underside_height_m: 0.5,
+            margin_m: 0.0,
+            z_range_m: [2.0, 3.0],
+        });
         let boxes = scene_boxes(&[bar], extent());
         let b = &boxes[0];
         assert!((b.centre_m[1] - b.half_extents_m[1] - 0.5).abs() < 1e-12);
-        assert!(b.centre_m[0] - b.half_extents_m[0] <= -1.3 + 1e-12 && b.centre_m[0] + b.half_extents_m[0] >= 1.3 - 1e-12);
+        assert!(
+            b.centre_m[0] - b.half_extents_m[0] <= -1.3 + 1e-12 && b.centre_m[0] + b.half_extents_m[0] >= 1.3 - 1e-12
+        );
         assert_eq!(b.role, SceneRole::Obstacle);
     }
 }
