@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use motion_core::export::bvh::BvhUnit;
-use motion_core::export::{read_joints_npy, write_outputs, ExportInput, ExportManifest};
-use motion_core::program::Primitive;
+use motion_core::export::{position_targets, read_joints_npy, write_outputs, ExportInput, ExportManifest};
+use motion_core::program::TaskProgram;
 use motion_core::render::{motion_gif, GifOptions, StripRow};
 use motion_core::skeleton::{Pose, FPS};
 
@@ -64,16 +64,15 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         None
     };
     let title = program.as_ref().map_or_else(|| joints.display().to_string(), |p| p.text.clone());
-    let scene = program.as_ref().map(|p| p.scene_primitives()).unwrap_or_default();
     let out = args.out.unwrap_or(folder);
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
-    write_all(&out, &title, args.fps, &motions, labels, scene, report, args.formats)?;
+    write_all(&out, &title, args.fps, &motions, labels, program.as_ref(), report, args.formats)?;
     Ok(())
 }
 
 /// Writes the BVH and GLB of every motion, the viewer page, `export.json` and, when asked,
 /// `motion.gif` into `out`, and prints what was written with the rotation solve's fit.
-/// `labels` name the motions.
+/// `labels` name the motions; `program`'s scene and position targets are drawn.
 #[allow(clippy::too_many_arguments)]
 pub fn write_all(
     out: &Path,
@@ -81,7 +80,7 @@ pub fn write_all(
     fps: f64,
     motions: &[Vec<Pose>],
     labels: Vec<String>,
-    scene: Vec<Primitive>,
+    program: Option<&TaskProgram>,
     report: Option<serde_json::Value>,
     formats: ExportFormats,
 ) -> anyhow::Result<ExportManifest> {
@@ -90,7 +89,8 @@ pub fn write_all(
         title: title.to_owned(),
         fps,
         samples: labels.into_iter().zip(motions).map(|(label, p)| (label, p.as_slice())).collect(),
-        scene,
+        scene: program.map(TaskProgram::scene_primitives).unwrap_or_default(),
+        targets: program.map(position_targets).unwrap_or_default(),
         report,
         bvh_unit,
     };

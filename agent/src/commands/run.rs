@@ -267,16 +267,7 @@ pub fn run_program(
         .with_context(|| format!("writing {}", program_path.display()))?;
     eprintln!("wrote {}/{{program.json,features.npy,joints.npy,report.json,strip.png}}", out.display());
     let labels = (0..poses.len()).map(|i| format!("{} sample {i} (seed {})", config.method, config.seed)).collect();
-    write_all(
-        out,
-        &program.text,
-        FPS,
-        &poses,
-        labels,
-        program.scene_primitives(),
-        Some(serde_json::to_value(&report)?),
-        formats,
-    )?;
+    write_all(out, &program.text, FPS, &poses, labels, Some(program), Some(serde_json::to_value(&report)?), formats)?;
     Ok(report)
 }
 

@@ -107,6 +107,6 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     motion_strip(&rows, 8, &[], &args.prompt, &args.out.join("strip.png"))?;
     println!("wrote {}/{{joints.npy,features.npy,strip.png}}", args.out.display());
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
-    write_all(&args.out, &args.prompt, FPS, &poses, labels, Vec::new(), None, args.formats)?;
+    write_all(&args.out, &args.prompt, FPS, &poses, labels, None, None, args.formats)?;
     Ok(())
 }

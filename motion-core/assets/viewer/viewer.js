@@ -18,6 +18,7 @@
     obstacle: { fill: 0xc0504d, opacity: 0.3, edge: 0x8b2e2b, label: 'obstacle (must not enter)' },
     region: { fill: 0x1e8449, opacity: 0.12, edge: 0x1e8449, label: 'region (stay inside)' },
     support: { fill: 0x8b5a2b, opacity: 1.0, edge: 0x5e3b1a, label: 'support (stand on)' },
+    target: { fill: 0x2e9d4f, opacity: 0.5, edge: 0x1e6b34, label: 'target (reach it)' },
   };
   const UNITS = { m: ' m', m_per_s: ' m/s', m_per_s2: ' m/s²', deg: '°', count: '' };
   const DECIMALS = { m: 3, m_per_s: 2, m_per_s2: 2, deg: 1, count: 0 };
@@ -308,7 +309,7 @@
   figures.forEach((f) => legendRow(hex(f.colour), f.sample.label + ': mid-line and pelvis path'));
   legendRow(hex(LEFT), 'left limbs and left foot path');
   legendRow(hex(RIGHT), 'right limbs and right foot path');
-  for (const role of ['obstacle', 'region', 'support']) {
+  for (const role of ['obstacle', 'region', 'support', 'target']) {
     if (rolesPresent.has(role)) legendRow(hex(SCENE_STYLE[role].fill), SCENE_STYLE[role].label, role === 'region');
   }
   const axes = document.createElement('div');

@@ -333,6 +333,7 @@ fn role_look(role: SceneRole) -> (&'static str, [f32; 4]) {
         SceneRole::Obstacle => ("obstacle", [0.8, 0.12, 0.08, 0.45]),
         SceneRole::Region => ("region", [0.1, 0.3, 0.9, 0.35]),
         SceneRole::Support => ("support", [0.45, 0.3, 0.15, 1.0]),
+        SceneRole::Target => ("target", [0.1, 0.65, 0.25, 0.6]),
     }
 }
 

@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 
 pub use outputs::{read_joints_npy, write_outputs, ExportInput, ExportManifest, ExportedSample, Probe};
 pub use rotations::{RigSkeleton, RotationTrack, SolveFit, ANIMATED_OFFSETS};
-pub use scene::{scene_boxes, SceneBox, SceneExtent, SceneRole};
+pub use scene::{position_targets, scene_boxes, PositionTarget, SceneBox, SceneExtent, SceneRole};
 
 /// Errors turning motions into files.
 #[derive(Debug, thiserror::Error)]

@@ -18,7 +18,7 @@ use serde::Serialize;
 use super::bvh::{write_bvh, BvhUnit};
 use super::gltf::write_glb;
 use super::rotations::{RotationTrack, SolveFit};
-use super::scene::{scene_boxes, SceneExtent};
+use super::scene::{scene_boxes, PositionTarget, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
 use super::{write_atomically, ExportError};
 use crate::program::Primitive;
@@ -49,6 +49,8 @@ pub struct ExportInput<'a> {
     pub samples: Vec<(String, &'a [Pose])>,
     /// The task's scene primitives (drawn in the GLBs and the viewer).
     pub scene: Vec<Primitive>,
+    /// The task's position targets (drawn likewise).
+    pub targets: Vec<PositionTarget>,
     /// The task's `report.json`, shown by the viewer; `None` for motions without a task.
     pub report: Option<serde_json::Value>,
     /// Length unit of the BVH files.
@@ -112,7 +114,7 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         .map(|(i, (_, poses))| RotationTrack::solve(poses, input.fps, i))
         .collect::<Result<Vec<_>, _>>()?;
     let motions: Vec<Vec<Pose>> = input.samples.iter().map(|(_, p)| p.to_vec()).collect();
-    let boxes = scene_boxes(&input.scene, SceneExtent::of(&motions));
+    let boxes = scene_boxes(&input.scene, &input.targets, SceneExtent::of(&motions));
     let viewer = ViewerInput {
         title: input.title.clone(),
         fps: input.fps,

@@ -1,15 +1,19 @@
-//! The task's scene primitives as solid boxes, for the 3-D outputs (glTF meshes, the viewer).
+//! The task's scene primitives and position targets as solid boxes, for the 3-D outputs (glTF
+//! meshes, the viewer).
 //!
 //! A constraint's primitive is a region (a gap between two infinite walls, a barrier over a z
 //! range); to draw it we give it a finite, conventional size: walls 2 m high and 0.1 m thick, an
 //! overhead barrier 0.1 m thick and as wide as the motion's x extent plus 1 m, a hurdle's bar
 //! likewise. Where a primitive has no z range, it spans the motions' z extent plus 1 m each way.
-//! The ground is not drawn here (viewers draw their own grid). Boxes are in the project's axes
-//! (m, y up, +z forward, +x left).
+//! The ground is not drawn here (viewers draw their own grid). A position target (an `equal`
+//! constraint on a world position) is a marker 6 cm thick along each constrained axis, spanning
+//! the motions along each free horizontal axis and lying on the floor when the height is free:
+//! a point for x, y, z, a floor mark for x, z, a finish line across the path for z alone.
+//! Boxes are in the project's axes (m, y up, +z forward, +x left).
 
 use glam::{DQuat, DVec3};
 
-use crate::program::Primitive;
+use crate::program::{Expr, Primitive, Quantity, Space, TaskProgram};
 use crate::skeleton::Pose;
 
 /// Height of drawn walls, m.
@@ -20,6 +24,10 @@ const THICKNESS_M: f64 = 0.1;
 const PAD_M: f64 = 1.0;
 /// Half-width of a drawn balance beam that is a line, m.
 const LINE_BEAM_HALF_WIDTH_M: f64 = 0.05;
+/// Half thickness of a target marker along a constrained axis, m.
+const TARGET_HALF_M: f64 = 0.03;
+/// Height of a target marker lying on the floor, m.
+const FLOOR_MARK_M: f64 = 0.01;
 
 /// What a box stands for, for colours and names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -31,6 +39,49 @@ pub enum SceneRole {
     Region,
     /// Something to stand or walk on (a balance beam).
     Support,
+    /// Where a constraint asks a point of the body to be.
+    Target,
+}
+
+/// A position a constraint asks a point of the body to reach (an `equal` constraint on a world
+/// position).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PositionTarget {
+    /// Name, e.g. `c2: the pelvis ends 5 m ahead`.
+    pub name: String,
+    /// The constrained x, y, z, m; `None` where the constraint leaves a coordinate free.
+    pub coordinates_m: [Option<f64>; 3],
+}
+
+/// The position targets of `program` (inside `and`, `or` and `not` too).
+pub fn position_targets(program: &TaskProgram) -> Vec<PositionTarget> {
+    fn visit(expr: &Expr, name: &str, out: &mut Vec<PositionTarget>) {
+        match expr {
+            Expr::Equal(equal) => {
+                if let Quantity::Position(position) = &equal.quantity {
+                    if position.space == Space::World {
+                        let mut coordinates_m = [None; 3];
+                        for (&axis, &value) in position.axes.indices().iter().zip(&equal.target) {
+                            coordinates_m[axis] = Some(value);
+                        }
+                        out.push(PositionTarget { name: name.to_owned(), coordinates_m });
+                    }
+                }
+            }
+            Expr::And(args) | Expr::Or(args) => args.args.iter().for_each(|a| visit(a, name, out)),
+            Expr::Not(not) => visit(&not.arg, name, out),
+            _ => {}
+        }
+    }
+    let mut out = Vec::new();
+    for constraint in &program.constraints {
+        let name = match &constraint.description {
+            Some(text) => format!("{}: {text}", constraint.id),
+            None => format!("{} target", constraint.id),
+        };
+        visit(&constraint.expr, &name, &mut out);
+    }
+    out
 }
 
 /// One solid box: `centre_m` and `half_extents_m` along the box's own axes, turned by `rotation`.
@@ -79,8 +130,8 @@ fn aligned(name: String, role: SceneRole, lo: DVec3, hi: DVec3) -> SceneBox {
     }
 }
 
-/// Boxes drawing `primitives` around motions occupying `extent`.
-pub fn scene_boxes(primitives: &[Primitive], extent: SceneExtent) -> Vec<SceneBox> {
+/// Boxes drawing `primitives` and `targets` around motions occupying `extent`.
+pub fn scene_boxes(primitives: &[Primitive], targets: &[PositionTarget], extent: SceneExtent) -> Vec<SceneBox> {
     let z_span = |range: Option<[f64; 2]>| range.unwrap_or([extent.min_m.z - PAD_M, extent.max_m.z + PAD_M]);
     let x_span = [extent.min_m.x - PAD_M, extent.max_m.x + PAD_M];
     let mut out = Vec::new();
@@ -173,6 +224,20 @@ pub fn scene_boxes(primitives: &[Primitive], extent: SceneExtent) -> Vec<SceneBo
             }
         }
     }
+    for target in targets {
+        let span = |axis: usize| match (target.coordinates_m[axis], axis) {
+            (Some(v), _) => [v - TARGET_HALF_M, v + TARGET_HALF_M],
+            (None, 1) => [0.0, FLOOR_MARK_M],
+            (None, _) => [extent.min_m[axis] - PAD_M, extent.max_m[axis] + PAD_M],
+        };
+        let [x, y, z] = [span(0), span(1), span(2)];
+        out.push(aligned(
+            target.name.clone(),
+            SceneRole::Target,
+            DVec3::new(x[0], y[0], z[0]),
+            DVec3::new(x[1], y[1], z[1]),
+        ));
+    }
     out
 }
 
@@ -188,7 +253,7 @@ mod tests {
     #[test]
     fn a_gap_is_two_walls_whose_inner_faces_are_the_gap() {
         let gap = Primitive::Gap(Gap { centre_x_m: 0.0, width_m: 0.4, margin_m: 0.1, z_range_m: Some([0.5, 3.5]) });
-        let boxes = scene_boxes(&[gap], extent());
+        let boxes = scene_boxes(&[gap], &[], extent());
         assert_eq!(boxes.len(), 2);
         let inner: Vec<f64> =
             boxes.iter().map(|b| b.centre_m[0] - b.half_extents_m[0] * b.centre_m[0].signum()).collect();
@@ -203,12 +268,37 @@ mod tests {
             margin_m: 0.0,
             z_range_m: [2.0, 3.0],
         });
-        let boxes = scene_boxes(&[bar], extent());
+        let boxes = scene_boxes(&[bar], &[], extent());
         let b = &boxes[0];
         assert!((b.centre_m[1] - b.half_extents_m[1] - 0.5).abs() < 1e-12);
         assert!(
             b.centre_m[0] - b.half_extents_m[0] <= -1.3 + 1e-12 && b.centre_m[0] + b.half_extents_m[0] >= 1.3 - 1e-12
         );
         assert_eq!(b.role, SceneRole::Obstacle);
+    }
+
+    #[test]
+    fn a_target_on_z_alone_is_a_finish_line_across_the_path() {
+        let text = include_str!("../../../fixtures/tasks/rgdno_task1_narrow_gap.json");
+        let program = TaskProgram::from_json_validated(text).unwrap();
+        let targets = position_targets(&program);
+        assert_eq!(targets.len(), 1, "{targets:?}");
+        assert_eq!(targets[0].coordinates_m, [None, None, Some(5.0)]);
+        assert!(targets[0].name.starts_with("c2: "), "{}", targets[0].name);
+        let boxes = scene_boxes(&[], &targets, extent());
+        let line = &boxes[0];
+        assert_eq!(line.role, SceneRole::Target);
+        assert!((line.centre_m[2] - 5.0).abs() < 1e-12 && (line.half_extents_m[2] - TARGET_HALF_M).abs() < 1e-12);
+        // Across the motion (x from -0.3 to 0.3, padded) and on the floor.
+        assert!(line.centre_m[0] - line.half_extents_m[0] <= -1.3 + 1e-12);
+        assert!((line.centre_m[1] - FLOOR_MARK_M / 2.0).abs() < 1e-12);
+        // A full 3-D target is a small cube at the point.
+        let point = PositionTarget { name: "p".into(), coordinates_m: [Some(0.5), Some(1.2), Some(2.0)] };
+        let cube = &scene_boxes(&[], &[point], extent())[0];
+        for (k, expected) in [0.5, 1.2, 2.0].into_iter().enumerate() {
+            assert!(
+                (cube.centre_m[k] - expected).abs() < 1e-12 && (cube.half_extents_m[k] - TARGET_HALF_M).abs() < 1e-12
+            );
+        }
     }
 }
