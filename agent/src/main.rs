@@ -10,7 +10,9 @@ use clap::{Parser, Subcommand};
 ///
 /// `mogen "walk forwards through a 0.4 m wide gap and stop 5 m ahead"`: an LLM writes the
 /// constraint program and its relational parse, then the motions are generated. Without an LLM
-/// endpoint the recorded replies of fixtures/llm/ answer.
+/// endpoint the recorded replies answer (shipped inside the binary; fixtures/llm/recorded in the
+/// source tree). The defaults are unpacked on first use into $MOGEN_DATA_DIR, else
+/// $XDG_DATA_HOME/mogen, else ~/.local/share/mogen.
 ///
 /// Conventions: y up, metres, seconds, +x is the character's left, motions start facing +z,
 /// 20 frames per second, the 22-joint SMPL/HumanML3D skeleton.
