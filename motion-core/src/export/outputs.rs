@@ -113,8 +113,8 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         .enumerate()
         .map(|(i, (_, poses))| RotationTrack::solve(poses, input.fps, i))
         .collect::<Result<Vec<_>, _>>()?;
-    let motions: Vec<Vec<Pose>> = input.samples.iter().map(|(_, p)| p.to_vec()).collect();
-    let boxes = scene_boxes(&input.scene, &input.targets, SceneExtent::of(&motions));
+    let extent = SceneExtent::of(input.samples.iter().map(|(_, poses)| *poses));
+    let boxes = scene_boxes(&input.scene, &input.targets, extent);
     let viewer = ViewerInput {
         title: input.title.clone(),
         fps: input.fps,
@@ -131,7 +131,8 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         let (bvh, glb) = (format!("sample_{i}/motion.bvh"), format!("sample_{i}/motion.glb"));
         write_bvh(&out.join(&bvh), track, input.bvh_unit)?;
         write_glb(&out.join(&glb), label, track, &boxes)?;
-        let SolveFit { mean_m, max_m } = track.fit(poses);
+        let fk = track.forward_kinematics();
+        let SolveFit { mean_m, max_m } = SolveFit::between(&fk, poses);
         samples.push(ExportedSample {
             label: label.clone(),
             frames: track.frames(),
@@ -139,7 +140,7 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
             glb,
             fit_mean_m: mean_m,
             fit_max_m: max_m,
-            probes: probes(track),
+            probes: probes(&fk),
         });
     }
     write_viewer(&out.join("viewer.html"), &viewer)?;
@@ -155,9 +156,9 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
     Ok(manifest)
 }
 
-/// [`PROBE_JOINTS`] at the first frame, a third, two thirds and the last frame.
-fn probes(track: &RotationTrack) -> Vec<Probe> {
-    let fk = track.forward_kinematics();
+/// [`PROBE_JOINTS`] of forward-kinematics poses `fk` at the first frame, a third, two thirds
+/// and the last frame.
+fn probes(fk: &[Pose]) -> Vec<Probe> {
     let last = fk.len().saturating_sub(1);
     let mut frames = vec![0, last / 3, 2 * last / 3, last];
     frames.dedup();

@@ -184,8 +184,15 @@ impl RotationTrack {
 
     /// Distances between [`Self::forward_kinematics`] and `poses` (the solved input).
     pub fn fit(&self, poses: &[Pose]) -> SolveFit {
+        SolveFit::between(&self.forward_kinematics(), poses)
+    }
+}
+
+impl SolveFit {
+    /// Distances between forward-kinematics poses `fk` and the input `poses`, frame by frame.
+    pub fn between(fk: &[Pose], poses: &[Pose]) -> SolveFit {
         let (mut sum, mut max, mut n) = (0.0, 0.0_f64, 0usize);
-        for (a, b) in self.forward_kinematics().iter().zip(poses) {
+        for (a, b) in fk.iter().zip(poses) {
             for (p, q) in a.iter().zip(b) {
                 let d = p.distance(*q);
                 sum += d;

@@ -110,8 +110,8 @@ pub struct SceneExtent {
 
 impl SceneExtent {
     /// The bounding box of every joint of `motions`; a 1 m cube at the origin when empty.
-    pub fn of(motions: &[Vec<Pose>]) -> Self {
-        let mut points = motions.iter().flatten().flatten().copied().filter(|p| p.is_finite());
+    pub fn of<'a>(motions: impl IntoIterator<Item = &'a [Pose]>) -> Self {
+        let mut points = motions.into_iter().flatten().flatten().copied().filter(|p| p.is_finite());
         let Some(first) = points.next() else {
             return Self { min_m: DVec3::splat(-0.5), max_m: DVec3::splat(0.5) };
         };
