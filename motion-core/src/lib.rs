@@ -13,6 +13,7 @@ pub mod export;
 pub mod generation;
 pub mod import;
 pub mod inversion;
+pub mod limits;
 pub mod metrics;
 pub mod model;
 pub mod motion;

@@ -1,0 +1,195 @@
+//! The limits that protect memory and time, in one place.
+//!
+//! Every input that sizes an allocation or a loop (a program's frames and constraints, an
+//! imported clip's frames and joints, a file's or an LLM reply's bytes, a repair prompt, the wait
+//! on `Retry-After`) is checked against one of these **before** anything is allocated for it, and
+//! a violation is a [`LimitExceeded`] that names the limit, the value and what to do about it.
+//! The program schema (`mogen schema`) states the same bounds, so a program that validates is one
+//! that `mogen run` can generate.
+
+use std::fmt;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// One limit: a name users can search for, the largest allowed value, its unit and advice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limit {
+    /// Name of the limit, as printed (e.g. `program frames`).
+    pub name: &'static str,
+    /// Largest allowed value.
+    pub max: u64,
+    /// Unit of the value (`frames`, `bytes`, ...).
+    pub unit: &'static str,
+    /// What a user can do when they meet it.
+    pub advice: &'static str,
+}
+
+/// A value over a [`Limit`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{what}: {value} {unit} is over the limit of {max} {unit} ({name}); {advice}", unit = limit.unit, max = limit.max, name = limit.name, advice = limit.advice)]
+pub struct LimitExceeded {
+    /// Where the value comes from (a file, a JSON path, a flag).
+    pub what: String,
+    /// The value found (or a lower bound of it, for a stream cut off at the limit).
+    pub value: u64,
+    /// The limit.
+    pub limit: Limit,
+}
+
+impl Limit {
+    /// `Ok` when `value ≤ max`; otherwise the error names `what`.
+    pub fn check(&self, value: u64, what: impl fmt::Display) -> Result<(), LimitExceeded> {
+        if value <= self.max {
+            Ok(())
+        } else {
+            Err(LimitExceeded { what: what.to_string(), value, limit: *self })
+        }
+    }
+
+    /// The limit as a `usize` (saturating on 32-bit targets).
+    pub fn max_usize(&self) -> usize {
+        usize::try_from(self.max).unwrap_or(usize::MAX)
+    }
+}
+
+/// Frames of a constraint program (20 fps: 50 s). The prior was trained on clips of up to 196
+/// frames; DNO's unrolled sampler keeps activations for every frame pair of the attention, so
+/// 1,000 frames is about the most a 24 GiB machine generates in one piece.
+pub const PROGRAM_FRAMES: Limit = Limit {
+    name: "program frames",
+    max: 1000,
+    unit: "frames",
+    advice: "generate a longer motion in parts of at most 1000 frames (50 s at 20 fps)",
+};
+
+/// Constraints of one program (the shipped tasks use at most 12).
+pub const PROGRAM_CONSTRAINTS: Limit = Limit {
+    name: "constraints per program",
+    max: 64,
+    unit: "constraints",
+    advice: "merge constraints with `all_of`/`any_of`, or split the task",
+};
+
+/// Characters of a program's `text` and of each constraint's `description`.
+pub const PROGRAM_TEXT_CHARS: Limit = Limit {
+    name: "text length",
+    max: 2000,
+    unit: "characters",
+    advice: "shorten the text; the prior reads only its first words",
+};
+
+/// Bytes of a program file (the largest shipped program is under 10 KiB).
+pub const PROGRAM_FILE_BYTES: Limit = Limit {
+    name: "program file size",
+    max: 1 << 20,
+    unit: "bytes",
+    advice: "a program is a small JSON document; is this the right file?",
+};
+
+/// Frames of an imported clip after resampling to 20 fps (one hour).
+pub const CLIP_FRAMES: Limit = Limit {
+    name: "imported clip length",
+    max: 72_000,
+    unit: "frames at 20 fps",
+    advice: "trim the clip, or check its frame count and frame time",
+};
+
+/// Joints of an imported rig (BVH, DeepMimic); SMPL has 24, large face rigs a few hundred.
+pub const RIG_JOINTS: Limit = Limit {
+    name: "joints per rig",
+    max: 1024,
+    unit: "joints",
+    advice: "remove unused joints (fingers, face) before importing",
+};
+
+/// Bytes of an imported mocap file (a 30-minute 120 fps BVH is about 150 MB).
+pub const MOCAP_FILE_BYTES: Limit = Limit {
+    name: "mocap file size",
+    max: 512 << 20,
+    unit: "bytes",
+    advice: "split the capture into shorter files",
+};
+
+/// Bytes of one LLM reply body (a program with the largest allowed constraints fits in far less).
+pub const LLM_REPLY_BYTES: Limit = Limit {
+    name: "LLM reply size",
+    max: 1 << 20,
+    unit: "bytes",
+    advice: "the endpoint sent far more than a constraint program; check --base-url and --model",
+};
+
+/// Characters of a bad reply quoted back to the LLM in one repair prompt (the rest is cut, with a
+/// note saying so).
+pub const REPAIR_QUOTE_CHARS: Limit = Limit {
+    name: "repair prompt quote",
+    max: 16_384,
+    unit: "characters",
+    advice: "the reply is quoted up to this length",
+};
+
+/// Reads a whole file as UTF-8 text, refusing one longer than `limit` before reading past it
+/// (so `/dev/zero` or a multi-gigabyte file fails at once). Errors name the path.
+pub fn read_text(path: &Path, limit: &Limit) -> Result<String, ReadError> {
+    let bytes = read_bytes(path, limit)?;
+    String::from_utf8(bytes).map_err(|e| ReadError::Io {
+        path: path.into(),
+        message: format!("not UTF-8 text (byte {} is not valid UTF-8)", e.utf8_error().valid_up_to()),
+    })
+}
+
+/// Reads a whole file, refusing one longer than `limit` before reading past it. Errors name the
+/// path.
+pub fn read_bytes(path: &Path, limit: &Limit) -> Result<Vec<u8>, ReadError> {
+    let io = |e: std::io::Error| ReadError::Io { path: path.into(), message: e.to_string() };
+    let file = std::fs::File::open(path).map_err(io)?;
+    if file.metadata().map_err(io)?.is_dir() {
+        return Err(ReadError::Io { path: path.into(), message: "is a folder, not a file".into() });
+    }
+    let mut bytes = Vec::new();
+    file.take(limit.max.saturating_add(1)).read_to_end(&mut bytes).map_err(io)?;
+    limit.check(bytes.len() as u64, path.display())?;
+    Ok(bytes)
+}
+
+/// Reading a bounded file failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// The file could not be opened or read.
+    #[error("{path}: {message}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// The file is longer than its limit.
+    #[error(transparent)]
+    TooLarge(#[from] LimitExceeded),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_value_over_the_limit_names_the_limit_and_the_advice() {
+        assert!(PROGRAM_FRAMES.check(1000, "frames").is_ok());
+        let err = PROGRAM_FRAMES.check(4999, "`frames`").unwrap_err().to_string();
+        assert!(err.contains("`frames`: 4999 frames is over the limit of 1000 frames (program frames)"), "{err}");
+        assert!(err.contains("in parts"), "{err}");
+    }
+
+    #[test]
+    fn an_endless_file_is_refused_without_reading_it_all() {
+        let limit = Limit { name: "test", max: 4096, unit: "bytes", advice: "a test" };
+        let err = read_bytes(Path::new("/dev/zero"), &limit).unwrap_err().to_string();
+        assert!(err.contains("/dev/zero: 4097 bytes is over the limit of 4096 bytes"), "{err}");
+        let dir = tempfile::tempdir().unwrap();
+        let err = read_text(dir.path(), &limit).unwrap_err().to_string();
+        assert!(err.contains("is a folder"), "{err}");
+        let file = dir.path().join("a.json");
+        std::fs::write(&file, b"{\xff}").unwrap();
+        let err = read_text(&file, &limit).unwrap_err().to_string();
+        assert!(err.contains("a.json: not UTF-8 text (byte 1"), "{err}");
+    }
+}
