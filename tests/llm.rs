@@ -133,7 +133,9 @@ async fn well_formed_replies_plan_the_task_with_chat_completion_requests() {
 async fn rate_limit_then_success_honours_retry_after() {
     let limited = Step::status(429, "Rate limit reached").with_header("retry-after", "1");
     let server = LlmServer::start(vec![limited, program(), parse()]).await;
-    let (result, took) = plan(&server).await;
+    // The waits of a request add up to at most its timeout: give the 1 s asked room.
+    let client = ClientConfig { request_timeout: Duration::from_secs(2), ..fast_client() };
+    let (result, took) = plan_with(LlmSettings { client, ..settings(&server) }).await;
     assert_planned(result);
     assert_eq!(server.received().len(), 3);
     // The backoff alone would have waited 20 ms.

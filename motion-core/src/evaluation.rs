@@ -201,6 +201,46 @@ fn worst(values: &Option<Vec<f64>>) -> Option<f64> {
     values.as_ref().map(|p| p.iter().copied().fold(0.0, f64::max))
 }
 
+impl TaskReport {
+    /// The name of the first figure that is NaN or infinite (`None` when all are finite): a
+    /// report must never store a broken figure as `null` or print it as a pass.
+    pub fn non_finite_figure(&self) -> Option<String> {
+        let scalars = [
+            ("constraint error", self.constraint_error),
+            ("success rate", self.success_rate),
+            ("foot skate ratio", self.foot_skate_ratio),
+            ("max acceleration", self.max_acceleration),
+            ("mean acceleration", self.mean_acceleration),
+            ("toe flicker", self.toe_flicker),
+            ("stance toe height", self.stance_toe_height_m),
+            ("depth under the floor", self.max_under_floor_m),
+            ("head-neck ratio", self.head_neck_incorrect_ratio),
+            ("pace", self.pace_steps_per_s),
+        ];
+        if let Some((name, _)) = scalars.iter().find(|(_, v)| !v.is_finite()) {
+            return Some((*name).to_owned());
+        }
+        let penetration = self.max_scene_penetration_m.iter().chain(self.scene_penetration_per_sample_m.iter().flatten());
+        if penetration.into_iter().any(|v| !v.is_finite()) {
+            return Some("scene penetration".to_owned());
+        }
+        if let Some(i) = self.constraint_error_per_sample.iter().position(|v| !v.is_finite()) {
+            return Some(format!("constraint error of sample {i}"));
+        }
+        for c in &self.constraints {
+            if let Some(i) = c.error.iter().position(|v| !v.is_finite()) {
+                return Some(format!("error of constraint {} in sample {i}", c.id));
+            }
+            for check in &c.checks {
+                if let Some(i) = check.value.iter().position(|v| !v.is_finite()) {
+                    return Some(format!("{} of constraint {} in sample {i}", check.what, c.id));
+                }
+            }
+        }
+        None
+    }
+}
+
 /// Builds the report of `generated` for `program`.
 pub fn report(
     program: &TaskProgram,

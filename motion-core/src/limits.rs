@@ -26,12 +26,14 @@ pub struct Limit {
 
 /// A value over a [`Limit`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{what}: {value} {unit} is over the limit of {max} {unit} ({name}); {advice}", unit = limit.unit, max = limit.max, name = limit.name, advice = limit.advice)]
+#[error("{what} is {}{value} {unit}, over the limit of {max} {unit} ({name}); {advice}", if *at_least { "at least " } else { "" }, unit = limit.unit, max = limit.max, name = limit.name, advice = limit.advice)]
 pub struct LimitExceeded {
-    /// Where the value comes from (a file, a JSON path, a flag).
+    /// What was measured (a file, "the clip length", a flag).
     pub what: String,
-    /// The value found (or a lower bound of it, for a stream cut off at the limit).
+    /// The value found, or a lower bound of it when `at_least`.
     pub value: u64,
+    /// The value is a lower bound: a stream (a file, a reply) was cut off past the limit.
+    pub at_least: bool,
     /// The limit.
     pub limit: Limit,
 }
@@ -42,8 +44,14 @@ impl Limit {
         if value <= self.max {
             Ok(())
         } else {
-            Err(LimitExceeded { what: what.to_string(), value, limit: *self })
+            Err(LimitExceeded { what: what.to_string(), value, at_least: false, limit: *self })
         }
+    }
+
+    /// Like [`Limit::check`] for a stream read so far: `read` bytes (or items) of `what`, which
+    /// may hold more; the error says "at least".
+    pub fn check_stream(&self, read: u64, what: impl fmt::Display) -> Result<(), LimitExceeded> {
+        self.check(read, what).map_err(|e| LimitExceeded { at_least: true, ..e })
     }
 
     /// The limit as a `usize` (saturating on 32-bit targets).
@@ -76,6 +84,14 @@ pub const PROGRAM_TEXT_CHARS: Limit = Limit {
     max: 2000,
     unit: "characters",
     advice: "shorten the text; the prior reads only its first words",
+};
+
+/// Motions generated in one batch (`-n`): DNO keeps every sample's unrolled sampler in memory.
+pub const BATCH_SAMPLES: Limit = Limit {
+    name: "samples per run",
+    max: 64,
+    unit: "samples",
+    advice: "run several batches with different --seed values",
 };
 
 /// Bytes of a program file (the largest shipped program is under 10 KiB).
@@ -147,7 +163,7 @@ pub fn read_bytes(path: &Path, limit: &Limit) -> Result<Vec<u8>, ReadError> {
     }
     let mut bytes = Vec::new();
     file.take(limit.max.saturating_add(1)).read_to_end(&mut bytes).map_err(io)?;
-    limit.check(bytes.len() as u64, path.display())?;
+    limit.check_stream(bytes.len() as u64, path.display())?;
     Ok(bytes)
 }
 
@@ -174,8 +190,8 @@ mod tests {
     #[test]
     fn a_value_over_the_limit_names_the_limit_and_the_advice() {
         assert!(PROGRAM_FRAMES.check(1000, "frames").is_ok());
-        let err = PROGRAM_FRAMES.check(4999, "`frames`").unwrap_err().to_string();
-        assert!(err.contains("`frames`: 4999 frames is over the limit of 1000 frames (program frames)"), "{err}");
+        let err = PROGRAM_FRAMES.check(4999, "the clip length").unwrap_err().to_string();
+        assert!(err.contains("the clip length is 4999 frames, over the limit of 1000 frames (program frames)"), "{err}");
         assert!(err.contains("in parts"), "{err}");
     }
 
@@ -183,7 +199,7 @@ mod tests {
     fn an_endless_file_is_refused_without_reading_it_all() {
         let limit = Limit { name: "test", max: 4096, unit: "bytes", advice: "a test" };
         let err = read_bytes(Path::new("/dev/zero"), &limit).unwrap_err().to_string();
-        assert!(err.contains("/dev/zero: 4097 bytes is over the limit of 4096 bytes"), "{err}");
+        assert!(err.contains("/dev/zero is at least 4097 bytes, over the limit of 4096 bytes"), "{err}");
         let dir = tempfile::tempdir().unwrap();
         let err = read_text(dir.path(), &limit).unwrap_err().to_string();
         assert!(err.contains("is a folder"), "{err}");

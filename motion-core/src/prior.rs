@@ -138,6 +138,20 @@ impl Prior {
             )));
         }
         let tensors = candle_core::safetensors::load_buffer(&bytes, device).map_err(|e| format(e.to_string()))?;
+        for (name, tensor) in &tensors {
+            let values = tensor
+                .to_dtype(DType::F32)
+                .and_then(|t| t.flatten_all())
+                .and_then(|t| t.to_vec1::<f32>())
+                .map_err(|e| format(format!("tensor `{name}`: {e}")))?;
+            let bad = values.iter().filter(|v| !v.is_finite()).count();
+            if bad > 0 {
+                return Err(format(format!(
+                    "tensor `{name}` has {bad} of {} values NaN or infinite; the file is damaged",
+                    values.len()
+                )));
+            }
+        }
         let stat = |key: &str| -> Result<Vec<f32>, PriorError> {
             tensors
                 .get(key)
@@ -280,6 +294,19 @@ mod tests {
         assert_eq!(back.mean_std.std().to_vec1::<f32>().unwrap()[5], 2.0);
         assert_eq!(back.root_decode, RootDecode::Velocity, "the default decode");
         assert_eq!(back.rest, Some(rest));
+
+        // A weight made NaN (a damaged file): refused at load, naming the tensor.
+        let mut named = prior.mdm.named_parameters().to_vec();
+        let (name, weight) = named.swap_remove(0);
+        let mut values = weight.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let middle = values.len() / 2;
+        values[middle] = f32::NAN;
+        let broken = Tensor::from_vec(values, weight.shape(), &Device::Cpu).unwrap();
+        named.push((name.clone(), broken));
+        let damaged = dir.path().join("damaged.safetensors");
+        Prior::write(&damaged, &named, prior.mdm.config(), &prior.encoder, &prior.mean_std, prior.rest.as_ref()).unwrap();
+        let err = Prior::load(&damaged, &Device::Cpu).unwrap_err().to_string();
+        assert!(err.contains(&format!("tensor `{name}` has 1 of")) && err.contains("damaged"), "{err}");
 
         std::fs::write(&path, b"not a prior").unwrap();
         assert!(Prior::load(&path, &Device::Cpu).unwrap_err().to_string().contains("prior.safetensors"));

@@ -13,6 +13,8 @@ use motion_core::generation::{generate, GenerationConfig, Method};
 use motion_core::prior::Prior;
 use serde::{Deserialize, Serialize};
 
+use motion_core::export::{write_atomically, OutputFolder};
+
 use super::run::{load_program, run_program, GenerationArgs, MethodArg};
 use crate::paths;
 
@@ -77,13 +79,12 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
                 &program,
                 &config,
                 &args.generation.rg_source(),
-                &args.out.join(&task).join(method.name()),
+                OutputFolder::create(&args.out.join(&task).join(method.name()))?,
                 args.generation.formats,
             )?;
             rows.push(ResultRow { task: task.clone(), report });
-            std::fs::write(&json_path, serde_json::to_string_pretty(&rows)?)
-                .with_context(|| format!("writing {}", json_path.display()))?;
-            std::fs::write(args.out.join("results.md"), markdown(&rows))?;
+            write_atomically(&json_path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            write_atomically(&args.out.join("results.md"), markdown(&rows).as_bytes())?;
         }
     }
     rows.sort_by(|a, b| (&a.task, a.report.config.method).cmp(&(&b.task, b.report.config.method)));
@@ -178,7 +179,7 @@ pub struct BenchDnoArgs {
     #[arg(long, default_value_t = 500)]
     steps: usize,
     /// Classifier-free guidance scale (1: one denoiser call per DDIM step; 2.5 doubles it).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::flags::guidance)]
     guidance: f64,
     /// Trained prior file.
     #[arg(long, default_value_os_t = paths::default_prior())]

@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use motion_core::export::bvh::BvhUnit;
-use motion_core::export::{position_targets, read_joints_npy, write_outputs, ExportInput, ExportManifest};
+use motion_core::export::{
+    position_targets, read_joints_npy, write_outputs, ExportInput, ExportManifest, OutputFolder,
+};
 use motion_core::program::TaskProgram;
 use motion_core::render::{motion_gif, GifOptions, StripRow};
 use motion_core::skeleton::{Pose, FPS};
@@ -27,7 +29,7 @@ pub struct ExportArgs {
     #[arg(long, value_name = "FILE")]
     program: Option<PathBuf>,
     /// Frames per second of the motion.
-    #[arg(long, default_value_t = FPS)]
+    #[arg(long, default_value_t = FPS, value_parser = super::flags::fps)]
     fps: f64,
     #[command(flatten)]
     formats: ExportFormats,
@@ -64,18 +66,22 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         None
     };
     let title = program.as_ref().map_or_else(|| joints.display().to_string(), |p| p.text.clone());
-    let out = args.out.unwrap_or(folder);
+    let out = OutputFolder::create(&args.out.unwrap_or(folder))?;
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
     write_all(&out, &title, args.fps, &motions, labels, program.as_ref(), report, args.formats)?;
+    // The folder's other files (the run's npy, report, strip) stay.
+    out.keep_existing()?;
+    out.commit()?;
     Ok(())
 }
 
 /// Writes the BVH and GLB of every motion, the viewer page, `export.json` and, when asked,
-/// `motion.gif` into `out`, and prints what was written with the rotation solve's fit.
+/// `motion.gif` into `out` (to be committed by the caller), and prints what was written with the
+/// rotation solve's fit.
 /// `labels` name the motions; `program`'s scene and position targets are drawn.
 #[allow(clippy::too_many_arguments)]
 pub fn write_all(
-    out: &Path,
+    out: &OutputFolder,
     title: &str,
     fps: f64,
     motions: &[Vec<Pose>],
@@ -94,21 +100,21 @@ pub fn write_all(
         report,
         bvh_unit,
     };
-    let manifest = write_outputs(out, &input).with_context(|| format!("exporting into {}", out.display()))?;
+    let manifest =
+        write_outputs(out.path(), &input).with_context(|| format!("exporting into {}", out.target().display()))?;
     let worst = manifest.samples.iter().map(|s| s.fit_max_m).fold(0.0, f64::max);
     eprintln!(
         "wrote {}/{{sample_*/motion.bvh,sample_*/motion.glb,viewer.html,export.json}} ({} samples; rigid-skeleton \
          fit: joints within {:.1} mm of the motion)",
-        out.display(),
+        out.target().display(),
         manifest.samples.len(),
         worst * 1000.0
     );
     if formats.gif {
         let rows: Vec<StripRow<'_>> =
             input.samples.iter().map(|(label, poses)| StripRow { label: label.clone(), poses }).collect();
-        let path = out.join("motion.gif");
-        motion_gif(&rows, &input.scene, title, &GifOptions::default(), &path)?;
-        eprintln!("wrote {}", path.display());
+        motion_gif(&rows, &input.scene, title, &GifOptions::default(), &out.path().join("motion.gif"))?;
+        eprintln!("wrote {}", out.target().join("motion.gif").display());
     }
     Ok(manifest)
 }

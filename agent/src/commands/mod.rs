@@ -4,6 +4,7 @@ pub mod bench;
 pub mod bench_tasks;
 pub mod data;
 pub mod export;
+pub mod flags;
 pub mod generate;
 pub mod report;
 pub mod retrieve;

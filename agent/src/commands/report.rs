@@ -31,7 +31,7 @@ pub struct ReportArgs {
     #[arg(long, default_value_t = QualityConfig::default().ddim_steps)]
     steps: usize,
     /// Classifier-free guidance scale (1 = conditional model alone).
-    #[arg(long, default_value_t = QualityConfig::default().guidance)]
+    #[arg(long, default_value_t = QualityConfig::default().guidance, value_parser = super::flags::guidance)]
     guidance: f64,
     /// Only this label (repeatable; all labels when absent), e.g. "a person walks forward".
     #[arg(long = "label")]

@@ -23,7 +23,7 @@ pub struct RetrieveArgs {
     #[arg(long, default_value_t = 10)]
     top: usize,
     /// Weight of C_R's constraints other than the most difficult one.
-    #[arg(long, default_value_t = RetrievalConfig::default().related_weight)]
+    #[arg(long, default_value_t = RetrievalConfig::default().related_weight, value_parser = super::flags::weight)]
     related_weight: f64,
     /// Also score every candidate exactly and print the best crop of each label (slower).
     #[arg(long)]

@@ -8,6 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use motion_core::constraints::CompiledProgram;
 use motion_core::database::MotionDatabase;
 use motion_core::evaluation::{report, TaskReport};
+use motion_core::export::OutputFolder;
 use motion_core::generation::{generate, GenerationConfig, Method};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
@@ -18,6 +19,7 @@ use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, 
 use motion_core::skeleton::FPS;
 
 use super::export::{write_all, ExportFormats};
+use super::flags;
 use crate::paths;
 
 /// A generation method on the command line.
@@ -53,35 +55,35 @@ impl From<MethodArg> for Method {
 #[derive(Debug, Clone, Args)]
 pub struct GenerationArgs {
     /// Motions generated together.
-    #[arg(long, short = 'n', default_value_t = 1)]
+    #[arg(long, short = 'n', default_value_t = 1, value_parser = flags::samples)]
     pub samples: usize,
     /// Seed of the start noise (same seed, same machine: same motion).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Optimisation steps (DNO default 500; IK default 100).
-    #[arg(long)]
+    #[arg(long, value_parser = flags::steps)]
     pub steps: Option<usize>,
     /// DNO random restarts; the best per sample is kept.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
     /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).
-    #[arg(long)]
+    #[arg(long, value_parser = flags::learning_rate)]
     pub lr: Option<f64>,
     /// DDIM steps of the sampler that DNO differentiates through (default 10).
-    #[arg(long)]
+    #[arg(long, value_parser = flags::ddim_steps)]
     pub ddim_steps: Option<usize>,
     /// Late start of DNO: optimise the noise of the unconstrained motion noised to this
     /// timestep (0–999) and denoise from there, instead of the start latent at 900.
-    #[arg(long)]
+    #[arg(long, value_parser = flags::timestep)]
     pub start_timestep: Option<usize>,
     /// Weight of DNO's noise decorrelation regulariser (default 1000, DNO's; 0: off).
-    #[arg(long)]
+    #[arg(long, value_parser = flags::weight)]
     pub decorrelate_scale: Option<f64>,
     /// Classifier-free guidance scale of the prior (1 = conditional only).
-    #[arg(long, default_value_t = motion_core::diffusion::Guidance::MDM_SCALE)]
+    #[arg(long, default_value_t = motion_core::diffusion::Guidance::MDM_SCALE, value_parser = flags::guidance)]
     pub guidance: f64,
     /// Weight of DNO's jitter guard on joint accelerations above 0.15 m/frame² (0: off).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = flags::weight)]
     pub jitter_weight: f64,
     /// Switch off the contact-aware clean-up (foot locking with leg IK) of the output; the report
     /// gives every figure before and after it when it runs.
@@ -170,33 +172,31 @@ pub struct RunArgs {
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let program = load_program(&args.program)?;
+    let folder = OutputFolder::create(&args.out)?;
     let device = candle_core::Device::Cpu;
     let prior = Prior::load(&args.generation.prior, &device)
         .with_context(|| format!("loading the prior {}", args.generation.prior.display()))?;
     let config = args.generation.config(args.method.into());
-    let report =
-        run_program(&prior, &program, &config, &args.generation.rg_source(), &args.out, args.generation.formats)?;
+    let report = run_program(&prior, &program, &config, &args.generation.rg_source(), folder, args.generation.formats)?;
     print_summary(&report);
     Ok(())
 }
 
-/// Reads and validates a program file; the error lists every problem with its JSON path.
+/// Reads a program file (bounded in size) and runs every check of a planned task on it; the
+/// error lists every problem with its JSON path.
 pub fn load_program(path: &Path) -> anyhow::Result<TaskProgram> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading the program {}", path.display()))?;
-    TaskProgram::from_json_validated(&text).map_err(|errors| {
-        let list: Vec<String> = errors.iter().map(|e| format!("  - {e}")).collect();
-        anyhow::anyhow!("{} is not a valid program:\n{}", path.display(), list.join("\n"))
-    })
+    Ok(agent::plan::plan_from_file(path)?.program)
 }
 
-/// Generates motions for `program` and writes features.npy, joints.npy, report.json and
-/// strip.png into `out`, with a progress bar on stderr. RG-DNO retrieves from `rg_source`.
+/// Generates motions for `program` and writes features.npy, joints.npy, report.json, strip.png,
+/// program.json and the exports into `folder`, all at once when everything is made (a failure
+/// leaves the folder as it was), with progress on stderr. RG-DNO retrieves from `rg_source`.
 pub fn run_program(
     prior: &Prior,
     program: &TaskProgram,
     config: &GenerationConfig,
     rg_source: &RgDnoSource,
-    out: &Path,
+    folder: OutputFolder,
     formats: ExportFormats,
 ) -> anyhow::Result<TaskReport> {
     let device = candle_core::Device::Cpu;
@@ -250,24 +250,25 @@ pub fn run_program(
     let mut report = report(program, &compiled, &generated, &config)?;
     report.rg_dno = rg_dno;
     report.fallback = fallback;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    prior.to_features(&generated.features)?.write_npy(out.join("features.npy"))?;
-    generated.joints.write_npy(out.join("joints.npy"))?;
-    let json = serde_json::to_string_pretty(&report)?;
-    std::fs::write(out.join("report.json"), json).with_context(|| format!("writing {}/report.json", out.display()))?;
+    if let Some(figure) = report.non_finite_figure() {
+        anyhow::bail!("the report's {figure} is not finite; nothing was written");
+    }
+    folder.write_npy("features.npy", &prior.to_features(&generated.features)?)?;
+    folder.write_npy("joints.npy", &generated.joints)?;
+    folder.write("report.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     let poses = tensor_to_poses(&generated.joints)?;
     let rows: Vec<StripRow<'_>> = poses
         .iter()
         .enumerate()
         .map(|(i, p)| StripRow { label: format!("{} sample {i} (seed {})", config.method, config.seed), poses: p })
         .collect();
-    motion_strip(&rows, 8, &program.scene_primitives(), &program.text, &out.join("strip.png"))?;
-    let program_path = out.join("program.json");
-    std::fs::write(&program_path, program.to_json_pretty()? + "\n")
-        .with_context(|| format!("writing {}", program_path.display()))?;
-    eprintln!("wrote {}/{{program.json,features.npy,joints.npy,report.json,strip.png}}", out.display());
+    motion_strip(&rows, 8, &program.scene_primitives(), &program.text, &folder.path().join("strip.png"))?;
+    folder.write("program.json", (program.to_json_pretty()? + "\n").as_bytes())?;
     let labels = (0..poses.len()).map(|i| format!("{} sample {i} (seed {})", config.method, config.seed)).collect();
-    write_all(out, &program.text, FPS, &poses, labels, Some(program), Some(serde_json::to_value(&report)?), formats)?;
+    let report_json = Some(serde_json::to_value(&report)?);
+    write_all(&folder, &program.text, FPS, &poses, labels, Some(program), report_json, formats)?;
+    let out = folder.commit()?;
+    eprintln!("wrote {}/{{program.json,features.npy,joints.npy,report.json,strip.png}}", out.display());
     Ok(report)
 }
 

@@ -6,13 +6,15 @@ use anyhow::Context;
 use clap::Args;
 use motion_core::cleanup::FootLockConfig;
 use motion_core::diffusion::Guidance;
-use motion_core::generation::clean_up;
+use motion_core::export::OutputFolder;
+use motion_core::generation::{clean_up, ensure_finite};
 use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
 use motion_core::skeleton::FPS;
 
 use super::export::{write_all, ExportFormats};
+use super::flags;
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -20,19 +22,19 @@ pub struct SampleArgs {
     /// Text prompt, e.g. "a person walks forward".
     prompt: String,
     /// Frames per motion at 20 fps (40..=196 is what the prior was trained on).
-    #[arg(long, default_value_t = 120)]
+    #[arg(long, default_value_t = 120, value_parser = flags::frames)]
     frames: usize,
     /// Number of motions.
-    #[arg(long, short = 'n', default_value_t = 4)]
+    #[arg(long, short = 'n', default_value_t = 4, value_parser = flags::samples)]
     samples: usize,
     /// Seed of the start noise (the same seed gives the same motion on the same machine).
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// DDIM steps.
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, value_parser = flags::ddim_steps)]
     steps: usize,
     /// Classifier-free guidance scale (1 = conditional only).
-    #[arg(long, default_value_t = Guidance::MDM_SCALE)]
+    #[arg(long, default_value_t = Guidance::MDM_SCALE, value_parser = flags::guidance)]
     guidance: f64,
     /// Trained prior file.
     #[arg(long, default_value_os_t = paths::default_prior())]
@@ -54,9 +56,7 @@ pub struct SampleArgs {
 }
 
 pub fn run(args: SampleArgs) -> anyhow::Result<()> {
-    anyhow::ensure!((2..=1000).contains(&args.frames), "--frames must be between 2 and 1000, got {}", args.frames);
-    anyhow::ensure!(args.samples >= 1, "--samples must be at least 1");
-    anyhow::ensure!(args.guidance.is_finite(), "--guidance must be a finite number");
+    let folder = OutputFolder::create(&args.out)?;
     let device = candle_core::Device::Cpu;
     let mut prior =
         Prior::load(&args.prior, &device).with_context(|| format!("loading the prior {}", args.prior.display()))?;
@@ -77,6 +77,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         &device,
     )?;
     let raw = prior.to_features(&x)?;
+    ensure_finite(&raw, "the prior's sampled features")?;
     let lock = FootLockConfig { enabled: !args.no_foot_lock, ..FootLockConfig::default() };
     let (joints, reports) = clean_up(&prior.joints_of(&raw)?, &lock)?;
     if lock.enabled {
@@ -95,18 +96,19 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
             );
         }
     }
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    joints.write_npy(args.out.join("joints.npy"))?;
-    raw.write_npy(args.out.join("features.npy"))?;
+    ensure_finite(&joints, "the foot clean-up's joint positions")?;
+    folder.write_npy("joints.npy", &joints)?;
+    folder.write_npy("features.npy", &raw)?;
     let poses = tensor_to_poses(&joints)?;
     let rows: Vec<StripRow<'_>> = poses
         .iter()
         .enumerate()
         .map(|(i, p)| StripRow { label: format!("sample {i} (seed {})", args.seed), poses: p })
         .collect();
-    motion_strip(&rows, 8, &[], &args.prompt, &args.out.join("strip.png"))?;
-    println!("wrote {}/{{joints.npy,features.npy,strip.png}}", args.out.display());
+    motion_strip(&rows, 8, &[], &args.prompt, &folder.path().join("strip.png"))?;
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
-    write_all(&args.out, &args.prompt, FPS, &poses, labels, None, None, args.formats)?;
+    write_all(&folder, &args.prompt, FPS, &poses, labels, None, None, args.formats)?;
+    let out = folder.commit()?;
+    println!("wrote {}/{{joints.npy,features.npy,strip.png}}", out.display());
     Ok(())
 }

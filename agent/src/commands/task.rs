@@ -3,9 +3,10 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use agent::llm::{ApiKey, ClientConfig, Llm, LlmSettings, OutputMode, ReplySource, RetryPolicy, DEFAULT_MODEL};
+use agent::llm::{escape_controls, ApiKey, ClientConfig, Llm, LlmSettings, OutputMode, ReplySource, RetryPolicy, DEFAULT_MODEL};
 use agent::plan::{plan_from_file, plan_task, PlanSettings, PlannedTask};
 use clap::Args;
+use motion_core::export::OutputFolder;
 
 use super::generate::{self, RunOptions};
 use super::run::{GenerationArgs, MethodArg};
@@ -53,7 +54,7 @@ pub struct TaskArgs {
 struct LlmArgs {
     /// Base URL of an OpenAI-compatible API (vLLM http://localhost:8000/v1, Ollama
     /// http://localhost:11434/v1, llama.cpp http://localhost:8080/v1, https://api.deepseek.com/v1).
-    #[arg(long, env = "OPENAI_BASE_URL")]
+    #[arg(long, env = "OPENAI_BASE_URL", hide_env_values = true)]
     base_url: Option<String>,
     /// Model name.
     #[arg(long, env = "OPENAI_MODEL", default_value = DEFAULT_MODEL)]
@@ -81,7 +82,7 @@ struct LlmArgs {
     #[arg(long, default_value_t = RetryPolicy::default().max_retries)]
     retries: u32,
     /// Sampling temperature.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = super::flags::temperature)]
     temperature: f64,
     /// Reply token limit (default: the server's).
     #[arg(long)]
@@ -124,6 +125,8 @@ fn unit_interval(text: &str) -> Result<f64, String> {
 }
 
 pub fn run(args: TaskArgs) -> anyhow::Result<()> {
+    // A bad --out fails before the LLM and the generator run.
+    let out = if args.dry_run { None } else { Some(OutputFolder::create(&args.out)?) };
     let planned = match (&args.program, &args.task) {
         (Some(path), _) => plan_from_file(path)?,
         (None, Some(task)) => plan_words(task, &args)?,
@@ -133,18 +136,17 @@ pub fn run(args: TaskArgs) -> anyhow::Result<()> {
         println!("{}", planned.program.to_json_pretty()?);
     }
     print_plan(&planned);
-    if args.dry_run {
+    let Some(out) = out else {
         println!("dry run: the program is valid; stopping before generation");
         return Ok(());
-    }
+    };
     let options = RunOptions {
         config: args.generation.config(args.method.into()),
         prior: args.generation.prior.clone(),
         rg_source: args.generation.rg_source(),
-        out: args.out.clone(),
         formats: args.generation.formats,
     };
-    generate::run(&planned, &options)
+    generate::run(&planned, &options, out)
 }
 
 /// The two LLM stages for `task`.
@@ -176,7 +178,8 @@ fn print_plan(planned: &PlannedTask) {
         program.text
     );
     for constraint in &program.constraints {
-        println!("  {}: {}", constraint.id, constraint.description.as_deref().unwrap_or("(no description)"));
+        let description = constraint.description.as_deref().unwrap_or("(no description)");
+        println!("  {}: {}", constraint.id, escape_controls(description));
     }
     let Some(parse) = &program.relational_parse else {
         println!("no relational parse: every constraint is fitted from random noise");
@@ -190,7 +193,7 @@ fn print_plan(planned: &PlannedTask) {
         parse.retrieval_confidence
     );
     if let Some(analysis) = &planned.analysis {
-        println!("  analysis: {analysis}");
+        println!("  analysis: {}", escape_controls(analysis));
     }
     if let Some(groups) = &planned.groups {
         println!(

@@ -30,30 +30,30 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = TrainConfig::default().batch_size)]
     batch_size: usize,
     /// Peak learning rate.
-    #[arg(long, default_value_t = TrainConfig::default().lr)]
+    #[arg(long, default_value_t = TrainConfig::default().lr, value_parser = super::flags::learning_rate)]
     lr: f64,
     /// Longest crop in frames (20 fps).
     #[arg(long, default_value_t = TrainConfig::default().max_frames)]
     max_frames: usize,
     /// Weight of the root features (yaw velocity, x/z velocity, height) in the x0 MSE
     /// (1 = MDM's plain MSE; 25 = HumanML3D's feat_bias 5).
-    #[arg(long, default_value_t = TrainConfig::default().root_weight)]
+    #[arg(long, default_value_t = TrainConfig::default().root_weight, value_parser = super::flags::weight)]
     root_weight: f64,
     /// Weight of the ric features (root-relative joint positions, from which the joints are
     /// recovered) in the x0 MSE (1 = MDM's plain MSE).
-    #[arg(long, default_value_t = TrainConfig::default().ric_weight)]
+    #[arg(long, default_value_t = TrainConfig::default().ric_weight, value_parser = super::flags::weight)]
     ric_weight: f64,
     /// Min-SNR-γ loss weighting: each sample's x0 MSE weighted by min(SNR_t, γ)
     /// (0 = off, MDM's uniform weighting; 5 is the paper's value).
-    #[arg(long, default_value_t = TrainConfig::default().snr_gamma)]
+    #[arg(long, default_value_t = TrainConfig::default().snr_gamma, value_parser = super::flags::weight)]
     snr_gamma: f64,
     /// Fraction of timesteps drawn from the noisiest 30 % of the schedule (0 = MDM's uniform
     /// sampling); high-noise steps teach the denoiser to tie frames together.
-    #[arg(long, default_value_t = TrainConfig::default().high_noise_fraction)]
+    #[arg(long, default_value_t = TrainConfig::default().high_noise_fraction, value_parser = super::flags::fraction)]
     high_noise_fraction: f64,
     /// Fraction of frames whose noisy input is replaced by pure noise, target unchanged, so the
     /// denoiser learns to restore frames from their neighbours (0 = off).
-    #[arg(long, default_value_t = TrainConfig::default().frame_corruption)]
+    #[arg(long, default_value_t = TrainConfig::default().frame_corruption, value_parser = super::flags::fraction)]
     frame_corruption: f64,
     /// Weight of the joint-velocity loss on the recovered joints ((m/s)²; 0 = off).
     #[arg(long, default_value_t = TrainConfig::default().velocity_weight)]

@@ -1,9 +1,12 @@
 //! Errors of talking to an LLM: transport, HTTP status, unusable bodies, recordings.
 //!
-//! Server text in these errors (bodies, reqwest messages) is scrubbed of the API key before it is
-//! stored here.
+//! Server text in these errors (bodies, reqwest messages) is scrubbed of the endpoint's secrets
+//! and has its control characters escaped before it is stored here; URLs are stored redacted
+//! ([`super::base_url::redacted`]).
 
 use std::path::PathBuf;
+
+use motion_core::limits::LimitExceeded;
 
 /// Why an exchange with the LLM (live, recorded or replayed) failed.
 #[derive(Debug, thiserror::Error)]
@@ -17,6 +20,12 @@ pub enum LlmError {
          or --api-key (or OPENAI_API_KEY) for OpenAI"
     )]
     NoEndpoint,
+    /// The base URL does not parse or is not an HTTP URL.
+    #[error("--base-url (or OPENAI_BASE_URL) is not a usable base URL: {reason}")]
+    BaseUrl {
+        /// Why (the URL itself is not repeated: it may hold a key).
+        reason: String,
+    },
     /// Could not connect, or the connection broke, on every attempt.
     #[error("{url}: connection failed on all {attempts} attempt(s): {message}")]
     Connection {
@@ -49,8 +58,12 @@ pub enum LlmError {
         /// The server's reply text (truncated, key scrubbed).
         body: String,
     },
-    /// The server asked to wait longer than we are prepared to.
-    #[error("{url} answered HTTP {status} and asked to retry after {wait_s:.0} s, more than the {max_s:.0} s allowed")]
+    /// The server asked to wait longer than the time left for waiting.
+    #[error(
+        "{url} answered HTTP {status} and asked to wait {wait_s:.0} s before retrying, more than the {left_s:.1} s \
+         of waiting left: the waits of one request add up to at most its timeout (--timeout, {timeout_s} s here) \
+         and each is at most {cap_s:.0} s"
+    )]
     RetryAfterTooLong {
         /// The endpoint.
         url: String,
@@ -58,9 +71,16 @@ pub enum LlmError {
         status: u16,
         /// The wait asked for (s).
         wait_s: f64,
-        /// The most we wait (s).
-        max_s: f64,
+        /// The wait that was left (s).
+        left_s: f64,
+        /// The request timeout, which bounds all waits of a request together (s).
+        timeout_s: f64,
+        /// The longest single `Retry-After` honoured (s).
+        cap_s: f64,
     },
+    /// The reply is larger than [`motion_core::limits::LLM_REPLY_BYTES`].
+    #[error(transparent)]
+    TooLarge(#[from] LimitExceeded),
     /// HTTP 200 with a body that is not a chat completion.
     #[error("{url} answered HTTP 200 with a body that is not a chat completion ({message}): {body}")]
     BadBody {

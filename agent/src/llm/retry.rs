@@ -37,13 +37,15 @@ impl RetryPolicy {
         self.initial_backoff.saturating_mul(factor).min(self.max_backoff)
     }
 
-    /// The wait before retry number `retry`: the server's `Retry-After` when given (an error when
-    /// it exceeds `max_retry_after`: the wait it asked for), else the backoff.
-    pub fn wait(&self, retry: u32, retry_after: Option<Duration>) -> Result<Duration, Duration> {
+    /// The wait before retry number `retry` when `left` of the request's waiting time remains
+    /// (the request timeout less the waits so far): the server's `Retry-After` when given (an
+    /// error, the wait it asked for, when that exceeds `left` or `max_retry_after`), else the
+    /// backoff, cut to `left`.
+    pub fn wait(&self, retry: u32, retry_after: Option<Duration>, left: Duration) -> Result<Duration, Duration> {
         match retry_after {
-            Some(wait) if wait > self.max_retry_after => Err(wait),
+            Some(wait) if wait > self.max_retry_after.min(left) => Err(wait),
             Some(wait) => Ok(wait),
-            None => Ok(self.backoff(retry)),
+            None => Ok(self.backoff(retry).min(left)),
         }
     }
 }
@@ -109,8 +111,19 @@ mod tests {
     #[test]
     fn wait_prefers_retry_after_and_refuses_long_ones() {
         let policy = RetryPolicy::default();
-        assert_eq!(policy.wait(2, None), Ok(Duration::from_secs(4)));
-        assert_eq!(policy.wait(2, Some(Duration::from_secs(7))), Ok(Duration::from_secs(7)));
-        assert_eq!(policy.wait(0, Some(Duration::from_secs(3600))), Err(Duration::from_secs(3600)));
+        let left = Duration::from_secs(180);
+        assert_eq!(policy.wait(2, None, left), Ok(Duration::from_secs(4)));
+        assert_eq!(policy.wait(2, Some(Duration::from_secs(7)), left), Ok(Duration::from_secs(7)));
+        assert_eq!(policy.wait(0, Some(Duration::from_secs(3600)), left), Err(Duration::from_secs(3600)));
+    }
+
+    #[test]
+    fn waits_are_bounded_by_the_time_left() {
+        let policy = RetryPolicy::default();
+        let left = Duration::from_secs(5);
+        assert_eq!(policy.wait(0, Some(Duration::from_secs(100)), left), Err(Duration::from_secs(100)));
+        assert_eq!(policy.wait(0, Some(left), left), Ok(left));
+        assert_eq!(policy.wait(4, None, left), Ok(left), "a 16 s backoff is cut to what is left");
+        assert_eq!(policy.wait(0, None, Duration::ZERO), Ok(Duration::ZERO));
     }
 }

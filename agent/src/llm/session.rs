@@ -3,11 +3,13 @@
 //! server rejects a `response_format`.
 
 use std::cell::Cell;
+use std::fmt;
 use std::path::PathBuf;
 
 use serde_json::Value;
 
-use super::api_key::ApiKey;
+use super::api_key::{ApiKey, REDACTED};
+use super::base_url::BaseUrl;
 use super::client::{ClientConfig, Endpoint, HttpClient, OPENAI_BASE_URL};
 use super::output::OutputMode;
 use super::wire::{ChatRequest, ChatResponse, Message};
@@ -28,10 +30,11 @@ pub enum ReplySource {
     Replay,
 }
 
-/// What the command line (or a test) says about the LLM.
-#[derive(Debug, Clone)]
+/// What the command line (or a test) says about the LLM. Its `Debug` form redacts the secrets.
+#[derive(Clone)]
 pub struct LlmSettings {
-    /// Base URL of an OpenAI-compatible API; `None` with a key means OpenAI's.
+    /// Base URL of an OpenAI-compatible API; `None` with a key means OpenAI's. User info and
+    /// query values in it are secrets ([`BaseUrl`]).
     pub base_url: Option<String>,
     /// Bearer token.
     pub api_key: Option<ApiKey>,
@@ -50,6 +53,25 @@ pub struct LlmSettings {
     pub temperature: Option<f64>,
     /// Reply token limit (`None`: the server's default).
     pub max_tokens: Option<u32>,
+}
+
+impl fmt::Debug for LlmSettings {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // Redacted by `BaseUrl`; a URL that does not parse cannot be redacted part by part.
+        let base_url =
+            self.base_url.as_deref().map(|url| BaseUrl::parse(url).map_or(REDACTED.to_owned(), |url| url.to_string()));
+        f.debug_struct("LlmSettings")
+            .field("base_url", &base_url)
+            .field("api_key", &self.api_key)
+            .field("model", &self.model)
+            .field("source", &self.source)
+            .field("recordings", &self.recordings)
+            .field("client", &self.client)
+            .field("output", &self.output)
+            .field("temperature", &self.temperature)
+            .field("max_tokens", &self.max_tokens)
+            .finish()
+    }
 }
 
 /// A question for the model: the opening messages in every output mode and the reply's schema.
@@ -106,7 +128,7 @@ impl Llm {
             .output
             .unwrap_or_else(|| base_url.as_deref().map_or(OutputMode::JsonSchema, OutputMode::for_base_url));
         let client = |base_url: Option<String>| {
-            let base_url = base_url.ok_or(LlmError::NoEndpoint)?;
+            let base_url = BaseUrl::parse(&base_url.ok_or(LlmError::NoEndpoint)?)?;
             HttpClient::new(Endpoint { base_url, api_key: settings.api_key.clone() }, settings.client.clone())
         };
         let transport = match source {
@@ -138,7 +160,7 @@ impl Llm {
         }
     }
 
-    /// One line saying where replies come from, for the user.
+    /// One line saying where replies come from, for the user (the base URL redacted).
     pub fn describe(&self) -> String {
         match &self.transport {
             Transport::Live(client) => {

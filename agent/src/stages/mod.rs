@@ -17,10 +17,10 @@ mod repair;
 
 use std::fmt;
 
-pub use program::{generate_program, program_question, program_schema};
+pub use program::{check_program, generate_program, program_question, program_schema};
 pub use relational::{parse_question, parse_relations, parse_schema, RelationalAnswer};
 
-use crate::llm::LlmError;
+use crate::llm::{escape_controls, truncate, LlmError};
 use crate::prompts::PromptError;
 
 /// Longest raw reply quoted in an error (characters).
@@ -75,11 +75,12 @@ pub enum StageError {
         #[source]
         source: PromptError,
     },
-    /// Every attempt gave an unusable answer.
+    /// Every attempt gave an unusable answer. The problems and the reply are shown with their
+    /// control characters escaped.
     #[error(
         "{stage}: no valid answer in {attempts} attempt(s). Problems with the last answer:\n{}\nThe last raw reply:\n{}",
         bullet_list(problems),
-        crate::llm::truncate(last_reply, MAX_REPLY_IN_ERROR)
+        escape_controls(&truncate(last_reply, MAX_REPLY_IN_ERROR))
     )]
     Invalid {
         /// The stage.
@@ -94,5 +95,5 @@ pub enum StageError {
 }
 
 fn bullet_list(items: &[String]) -> String {
-    items.iter().map(|item| format!("  - {item}")).collect::<Vec<_>>().join("\n")
+    items.iter().map(|item| format!("  - {}", escape_controls(item))).collect::<Vec<_>>().join("\n")
 }

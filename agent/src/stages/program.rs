@@ -95,8 +95,9 @@ pub async fn generate_program(
     ask_until_valid(llm, prompts, stage, &question, max_repairs, check_program).await
 }
 
-/// A stage-1 answer as a program: JSON Schema (paths), types, then the meaning checks.
-fn check_program(answer: &Answer) -> Result<TaskProgram, Vec<String>> {
+/// A stage-1 answer as a program: JSON Schema (paths), types, then the meaning checks (which
+/// compile it).
+pub fn check_program(answer: &Answer) -> Result<TaskProgram, Vec<String>> {
     let mut value = answer.json.clone();
     // Written by stage 2; a model that adds one anyway (JSON mode) is not wrong, just early.
     if let Some(parse) = value.as_object_mut().and_then(|object| object.remove("relational_parse")) {

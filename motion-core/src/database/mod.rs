@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 use candle_core::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
-use crate::import::{resample, MocapClip};
+use crate::import::{check_clip_length, resample, short_number};
+use crate::limits::LimitExceeded;
 use crate::motion::mirror;
 use crate::representation::{
     extract_features, recover_from_ric, FeatureFrame, MeanStd, NormalizationError, RestSkeleton, FEATURE_DIM,
@@ -47,6 +48,26 @@ pub struct DatabaseConfig {
     pub min_window_frames: usize,
     /// Step between window starts, frames; default 20 (1 s).
     pub window_stride_frames: usize,
+}
+
+impl DatabaseConfig {
+    /// Checks that every figure is one [`MotionDatabase::build`] can use: speeds finite and
+    /// positive, loop and hold seconds finite (loops positive, holds not negative).
+    pub fn check(&self) -> Result<(), DatabaseError> {
+        let bad = |field: String, value: f64, rule: &str| {
+            Err(DatabaseError::Config { field, message: format!("{} {rule}", short_number(value)) })
+        };
+        if let Some((i, &speed)) = self.speeds.iter().enumerate().find(|(_, s)| !(s.is_finite() && **s > 0.0)) {
+            return bad(format!("speeds[{i}]"), speed, "is not a positive, finite speed");
+        }
+        if !(self.loop_seconds.is_finite() && self.loop_seconds > 0.0) {
+            return bad("loop_seconds".into(), self.loop_seconds, "is not a positive, finite number of seconds");
+        }
+        if !(self.hold_seconds.is_finite() && self.hold_seconds >= 0.0) {
+            return bad("hold_seconds".into(), self.hold_seconds, "is not a finite number of seconds ≥ 0");
+        }
+        Ok(())
+    }
 }
 
 impl Default for DatabaseConfig {
@@ -114,6 +135,17 @@ pub enum DatabaseError {
     /// Normalisation statistics could not be computed.
     #[error("normalisation: {0}")]
     Normalization(#[from] NormalizationError),
+    /// A figure of the [`DatabaseConfig`] is unusable.
+    #[error("database config `{field}`: {message}")]
+    Config {
+        /// The field (`speeds[1]`, `loop_seconds`, ...).
+        field: String,
+        /// The value and the rule it breaks.
+        message: String,
+    },
+    /// An augmented sequence would be longer than a clip may be.
+    #[error(transparent)]
+    Limit(#[from] LimitExceeded),
     /// No sequence was long enough for a window.
     #[error("no sequence has {min} frames or more; nothing to store")]
     Empty {
@@ -149,15 +181,17 @@ pub struct MotionDatabase {
 }
 
 impl MotionDatabase {
-    /// Builds the database from loaded source clips.
+    /// Builds the database from loaded source clips. The config is checked first, and each
+    /// augmented sequence's length against [`CLIP_FRAMES`] before it is sampled.
     pub fn build(sources: &[SourceClip], config: &DatabaseConfig) -> Result<Self, DatabaseError> {
+        config.check()?;
         let mut features: Vec<FeatureFrame> = Vec::new();
         let mut sequences = Vec::new();
         let mut windows = Vec::new();
         for source in sources {
             for mirrored in if config.mirror { vec![false, true] } else { vec![false] } {
                 for &speed in &config.speeds {
-                    let poses = augmented_poses(source.clip.as_ref(), speed, mirrored, config);
+                    let poses = augmented_poses(source, speed, mirrored, config)?;
                     let extracted = extract_features(&poses)
                         .map_err(|error| DatabaseError::Motion { source_name: source.name.clone(), error })?;
                     let frames = extracted.features.len();
@@ -339,12 +373,22 @@ impl MotionDatabase {
     }
 }
 
-/// 20 fps joint positions of one augmentation of a source clip.
-fn augmented_poses(clip: &dyn MocapClip, speed: f64, mirrored: bool, config: &DatabaseConfig) -> Vec<Pose> {
+/// 20 fps joint positions of one augmentation of a source clip, its length checked against
+/// [`CLIP_FRAMES`](crate::limits::CLIP_FRAMES) (holds included) before it is sampled.
+fn augmented_poses(
+    source: &SourceClip,
+    speed: f64,
+    mirrored: bool,
+    config: &DatabaseConfig,
+) -> Result<Vec<Pose>, DatabaseError> {
+    let clip = source.clip.as_ref();
+    let hold = (config.hold_seconds * FPS).round() as usize;
+    let seconds =
+        if clip.is_cyclic() { config.loop_seconds } else { clip.duration_s() / speed + 2.0 * hold as f64 / FPS };
+    check_clip_length(seconds, format_args!("clip {} at speed {speed}", source.name))?;
     let mut poses = if clip.is_cyclic() {
         resample(clip, speed, Some(config.loop_seconds))
     } else {
-        let hold = (config.hold_seconds * FPS).round() as usize;
         let body = resample(clip, speed, None);
         let (first, last) = (body.first().copied(), body.last().copied());
         let mut poses = Vec::with_capacity(body.len() + 2 * hold);
@@ -356,7 +400,7 @@ fn augmented_poses(clip: &dyn MocapClip, speed: f64, mirrored: bool, config: &Da
     if mirrored {
         poses = mirror(&poses);
     }
-    poses
+    Ok(poses)
 }
 
 /// Window (start, length) pairs covering a sequence of `frames` frames.
@@ -387,6 +431,7 @@ pub fn mirror_label(label: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::import::MocapClip;
 
     #[test]
     fn windows_cover_the_sequence_and_end_at_its_end() {
@@ -396,6 +441,50 @@ mod tests {
         assert_eq!(w.last(), Some(&(54, 196)));
         let w: Vec<_> = window_starts(60, &cfg).collect();
         assert_eq!(w, vec![(0, 60)]);
+    }
+
+    /// A clip standing still for `duration_s`.
+    struct Still {
+        duration_s: f64,
+        cyclic: bool,
+    }
+
+    impl MocapClip for Still {
+        fn duration_s(&self) -> f64 {
+            self.duration_s
+        }
+        fn is_cyclic(&self) -> bool {
+            self.cyclic
+        }
+        fn pose_at(&self, _t_s: f64) -> Pose {
+            crate::import::deepmimic::rest_pose()
+        }
+    }
+
+    fn source(duration_s: f64, cyclic: bool) -> SourceClip {
+        SourceClip {
+            name: "still".into(),
+            label: "a person stands".into(),
+            clip: Box::new(Still { duration_s, cyclic }),
+        }
+    }
+
+    #[test]
+    fn sequences_over_the_clip_limit_and_bad_configs_are_refused_before_sampling() {
+        let e = MotionDatabase::build(&[source(1e9, false)], &DatabaseConfig::default()).unwrap_err().to_string();
+        assert!(e.starts_with("clip still at speed 0.8 is ") && e.contains("imported clip length"), "{e}");
+        let looped = DatabaseConfig { loop_seconds: 1e7, ..DatabaseConfig::default() };
+        let e = MotionDatabase::build(&[source(2.0, true)], &looped).unwrap_err().to_string();
+        assert!(e.contains("200000001 frames at 20 fps") && e.contains("imported clip length"), "{e}");
+        for (config, field) in [
+            (DatabaseConfig { loop_seconds: f64::NAN, ..DatabaseConfig::default() }, "loop_seconds"),
+            (DatabaseConfig { hold_seconds: -1.0, ..DatabaseConfig::default() }, "hold_seconds"),
+            (DatabaseConfig { speeds: vec![1.0, 0.0], ..DatabaseConfig::default() }, "speeds[1]"),
+            (DatabaseConfig { speeds: vec![f64::INFINITY], ..DatabaseConfig::default() }, "speeds[0]"),
+        ] {
+            let e = MotionDatabase::build(&[source(2.0, true)], &config).unwrap_err().to_string();
+            assert!(e.contains(field), "{field}: {e}");
+        }
     }
 
     #[test]

@@ -12,6 +12,7 @@
 //! leaves no half-written file behind.
 
 pub mod bvh;
+mod folder;
 pub mod gltf;
 mod outputs;
 pub mod rotations;
@@ -20,6 +21,7 @@ pub mod viewer;
 
 use std::path::{Path, PathBuf};
 
+pub use folder::{npy_bytes, OutputFolder};
 pub use outputs::{read_joints_npy, write_outputs, ExportInput, ExportManifest, ExportedSample, Probe};
 pub use rotations::{RigSkeleton, RotationTrack, SolveFit, ANIMATED_OFFSETS};
 pub use scene::{position_targets, scene_boxes, PositionTarget, SceneBox, SceneExtent, SceneRole};

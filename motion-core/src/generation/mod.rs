@@ -178,9 +178,43 @@ pub enum GenerationError {
         /// What was wrong.
         source: FootLockError,
     },
+    /// A result holds NaN or infinite values: the prior, the text or a setting is broken.
+    #[error(
+        "{what} of sample {sample} is not finite (frame {frame}, {count} values NaN or infinite); nothing was \
+         written. Check the prior file (`mogen sample` with it), the prompt and the numeric settings"
+    )]
+    NonFinite {
+        /// Which result (e.g. `DNO's motion features`).
+        what: String,
+        /// The first bad sample.
+        sample: usize,
+        /// Its first bad frame.
+        frame: usize,
+        /// Bad values in the whole tensor.
+        count: usize,
+    },
     /// A tensor operation failed.
     #[error(transparent)]
     Tensor(#[from] candle_core::Error),
+}
+
+/// `Ok` when every value of `batch` `[B, T, ...]` is finite; otherwise [`GenerationError::NonFinite`]
+/// naming `what`, the first bad sample and frame.
+pub fn ensure_finite(batch: &Tensor, what: &str) -> Result<(), GenerationError> {
+    let dims = batch.dims();
+    let per_frame = dims.iter().skip(2).product::<usize>().max(1);
+    let frames = dims.get(1).copied().unwrap_or(1).max(1);
+    let values = batch.to_dtype(candle_core::DType::F32)?.flatten_all()?.to_vec1::<f32>()?;
+    let count = values.iter().filter(|v| !v.is_finite()).count();
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(first) => Err(GenerationError::NonFinite {
+            what: what.to_owned(),
+            sample: first / (per_frame * frames),
+            frame: first / per_frame % frames,
+            count,
+        }),
+    }
 }
 
 /// Progress of a running method.
@@ -286,10 +320,13 @@ pub(crate) fn finish(
     loss_history: Vec<Vec<f64>>,
     start: Instant,
 ) -> Result<Generated, GenerationError> {
+    ensure_finite(&features, &format!("{}'s motion features", config.method))?;
     let raw_joints = prior.to_joints(&features)?;
+    ensure_finite(&raw_joints, &format!("{}'s joint positions", config.method))?;
     let mut lock = config.foot_lock.clone();
     lock.plant_on_floor &= !has_raised_support(program);
     let (joints, foot_lock) = clean_up(&raw_joints, &lock)?;
+    ensure_finite(&joints, "the foot clean-up's joint positions")?;
     Ok(Generated {
         features,
         joints,
@@ -331,6 +368,17 @@ fn has_raised_support(program: &TaskProgram) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_non_finite_result_names_its_sample_and_frame() {
+        let mut data = vec![0f32; 3 * 4 * 5];
+        data[2 * 20 + 3 * 5 + 1] = f32::NAN;
+        data[2 * 20 + 3 * 5 + 2] = f32::INFINITY;
+        let batch = Tensor::from_vec(data, (3, 4, 5), &Device::Cpu).unwrap();
+        let err = ensure_finite(&batch, "DNO's motion features").unwrap_err().to_string();
+        assert!(err.starts_with("DNO's motion features of sample 2 is not finite (frame 3, 2 values"), "{err}");
+        assert!(ensure_finite(&batch.narrow(0, 0, 2).unwrap(), "x").is_ok());
+    }
 
     #[test]
     fn jitter_penalty_by_hand_and_its_gradient() {

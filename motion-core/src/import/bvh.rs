@@ -29,7 +29,8 @@ pub use animation::BvhAnimation;
 pub use clip::{BvhClip, BvhOptions};
 pub use rig::Rig;
 
-use super::{ImportError, ImportWarning};
+use super::{check_clip_length, short_number, ImportError, ImportWarning};
+use crate::limits::{read_bytes, MOCAP_FILE_BYTES, RIG_JOINTS};
 
 /// A coordinate axis of the file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -106,6 +107,8 @@ pub struct Bvh {
     /// `[frames, channel_count]`, row-major.
     motion: Vec<f64>,
     channel_count: usize,
+    /// 1-based line of each frame (blank lines are skipped, so they are not consecutive).
+    frame_lines: Vec<usize>,
 }
 
 fn invalid(path: &Path, line: usize, joint: Option<&str>, message: impl Into<String>) -> ImportError {
@@ -115,6 +118,9 @@ fn invalid(path: &Path, line: usize, joint: Option<&str>, message: impl Into<Str
     };
     ImportError::Invalid { path: path.into(), location, message: message.into() }
 }
+
+/// Accepted `Frame Time` range, s: 10,000 to 1 frames per second.
+const FRAME_TIME_S: (f64, f64) = (1e-4, 1.0);
 
 fn parse_finite(tok: &str) -> Option<f64> {
     tok.parse::<f64>().ok().filter(|v| v.is_finite())
@@ -128,40 +134,36 @@ struct Draft {
 }
 
 impl Bvh {
-    /// Reads a file (non-UTF-8 bytes are replaced, so only names can suffer).
+    /// Reads a file of at most [`MOCAP_FILE_BYTES`] (non-UTF-8 bytes are replaced, so only
+    /// names can suffer).
     pub fn read(path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
-        let bytes = std::fs::read(path).map_err(|source| ImportError::Io { path: path.into(), source })?;
+        let bytes = read_bytes(path, &MOCAP_FILE_BYTES)?;
         Self::parse(&String::from_utf8_lossy(&bytes), path)
     }
 
     /// Parses BVH text; `path` is only used in messages. Warns about lines after the last frame.
+    ///
+    /// Nothing is allocated per line or per token: the hierarchy is read as a stream and is
+    /// refused at its [`RIG_JOINTS`]+1st node; the frame time and the clip's length at 20 fps
+    /// ([`check_clip_length`]) are checked from the header before the motion is read.
     pub fn parse(text: &str, path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let lines: Vec<&str> = text.lines().collect();
-        if lines.iter().all(|l| l.trim().is_empty()) {
+        let numbered = || text.lines().enumerate().map(|(i, l)| (i + 1, l));
+        if text.lines().all(|l| l.trim().is_empty()) {
             return Err(invalid(path, 1, None, "empty file; expected HIERARCHY"));
         }
-        let motion_at = lines.iter().position(|l| l.split_whitespace().next() == Some("MOTION"));
-        let hierarchy_end = motion_at.unwrap_or(lines.len());
-        let tokens: Vec<(&str, usize)> = lines[..hierarchy_end]
-            .iter()
-            .enumerate()
-            .flat_map(|(i, l)| l.split_whitespace().map(move |t| (t, i + 1)))
-            .collect();
-        let joints = parse_hierarchy(&tokens, hierarchy_end.max(1), path)?;
+        let motion_at = text.lines().position(|l| l.split_whitespace().next() == Some("MOTION"));
+        let hierarchy_end = motion_at.unwrap_or_else(|| text.lines().count());
+        let tokens = numbered().take(hierarchy_end).flat_map(|(line, l)| l.split_whitespace().map(move |t| (t, line)));
+        let joints = parse_hierarchy(tokens, hierarchy_end.max(1), path)?;
         let channel_count: usize = joints.iter().map(|j| j.channels.len()).sum();
         if channel_count == 0 {
             return Err(invalid(path, joints[0].line, None, "the hierarchy declares no channels"));
         }
         let Some(motion_at) = motion_at else {
-            return Err(invalid(path, lines.len(), None, "file ends without a MOTION section"));
+            return Err(invalid(path, hierarchy_end, None, "file ends without a MOTION section"));
         };
-        let mut rest = lines
-            .iter()
-            .enumerate()
-            .skip(motion_at + 1)
-            .map(|(i, l)| (i + 1, *l))
-            .filter(|(_, l)| !l.trim().is_empty());
+        let mut rest = numbered().skip(motion_at + 1).filter(|(_, l)| !l.trim().is_empty());
         let (frames_line, frames_text) =
             rest.next().ok_or_else(|| invalid(path, motion_at + 1, None, "MOTION is not followed by `Frames:`"))?;
         let declared = header_value(frames_text, "Frames:").and_then(|v| v.parse::<usize>().ok()).ok_or_else(|| {
@@ -176,15 +178,35 @@ impl Bvh {
         let frame_time_s = header_value(time_text, "Frame Time:").and_then(parse_finite).ok_or_else(|| {
             invalid(path, time_line, None, format!("expected `Frame Time: <seconds>`, found `{}`", time_text.trim()))
         })?;
-        if frame_time_s <= 0.0 {
-            return Err(invalid(path, time_line, None, format!("Frame Time must be positive, found {frame_time_s}")));
+        if !(FRAME_TIME_S.0..=FRAME_TIME_S.1).contains(&frame_time_s) {
+            return Err(invalid(
+                path,
+                time_line,
+                None,
+                format!(
+                    "Frame Time {} s is outside {} to {} s (1 to 10000 frames per second)",
+                    short_number(frame_time_s),
+                    short_number(FRAME_TIME_S.0),
+                    short_number(FRAME_TIME_S.1)
+                ),
+            ));
         }
+        check_clip_length(
+            (declared - 1) as f64 * frame_time_s,
+            format_args!(
+                "{}: lines {frames_line}-{time_line}: {declared} frames of {} s",
+                path.display(),
+                short_number(frame_time_s)
+            ),
+        )?;
         let owners: Vec<(usize, Channel)> =
             joints.iter().enumerate().flat_map(|(j, joint)| joint.channels.iter().map(move |c| (j, *c))).collect();
-        let mut motion = Vec::with_capacity(declared.min(lines.len()) * channel_count);
-        let mut frames = 0;
+        // Every value takes at least two bytes of text, so the file's size bounds the table.
+        let mut motion = Vec::with_capacity(declared.saturating_mul(channel_count).min(text.len() / 2));
+        let mut frame_lines = Vec::with_capacity(declared.min(text.len() / 2));
         let mut extra_lines = 0;
         for (line, text) in rest {
+            let frames = frame_lines.len();
             if frames == declared {
                 extra_lines += 1;
                 continue;
@@ -209,12 +231,13 @@ impl Bvh {
                 })?;
                 motion.push(v);
             }
-            frames += 1;
+            frame_lines.push(line);
         }
+        let frames = frame_lines.len();
         if frames < declared {
             return Err(invalid(
                 path,
-                lines.len(),
+                text.lines().count(),
                 None,
                 format!("file ends after {frames} of the {declared} frames declared on line {frames_line}"),
             ));
@@ -229,7 +252,7 @@ impl Bvh {
         } else {
             Vec::new()
         };
-        Ok((Self { joints, frame_time_s, motion, channel_count }, warnings))
+        Ok((Self { joints, frame_time_s, motion, channel_count, frame_lines }, warnings))
     }
 
     /// The hierarchy, parents before children, root first.
@@ -245,6 +268,11 @@ impl Bvh {
     /// Seconds between frames.
     pub fn frame_time_s(&self) -> f64 {
         self.frame_time_s
+    }
+
+    /// 1-based line of frame `k` in the file.
+    pub fn frame_line(&self, k: usize) -> Option<usize> {
+        self.frame_lines.get(k).copied()
     }
 
     /// Channel values of frame `k`, in hierarchy order.
@@ -298,8 +326,16 @@ fn header_value<'a>(line: &'a str, key: &str) -> Option<&'a str> {
 
 /// Reads the HIERARCHY tokens (each with its 1-based line) without recursion, so deeply nested
 /// input cannot overflow the stack.
-fn parse_hierarchy(tokens: &[(&str, usize)], last_line: usize, path: &Path) -> Result<Vec<BvhJoint>, ImportError> {
-    let mut it = tokens.iter().copied().peekable();
+fn parse_hierarchy<'a>(
+    tokens: impl Iterator<Item = (&'a str, usize)>,
+    last_line: usize,
+    path: &Path,
+) -> Result<Vec<BvhJoint>, ImportError> {
+    let mut it = tokens.peekable();
+    // Checked before each node is added, so a huge hierarchy stops at the first node over.
+    let room_for_one_more = |nodes: usize, line: usize| {
+        RIG_JOINTS.check(nodes as u64 + 1, format_args!("{}: line {line}: the rig", path.display()))
+    };
     match it.next() {
         Some(("HIERARCHY", _)) => {}
         Some((tok, line)) => return Err(invalid(path, line, None, format!("expected HIERARCHY, found `{tok}`"))),
@@ -338,6 +374,7 @@ fn parse_hierarchy(tokens: &[(&str, usize)], last_line: usize, path: &Path) -> R
                 if parts.is_empty() {
                     return Err(invalid(path, line, None, format!("{tok} without a name")));
                 }
+                room_for_one_more(drafts.len(), line)?;
                 pending = Some(drafts.len());
                 drafts.push(Draft {
                     joint: BvhJoint {
@@ -359,6 +396,7 @@ fn parse_hierarchy(tokens: &[(&str, usize)], last_line: usize, path: &Path) -> R
                 let Some(parent) = current.filter(|c| !drafts[*c].joint.end_site) else {
                     return Err(invalid(path, line, None, "End Site outside a joint"));
                 };
+                room_for_one_more(drafts.len(), line)?;
                 pending = Some(drafts.len());
                 drafts.push(Draft {
                     joint: BvhJoint {
@@ -566,7 +604,7 @@ Frame Time: 0.5
 ";
 
     /// TINY with 1-based line `n` replaced (or removed when `None`).
-    fn edit(n: usize, with: Option<&str>) -> String {
+    pub(super) fn edit(n: usize, with: Option<&str>) -> String {
         let mut lines: Vec<&str> = TINY.lines().collect();
         match with {
             Some(w) => lines[n - 1] = w,
@@ -637,8 +675,8 @@ Frame Time: 0.5
             (edit(17, Some("Frames: 3")), "line 20", "after 2 of the 3 frames declared on line 17"),
             (edit(17, Some("Frames: lots")), "line 17", "Frames:"),
             (edit(17, Some("Frame: 2")), "line 17", "Frames:"),
-            (edit(18, Some("Frame Time: 0")), "line 18", "must be positive"),
-            (edit(18, Some("Frame Time: -0.1")), "line 18", "must be positive"),
+            (edit(18, Some("Frame Time: 0")), "line 18", "Frame Time 0 s is outside 0.0001 to 1 s"),
+            (edit(18, Some("Frame Time: -0.1")), "line 18", "Frame Time -0.1 s is outside"),
             (edit(18, Some("Frame Time: nan")), "line 18", "Frame Time"),
             (edit(20, Some("1 2 NaN 90 0 0 0 0 90")), "line 20, joint Hips", "frame 1, Zposition: `NaN`"),
             (edit(20, Some("1 2 3 inf 0 0 0 0 90")), "line 20, joint Hips", "not a finite number"),
@@ -723,24 +761,60 @@ Frame Time: 0.5
             }
         }
         assert!(err("\u{0}\u{1}\u{ff}").contains("line 1"));
-        assert!(err(&edit(17, Some("Frames: 18446744073709551615"))).contains("after 2 of the"));
         assert!(err(&edit(9, Some("CHANNELS 18446744073709551615 Xrotation"))).contains("lists 1"));
     }
 
     #[test]
     fn deep_nesting_does_not_overflow_the_stack() {
-        let depth = 20_000;
-        let mut text = String::from("HIERARCHY\nROOT J0\n{\nOFFSET 0 1 0\nCHANNELS 1 Zrotation\n");
-        for i in 1..depth {
-            text.push_str(&format!("JOINT J{i}\n{{\nOFFSET 0 1 0\nCHANNELS 1 Zrotation\n"));
-        }
-        text.push_str(&"}\n".repeat(depth));
-        text.push_str(&format!("MOTION\nFrames: 1\nFrame Time: 0.1\n{}\n", vec!["1"; depth].join(" ")));
-        let (bvh, _) = parse(&text).unwrap();
+        let chain = |depth: usize| {
+            let mut text = String::from("HIERARCHY\nROOT J0\n{\nOFFSET 0 1 0\nCHANNELS 1 Zrotation\n");
+            for i in 1..depth {
+                text.push_str(&format!("JOINT J{i}\n{{\nOFFSET 0 1 0\nCHANNELS 1 Zrotation\n"));
+            }
+            text.push_str(&"}\n".repeat(depth));
+            text + &format!("MOTION\nFrames: 1\nFrame Time: 0.1\n{}\n", vec!["1"; depth].join(" "))
+        };
+        let depth = RIG_JOINTS.max_usize();
+        let (bvh, _) = parse(&chain(depth)).unwrap();
         assert_eq!(bvh.joints().len(), depth);
         assert_eq!(bvh.rest_height(UpAxis::Y), (depth - 1) as f64);
         let e = BvhClip::from_bvh("deep", &bvh, &BvhOptions::default(), Path::new("deep.bvh")).unwrap_err();
         assert!(e.to_string().contains("no known rig"));
+        assert!(err(&chain(20_000)).contains("joints per rig"));
+    }
+
+    #[test]
+    fn frame_times_and_clip_lengths_are_checked_before_the_motion_is_read() {
+        for (time, shown) in [("100000", "100000"), ("0.00000001", "1e-8"), ("-1e308", "-1e308")] {
+            let e = err(&edit(18, Some(&format!("Frame Time: {time}"))));
+            assert!(e.starts_with("tiny.bvh: line 18") && e.contains(shown), "{e}");
+            assert!(e.len() < 300, "{e}");
+        }
+        // 200000 frames half a second apart: 99999.5 s, 1999991 frames at 20 fps.
+        let e = err(&edit(17, Some("Frames: 200000")));
+        assert!(e.starts_with("tiny.bvh: lines 17-18"), "{e}");
+        assert!(e.contains("is 1999991 frames at 20 fps, over the limit of 72000 frames at 20 fps"), "{e}");
+        assert!(e.contains("(imported clip length)"), "{e}");
+        assert!(err(&edit(17, Some("Frames: 18446744073709551615"))).contains("imported clip length"));
+    }
+
+    /// A root with `joints` zero-channel children, one frame.
+    fn wide(joints: usize) -> String {
+        let mut text = String::from("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 1 Xposition\n");
+        for j in 0..joints {
+            text.push_str(&format!("JOINT J{j}\n{{\nOFFSET 0 1 0\nCHANNELS 0\n}}\n"));
+        }
+        text + "}\nMOTION\nFrames: 1\nFrame Time: 0.05\n0\n"
+    }
+
+    #[test]
+    fn rigs_over_the_joint_limit_are_refused_while_parsing() {
+        let (bvh, _) = parse(&wide(1023)).unwrap();
+        assert_eq!(bvh.joints().len(), 1024);
+        // The root is node 1, J1023 node 1025, on line 6 + 5 · 1023.
+        let e = err(&wide(100_000));
+        assert!(e.starts_with("tiny.bvh: line 5121"), "{e}");
+        assert!(e.contains("the rig is 1025 joints, over the limit of 1024 joints (joints per rig)"), "{e}");
     }
 
     #[test]

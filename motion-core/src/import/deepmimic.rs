@@ -7,11 +7,15 @@
 //! elbows (angle). The DeepMimic world has y up, the character facing +x and +z on its right;
 //! we map it to ours with x = −z_dm, y = y_dm, z = x_dm.
 
+mod file;
+
 use std::path::Path;
 
+use file::ClipFile;
 use glam::{DQuat, DVec3};
 
-use super::{ImportError, ImportWarning, MocapClip};
+use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
+use crate::limits::{read_text, MOCAP_FILE_BYTES};
 use crate::skeleton::{Pose, NUM_JOINTS};
 
 /// Values per frame.
@@ -132,54 +136,41 @@ pub struct DeepMimicClip {
 }
 
 impl DeepMimicClip {
-    /// Reads a clip file. Non-unit quaternions are normalised and reported in the warnings.
+    /// Reads a clip file of at most [`MOCAP_FILE_BYTES`]. Non-unit quaternions are normalised
+    /// and reported in the warnings.
     pub fn read(path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ImportError::Io { path: path.into(), source })?;
+        let text = read_text(path, &MOCAP_FILE_BYTES)?;
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         Self::parse(&name, &text, path)
     }
 
-    /// Parses clip text; `path` is only used in messages.
+    /// Parses clip text; `path` is only used in messages. Frames are read straight into
+    /// 44-value rows (no JSON tree), so memory grows with the frames, not the text's tokens.
     pub fn parse(name: &str, text: &str, path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
         let invalid = |location: String, message: String| ImportError::Invalid { path: path.into(), location, message };
-        let json: serde_json::Value = serde_json::from_str(text).map_err(|e| ImportError::Json {
-            path: path.into(),
-            line: e.line(),
-            column: e.column(),
-            message: e.to_string(),
+        let clip: ClipFile = serde_json::from_str(text).map_err(|e| {
+            let (line, column) = (e.line(), e.column());
+            if e.classify() == serde_json::error::Category::Data {
+                // Our own messages ("frame 3: expected 44 values, found 43") without serde's
+                // position suffix, which goes into the location.
+                let message = e.to_string();
+                let suffix = format!(" at line {line} column {column}");
+                let message = message.strip_suffix(&suffix).unwrap_or(&message).to_owned();
+                invalid(format!("line {line}, column {column}"), message)
+            } else {
+                ImportError::Json { path: path.into(), line, column, message: e.to_string() }
+            }
         })?;
-        let cyclic = match json.get("Loop").and_then(|v| v.as_str()) {
+        let cyclic = match clip.looping.as_deref() {
             Some("wrap") => true,
             Some("none") | None => false,
             Some(other) => {
                 return Err(invalid("\"Loop\"".into(), format!("expected \"wrap\" or \"none\", found {other:?}")))
             }
         };
-        let rows = json
-            .get("Frames")
-            .and_then(|v| v.as_array())
-            .ok_or_else(|| invalid("top level".into(), "no \"Frames\" array".into()))?;
-        if rows.is_empty() {
+        let frames = clip.frames.0;
+        if frames.is_empty() {
             return Err(ImportError::Empty { path: path.into() });
-        }
-        let mut frames = Vec::with_capacity(rows.len());
-        for (f, row) in rows.iter().enumerate() {
-            let values =
-                row.as_array().ok_or_else(|| invalid(format!("frame {f}"), "is not an array of numbers".into()))?;
-            if values.len() != FRAME_WIDTH {
-                return Err(invalid(
-                    format!("frame {f}"),
-                    format!("expected {FRAME_WIDTH} values, found {}", values.len()),
-                ));
-            }
-            let mut frame = [0f64; FRAME_WIDTH];
-            for (i, v) in values.iter().enumerate() {
-                frame[i] = v
-                    .as_f64()
-                    .filter(|x| x.is_finite())
-                    .ok_or_else(|| invalid(format!("frame {f}, value {i}"), format!("{v} is not a finite number")))?;
-            }
-            frames.push(frame);
         }
         if frames.len() < 2 {
             return Err(invalid("Frames".into(), "a clip needs at least 2 frames".into()));
@@ -194,19 +185,36 @@ impl DeepMimicClip {
         cyclic: bool,
         path: &Path,
     ) -> Result<(Self, Vec<ImportWarning>), ImportError> {
+        let invalid = |location: String, message: String| ImportError::Invalid { path: path.into(), location, message };
         let mut times = Vec::with_capacity(frames.len());
         let mut t = 0.0;
         for (f, frame) in frames.iter().enumerate() {
             times.push(t);
             if f + 1 < frames.len() && frame[0] <= 0.0 {
-                return Err(ImportError::Invalid {
-                    path: path.into(),
-                    location: format!("frame {f}, value 0"),
-                    message: format!("keyframe duration {} s must be positive", frame[0]),
-                });
+                return Err(invalid(
+                    format!("frame {f}, value 0"),
+                    format!("keyframe duration {} s must be positive", short_number(frame[0])),
+                ));
+            }
+            if let Some(i) = (1..4).find(|i| !in_reach(frame[*i])) {
+                return Err(invalid(
+                    format!("frame {f}, value {i}"),
+                    format!(
+                        "root position {} m is out of range (more than {} m from the origin)",
+                        short_number(frame[i]),
+                        short_number(MAX_POSITION_M)
+                    ),
+                ));
             }
             t += frame[0];
         }
+        // The last keyframe's duration is not played.
+        let last = frames.len() - 1;
+        let duration_s = t - frames[last][0];
+        check_clip_length(
+            duration_s,
+            format_args!("{}: frames 0-{last}: {} s", path.display(), short_number(duration_s)),
+        )?;
         let mut off_norm: Vec<(usize, usize, f64)> = Vec::new(); // (joint, frame, norm)
         let mut keys = Vec::with_capacity(frames.len());
         for (f, frame) in frames.iter().enumerate() {
@@ -493,6 +501,36 @@ mod tests {
         let zero_q = format!("{{\"Frames\": [[{}], [{}]]}}", vec!["0.1"; 44].join(","), vec!["0"; 44].join(","));
         assert!(err(&zero_q).contains("zero quaternion"));
         assert!(err(&format!("{{\"Loop\": \"bounce\", \"Frames\": [[{}]]}}", vec!["0"; 44].join(","))).contains("Loop"));
+    }
+
+    /// A clip of `frames` standing keyframes `duration_s` apart, with `edit` applied, as JSON.
+    fn standing(frames: usize, duration_s: f64, edit: impl Fn(&mut Vec<Vec<f64>>)) -> String {
+        let mut rows = vec![vec![0.0; FRAME_WIDTH]; frames];
+        for r in &mut rows {
+            r[0] = duration_s;
+            for s in [4, 8, 12, 16, 21, 25, 30, 35, 39] {
+                r[s] = 1.0;
+            }
+        }
+        edit(&mut rows);
+        serde_json::json!({ "Loop": "none", "Frames": rows }).to_string()
+    }
+
+    #[test]
+    fn absurd_values_and_overlong_clips_are_named() {
+        let err = |t: &str| DeepMimicClip::parse("x", t, Path::new("clip.txt")).unwrap_err().to_string();
+        let e = err(&standing(3, 0.05, |r| r[1][1] = 1e300));
+        assert!(e.starts_with("clip.txt: frame 1, value 1: ") && e.contains("1e300 m is out of range"), "{e}");
+        let e = err(&standing(3, 0.05, |r| r[0][0] = -1e308));
+        assert!(e.starts_with("clip.txt: frame 0, value 0: ") && e.contains("-1e308 s"), "{e}");
+        assert!(e.len() < 200, "{e}");
+        // Two keyframes 4000 s apart: 80001 frames at 20 fps.
+        let e = err(&standing(2, 4000.0, |_| {}));
+        assert!(e.starts_with("clip.txt: frames 0-1") && e.contains("80001 frames at 20 fps"), "{e}");
+        assert!(e.contains("imported clip length"), "{e}");
+        let e = err(&standing(2, 1e300, |_| {}));
+        assert!(e.contains("imported clip length") && !e.contains("000000000000"), "{e}");
+        assert!(DeepMimicClip::parse("x", &standing(2, 3000.0, |_| {}), Path::new("clip.txt")).is_ok());
     }
 
     #[test]

@@ -13,16 +13,23 @@
 //! otherwise it describes frames `[⌊start_s·20⌋, ⌊end_s·20⌋)` (HumanML3D's
 //! `motion[int(f_tag*20):int(to_tag*20)]`, `data_loaders/humanml/data/dataset.py`).
 //!
-//! The `.npy` reader is our own: it checks the header against the file's size before reading,
-//! so a truncated or corrupt file is an error naming the file, never a panic or a huge
-//! allocation.
+//! The `.npy` reader is our own ([`npy`]): it checks the header against the file's size before
+//! reading, so a truncated or corrupt file is an error naming the file, never a panic or a huge
+//! allocation. [`HumanMl3dClip`] poses a clip's features for the motion database.
+
+mod clip;
+mod npy;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Tensor};
 
-use super::ImportError;
+pub use clip::HumanMl3dClip;
+use npy::read_float_npy;
+
+use super::{check_clip_length, ImportError};
+use crate::limits::{read_text, MOCAP_FILE_BYTES};
 use crate::representation::{FeatureFrame, MeanStd, FEATURE_DIM};
 use crate::skeleton::FPS;
 
@@ -139,10 +146,10 @@ impl HumanMl3dFolder {
         }
         let stats = |name: &str| -> Result<Vec<f32>, ImportError> {
             let path = root.join(name);
-            let array = read_float_npy(&path)?;
-            if array.shape.len() != 1 || array.shape[0] != FEATURE_DIM {
-                return Err(invalid(&path, "npy header", format!("shape {:?}; expected [{FEATURE_DIM}]", array.shape)));
-            }
+            let array = read_float_npy(&path, |shape| match shape {
+                [FEATURE_DIM] => Ok(()),
+                _ => Err(invalid(&path, "npy header", format!("shape {shape:?}; expected [{FEATURE_DIM}]"))),
+            })?;
             Ok(array.data)
         };
         let (mean, std) = (stats("Mean.npy")?, stats("Std.npy")?);
@@ -181,7 +188,7 @@ impl HumanMl3dFolder {
     /// The ids listed in `<root>/<name>.txt` (`"train"`, `"val"`, `"test"`, ...), in file order.
     pub fn split_ids(&self, name: &str) -> Result<Vec<String>, ImportError> {
         let path = self.root.join(format!("{name}.txt"));
-        let text = std::fs::read_to_string(&path).map_err(|source| ImportError::Io { path: path.clone(), source })?;
+        let text = read_text(&path, &MOCAP_FILE_BYTES)?;
         let ids: Vec<String> = text.lines().map(str::trim).filter(|l| !l.is_empty()).map(str::to_owned).collect();
         if ids.is_empty() {
             return Err(ImportError::Empty { path });
@@ -189,11 +196,22 @@ impl HumanMl3dFolder {
         Ok(ids)
     }
 
+    /// `new_joint_vecs/<id>.npy`.
+    fn features_path(&self, id: &str) -> PathBuf {
+        self.root.join("new_joint_vecs").join(format!("{id}.npy"))
+    }
+
     /// Reads one clip: its features and its captions, both validated.
     pub fn load_item(&self, id: &str) -> Result<HumanMl3dItem, ImportError> {
-        let features = read_features(&self.root.join("new_joint_vecs").join(format!("{id}.npy")))?;
+        let features = read_features(&self.features_path(id))?;
         let captions = read_captions(&self.root.join("texts").join(format!("{id}.txt")), features.len())?;
         Ok(HumanMl3dItem { id: id.to_owned(), features, captions })
+    }
+
+    /// Poses a clip read by [`HumanMl3dFolder::load_item`] (see [`HumanMl3dClip`]); errors name
+    /// its features file.
+    pub fn clip(&self, item: &HumanMl3dItem) -> Result<HumanMl3dClip, ImportError> {
+        HumanMl3dClip::from_features(&item.features, &self.features_path(&item.id))
     }
 
     /// Reads the clips `ids` lazily, one at a time (the whole dataset is about 1 GB of f32).
@@ -223,15 +241,19 @@ fn invalid(path: &Path, location: impl Into<String>, message: impl Into<String>)
     ImportError::Invalid { path: path.to_path_buf(), location: location.into(), message: message.into() }
 }
 
-/// Reads `new_joint_vecs/<id>.npy`: shape `[frames, 263]`, every value finite.
+/// Reads `new_joint_vecs/<id>.npy`: shape `[frames, 263]` with at most [`CLIP_FRAMES`]
+/// frames (checked from the header), every value finite.
+///
+/// [`CLIP_FRAMES`]: crate::limits::CLIP_FRAMES
 fn read_features(path: &Path) -> Result<Vec<FeatureFrame>, ImportError> {
-    let array = read_float_npy(path)?;
-    if array.shape.len() != 2 || array.shape[1] != FEATURE_DIM {
-        return Err(invalid(path, "npy header", format!("shape {:?}; expected [frames, {FEATURE_DIM}]", array.shape)));
-    }
-    if array.shape[0] == 0 {
-        return Err(ImportError::Empty { path: path.to_path_buf() });
-    }
+    let array = read_float_npy(path, |shape| match *shape {
+        [0, FEATURE_DIM] => Err(ImportError::Empty { path: path.to_path_buf() }),
+        [frames, FEATURE_DIM] => Ok(check_clip_length(
+            (frames - 1) as f64 / FPS,
+            format_args!("{}: npy header: shape {shape:?}", path.display()),
+        )?),
+        _ => Err(invalid(path, "npy header", format!("shape {shape:?}; expected [frames, {FEATURE_DIM}]"))),
+    })?;
     let mut frames = Vec::with_capacity(array.shape[0]);
     for (frame, chunk) in array.data.chunks_exact(FEATURE_DIM).enumerate() {
         if let Some(feature) = chunk.iter().position(|v| !v.is_finite()) {
@@ -250,7 +272,7 @@ fn read_features(path: &Path) -> Result<Vec<FeatureFrame>, ImportError> {
 
 /// Reads `texts/<id>.txt` for a clip of `clip_frames` feature frames.
 fn read_captions(path: &Path, clip_frames: usize) -> Result<Vec<Caption>, ImportError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ImportError::Io { path: path.to_path_buf(), source })?;
+    let text = read_text(path, &MOCAP_FILE_BYTES)?;
     let mut captions = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -299,84 +321,6 @@ fn parse_caption(line: &str, clip_frames: usize) -> Result<Caption, String> {
         Some(to_frame(start_s)..to_frame(end_s))
     };
     Ok(Caption { text: text.to_owned(), tokens: tokens.split_whitespace().map(str::to_owned).collect(), frames })
-}
-
-/// A float array read from a `.npy` file, converted to f32, C order.
-struct NpyArray {
-    shape: Vec<usize>,
-    data: Vec<f32>,
-}
-
-const NPY_MAGIC: &[u8] = b"\x93NUMPY";
-
-/// Reads a little-endian `<f4` or `<f8` `.npy` file (format versions 1–3).
-fn read_float_npy(path: &Path) -> Result<NpyArray, ImportError> {
-    let bytes = std::fs::read(path).map_err(|source| ImportError::Io { path: path.to_path_buf(), source })?;
-    let bad = |message: String| invalid(path, "npy header", message);
-    if bytes.len() < 10 || !bytes.starts_with(NPY_MAGIC) {
-        return Err(bad("not a .npy file (no \\x93NUMPY magic)".into()));
-    }
-    let (header_start, header_len) = match bytes[6] {
-        1 => (10, usize::from(u16::from_le_bytes([bytes[8], bytes[9]]))),
-        2 | 3 => match bytes.get(8..12) {
-            Some(&[a, b, c, d]) => (12, u32::from_le_bytes([a, b, c, d]) as usize),
-            _ => return Err(bad("truncated header".into())),
-        },
-        v => return Err(bad(format!("unsupported .npy version {v}"))),
-    };
-    let data_start = header_start + header_len;
-    let header = bytes.get(header_start..data_start).ok_or_else(|| bad("truncated header".into()))?;
-    let header = std::str::from_utf8(header).map_err(|_| bad("header is not text".into()))?;
-    let descr = dict_value(header, "descr")
-        .and_then(|v| v.strip_prefix('\'')?.split_once('\''))
-        .ok_or_else(|| bad(format!("no readable 'descr' in {header:?}")))?
-        .0;
-    let item_size: usize = match descr {
-        "<f4" => 4,
-        "<f8" => 8,
-        other => return Err(bad(format!("dtype '{other}'; expected float32 ('<f4') or float64 ('<f8')"))),
-    };
-    if dict_value(header, "fortran_order").is_some_and(|v| v.starts_with("True")) {
-        return Err(bad("Fortran-ordered arrays are not supported".into()));
-    }
-    let shape = dict_value(header, "shape")
-        .and_then(parse_shape)
-        .ok_or_else(|| bad(format!("no readable 'shape' in {header:?}")))?;
-    let expected = shape
-        .iter()
-        .try_fold(item_size, |acc, d| acc.checked_mul(*d))
-        .ok_or_else(|| bad(format!("shape {shape:?} is too large")))?;
-    let data = &bytes[data_start.min(bytes.len())..];
-    if data.len() != expected {
-        return Err(invalid(
-            path,
-            "data",
-            format!(
-                "shape {shape:?} of {descr} needs {expected} bytes; the file has {} (truncated or corrupt)",
-                data.len()
-            ),
-        ));
-    }
-    let data = if item_size == 4 {
-        data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
-    } else {
-        data.chunks_exact(8)
-            .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32)
-            .collect()
-    };
-    Ok(NpyArray { shape, data })
-}
-
-/// The text after `'key':` in a numpy header dict (the value and everything after it).
-fn dict_value<'h>(header: &'h str, key: &str) -> Option<&'h str> {
-    let at = header.find(&format!("'{key}'"))? + key.len() + 2;
-    header[at..].trim_start().strip_prefix(':').map(str::trim_start)
-}
-
-/// Parses `(3, 263)` (the start of a header value) into dimensions.
-fn parse_shape(value: &str) -> Option<Vec<usize>> {
-    let inner = value.strip_prefix('(')?.split_once(')')?.0;
-    inner.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse().ok()).collect()
 }
 
 #[cfg(test)]
@@ -511,6 +455,15 @@ mod tests {
         huge.extend_from_slice(&good[data_start..]);
         std::fs::write(npy("huge"), huge).unwrap();
         assert!(err_of(&ds, "huge").contains("huge.npy"));
+        // A clip longer than the limit is refused from its header.
+        let header = String::from_utf8_lossy(&good[10..data_start]).replace("(30,", "(72001,");
+        let mut overlong = good[..8].to_vec();
+        overlong.extend_from_slice(&(header.len() as u16).to_le_bytes());
+        overlong.extend_from_slice(header.as_bytes());
+        overlong.extend_from_slice(&good[data_start..]);
+        std::fs::write(npy("overlong"), overlong).unwrap();
+        let e = err_of(&ds, "overlong");
+        assert!(e.contains("overlong.npy") && e.contains("is 72001 frames at 20 fps, over the limit"), "{e}");
     }
 
     #[test]
@@ -520,7 +473,7 @@ mod tests {
         let ds = HumanMl3dFolder::open(root).unwrap();
         frames(50, 0.0).write_npy(root.join("new_joint_vecs/t.npy")).unwrap();
         let e = err_of(&ds, "t");
-        assert!(e.contains("t.txt") && e.contains("cannot read"), "{e}");
+        assert!(e.contains("t.txt: No such file"), "{e}");
         for (body, needle) in [
             ("ok#a/DET#0.0#0.0\nonly#two\n", "line 2"),
             ("ok#a/DET#0.0#0.0\n\nbad#a/DET#zero#1.0\n", "line 3"),

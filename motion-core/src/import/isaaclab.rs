@@ -29,7 +29,8 @@ use candle_core::Tensor;
 use glam::{DQuat, DVec3};
 
 use super::deepmimic::{self, DM_JOINTS};
-use super::{ImportError, ImportWarning, MocapClip};
+use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
+use crate::limits::MOCAP_FILE_BYTES;
 use crate::skeleton::Pose;
 
 /// The 15 bodies of a file, in file order (`body_names` of all three motions).
@@ -82,7 +83,9 @@ impl IsaacAmpClip {
     pub fn read(path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
         // Opened first so that a missing or unreadable file is an I/O error with its OS reason,
         // not an npz message.
-        std::fs::File::open(path).map_err(|source| ImportError::Io { path: path.into(), source })?;
+        let file = std::fs::File::open(path).map_err(|source| ImportError::Io { path: path.into(), source })?;
+        let bytes = file.metadata().map_err(|source| ImportError::Io { path: path.into(), source })?.len();
+        MOCAP_FILE_BYTES.check(bytes, path.display())?;
         let npz = |e: candle_core::Error| ImportError::Invalid {
             path: path.into(),
             location: "npz archive".into(),
@@ -145,6 +148,10 @@ impl IsaacAmpClip {
                 ),
             ));
         }
+        check_clip_length(
+            (frames - 1) as f64 / fps as f64,
+            format_args!("{}: body_positions: {frames} frames at {fps} fps", path.display()),
+        )?;
         let z_up_to_y_up = DQuat::from_rotation_x(-FRAC_PI_2);
         let mut roots = Vec::with_capacity(frames);
         let mut all_rotations = Vec::with_capacity(frames);
@@ -168,6 +175,16 @@ impl IsaacAmpClip {
                 world[j] = z_up_to_y_up * (q / norm) * z_up_to_y_up.inverse();
             }
             let root = position(BODY_OF_DM_JOINT[0]);
+            if !root.to_array().into_iter().all(in_reach) {
+                return Err(invalid(
+                    format!("frame {f}, body {}", BODY_NAMES[BODY_OF_DM_JOINT[0]]),
+                    format!(
+                        "position ({}) m is out of range (more than {} m from the origin)",
+                        root.to_array().map(short_number).join(", "),
+                        short_number(MAX_POSITION_M)
+                    ),
+                ));
+            }
             for (j, p) in deepmimic::joint_positions(root, &world).iter().enumerate() {
                 let b = BODY_OF_DM_JOINT[j];
                 let off = p.distance(position(b));

@@ -11,7 +11,13 @@ pub mod isaaclab;
 
 use std::path::PathBuf;
 
+use crate::limits::{LimitExceeded, ReadError, CLIP_FRAMES};
 use crate::skeleton::{Pose, FPS};
+
+/// Largest distance of an imported position from the origin after unit scaling, m. Real
+/// captures stay within a few hundred metres; beyond this a value is a unit or export error,
+/// and far beyond it the features overflow.
+pub const MAX_POSITION_M: f64 = 1e4;
 
 /// A motion-capture clip that can be posed at any time (seconds from its start).
 pub trait MocapClip {
@@ -30,6 +36,31 @@ pub fn resample(clip: &dyn MocapClip, speed: f64, seconds: Option<f64>) -> Vec<P
     let out_seconds = seconds.unwrap_or(clip.duration_s() / speed);
     let frames = ((out_seconds * FPS).floor() as usize + 1).max(2);
     (0..frames).map(|k| clip.pose_at(k as f64 / FPS * speed)).collect()
+}
+
+/// Whether a coordinate, m, is finite and within [`MAX_POSITION_M`] of zero.
+pub(crate) fn in_reach(v_m: f64) -> bool {
+    v_m.abs() <= MAX_POSITION_M
+}
+
+/// Frames of a clip of `duration_s` seconds sampled at 20 fps (what [`resample`] makes of it at
+/// speed 1), checked against [`CLIP_FRAMES`] before anything is allocated for them. `what`
+/// names the file and where its length comes from.
+pub fn check_clip_length(duration_s: f64, what: impl std::fmt::Display) -> Result<(), LimitExceeded> {
+    let frames = duration_s * FPS;
+    // Saturating: a non-finite duration is reported as the largest count.
+    let count = if frames.is_finite() && frames >= 0.0 { (frames.floor() as u64).saturating_add(1) } else { u64::MAX };
+    CLIP_FRAMES.check(count, what)
+}
+
+/// A number as messages print it: as written for ordinary magnitudes, in exponent form when
+/// huge or tiny (`1e308`, not 309 digits).
+pub fn short_number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e6).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
 }
 
 /// A non-fatal problem found while importing (the clip is still usable).
@@ -86,4 +117,10 @@ pub enum ImportError {
         /// The file.
         path: PathBuf,
     },
+    /// The file could not be read within its size limit (the message names the file).
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    /// The clip is over a limit (the message names the file and where).
+    #[error(transparent)]
+    Limit(#[from] LimitExceeded),
 }

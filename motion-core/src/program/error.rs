@@ -47,13 +47,13 @@ pub enum Problem {
     #[error("violates the JSON Schema: {0}")]
     Schema(String),
     /// NaN or infinite.
-    #[error("{value} is not a finite number")]
+    #[error("{} is not a finite number", short(*value))]
     NonFinite {
         /// The value.
         value: f64,
     },
     /// A number outside its sensible range.
-    #[error("{value} is outside [{min}, {max}]{}", unit_suffix(unit))]
+    #[error("{} is outside [{}, {}]{}", short(*value), short(*min), short(*max), unit_suffix(unit))]
     OutOfRange {
         /// The value.
         value: f64,
@@ -84,6 +84,20 @@ pub enum Problem {
     /// Fields that contradict each other or the clip (explained in the message).
     #[error("{0}")]
     Inconsistent(String),
+    /// A size over one of the [`crate::limits`].
+    #[error("{0}")]
+    OverLimit(#[from] crate::limits::LimitExceeded),
+}
+
+/// `value` as a person reads it: plain for ordinary magnitudes, scientific beyond (1e308 is
+/// `1e308`, not 309 digits).
+pub fn short(value: f64) -> String {
+    let magnitude = value.abs();
+    if value.is_finite() && value != 0.0 && !(1e-4..1e6).contains(&magnitude) {
+        format!("{value:e}")
+    } else {
+        format!("{value}")
+    }
 }
 
 fn unit_suffix(unit: &str) -> String {

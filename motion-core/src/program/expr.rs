@@ -199,7 +199,7 @@ pub struct Count {
     #[schemars(range(min = -1000.0, max = 1000.0))]
     pub threshold: f64,
     /// Required number of extrema.
-    #[schemars(range(max = 10000))]
+    #[schemars(range(max = super::MAX_FRAMES))]
     pub target_count: u32,
     /// Sigmoid scale T, per unit of the signal (RG-DNO uses 10000).
     #[serde(default = "default_sharpness")]

@@ -44,8 +44,15 @@ pub use scene::{BalanceBeam, Body, Gap, Ground, Hurdle, InsideBox, JointSet, Ove
 pub use schema::{json_schema, validate_json};
 pub use serde_util::NonEmpty;
 
-/// Longest clip a program may ask for (frames at 20 fps; the prior itself stops at 196).
-pub const MAX_FRAMES: u32 = 10_000;
+/// Longest clip a program may ask for (frames at 20 fps; the prior itself stops at 196):
+/// [`crate::limits::PROGRAM_FRAMES`], which the schema states too.
+pub const MAX_FRAMES: u32 = crate::limits::PROGRAM_FRAMES.max as u32;
+
+/// Most constraints in one program: [`crate::limits::PROGRAM_CONSTRAINTS`].
+pub const MAX_CONSTRAINTS: usize = crate::limits::PROGRAM_CONSTRAINTS.max as usize;
+
+/// Longest `text` or `description`: [`crate::limits::PROGRAM_TEXT_CHARS`].
+pub const MAX_TEXT_CHARS: usize = crate::limits::PROGRAM_TEXT_CHARS.max as usize;
 
 /// Retrieval confidence from which RG-DNO's Algorithm 1 treats retrieval as confident (`s = 1`).
 pub const CONFIDENT_RETRIEVAL: f64 = 0.5;
@@ -55,12 +62,13 @@ pub const CONFIDENT_RETRIEVAL: f64 = 0.5;
 #[serde(deny_unknown_fields)]
 pub struct TaskProgram {
     /// Text prompt for the motion prior (may be empty for unconditional generation).
+    #[schemars(length(max = MAX_TEXT_CHARS))]
     pub text: String,
     /// Clip length in frames at 20 fps.
-    #[schemars(range(min = 1, max = 10000))]
+    #[schemars(range(min = 1, max = MAX_FRAMES))]
     pub frames: u32,
     /// The constraints; the task's error is `Σ weight × error`.
-    #[schemars(length(min = 1))]
+    #[schemars(length(min = 1, max = MAX_CONSTRAINTS))]
     pub constraints: Vec<NamedConstraint>,
     /// RG-DNO's relational task parse (§4.2), for retrieval-guided optimisation.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -76,6 +84,7 @@ pub struct NamedConstraint {
     pub id: String,
     /// What the constraint means, in words (given to the LLM for relational parsing).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(length(max = MAX_TEXT_CHARS))]
     pub description: Option<String>,
     /// Weight of its error in the sum (≥ 0; default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -141,7 +150,24 @@ impl TaskProgram {
 
     /// Parses a program from JSON text (types only; see [`TaskProgram::validate`]). The error names
     /// the path of the first bad field, and for an unknown name lists the valid ones.
+    /// A leading byte-order mark (which some editors write) is skipped, as RFC 8259 allows.
     pub fn from_json(text: &str) -> Result<TaskProgram, ProgramError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        if let Some(first) = text.trim_start().chars().next().filter(|&c| c != '{') {
+            let found = match first {
+                '[' => "an array".to_owned(),
+                '"' => "a string".to_owned(),
+                c if c.is_ascii_digit() || c == '-' => "a number".to_owned(),
+                c => format!("'{}'", c.escape_debug()),
+            };
+            return Err(ProgramError::new(
+                String::new(),
+                Problem::Shape(format!(
+                    "a program is a JSON object {{\"text\": ..., \"frames\": ..., \"constraints\": [...]}}; \
+                     this document starts with {found}"
+                )),
+            ));
+        }
         let mut deserializer = serde_json::Deserializer::from_str(text);
         let program: TaskProgram =
             serde_path_to_error::deserialize(&mut deserializer).map_err(|error| parse_error(&error))?;

@@ -293,7 +293,7 @@ pub enum FrameRef {
     /// Frame `n − 1`.
     Last,
     /// An explicit 0-based frame index (20 fps), `< n`.
-    Frame(#[schemars(range(max = 10000))] u32),
+    Frame(#[schemars(range(max = super::MAX_FRAMES))] u32),
     /// `round(f · (n − 1))` for `f` in [0, 1].
     Fraction(#[schemars(range(min = 0.0, max = 1.0))] f64),
 }

@@ -291,9 +291,50 @@ fn absurd_values_are_rejected() {
     let path = "constraints[1].expr.args[1].quantity.b.fixed_m[1]";
     assert_names(&rust_errors(&far), path, "outside [-100, 100] m");
     assert_names(&schema_errors(&far), path, "1000");
-    let long = with("/frames", json!(20000));
-    assert_names(&rust_errors(&long), "frames", "outside [1, 10000]");
-    assert_names(&schema_errors(&long), "frames", "20000");
+    let long = with("/frames", json!(4999));
+    assert_names(&rust_errors(&long), "frames", "4999 frames, over the limit of 1000 frames (program frames)");
+    assert_names(&schema_errors(&long), "frames", "4999");
+    // Huge numbers are printed as a person reads them, not as 309 digits.
+    let huge = with("/constraints/1/expr/args/1/quantity/b/fixed_m/1", json!(1e308));
+    assert_names(&rust_errors(&huge), path, "1e308 is outside [-100, 100] m");
+}
+
+/// Issue 18: the sizes a program may ask for are bounded where the schema says so, and the
+/// messages name the rule.
+#[test]
+fn sizes_over_the_limits_are_rejected_with_the_limit_named() {
+    let constraint = base()["constraints"][0].clone();
+    let many: Vec<Value> = (1..=65)
+        .map(|i| {
+            let mut c = constraint.clone();
+            c["id"] = json!(format!("c{i}"));
+            c
+        })
+        .collect();
+    let mut crowded = base();
+    crowded["constraints"] = json!(many);
+    crowded.as_object_mut().unwrap().remove("relational_parse");
+    assert_names(&rust_errors(&crowded), "constraints", "65 constraints, over the limit of 64");
+    assert_names(&schema_errors(&crowded), "constraints", "more than 64");
+    let wordy = with("/constraints/0/description", json!("x".repeat(2001)));
+    assert_names(&rust_errors(&wordy), "constraints[0].description", "2001 characters, over the limit of 2000");
+    assert_names(&schema_errors(&wordy), "constraints[0].description", "longer than 2000");
+    let escape = with("/text", json!("walk \u{1b}[31mred\u{1b}[0m"));
+    assert_names(&rust_errors(&escape), "text", "character 5 is the control character '\\u{1b}'");
+    let id = with("/constraints/0/id", json!("c10000"));
+    assert_names(&rust_errors(&id), "constraints[0].id", "a number from 1 to 9999");
+}
+
+#[test]
+fn a_byte_order_mark_is_skipped_and_a_non_object_is_named() {
+    let text = format!("\u{feff}{}", base());
+    assert!(TaskProgram::from_json_validated(&text).is_ok());
+    for (document, found) in [("[1, 2]", "an array"), ("\"walk\"", "a string"), ("  42", "a number"), ("true", "'t'")] {
+        let err = TaskProgram::from_json(document).unwrap_err();
+        assert_eq!(err.path, "");
+        assert!(err.to_string().contains("a program is a JSON object"), "{err}");
+        assert!(err.to_string().contains(&format!("this document starts with {found}")), "{err}");
+    }
 }
 
 #[test]

@@ -8,6 +8,7 @@ use super::expr::{Count, Expr, FootContact, SelfCollision};
 use super::quantity::{Condition, FrameRef, FrameSelection, Point, Quantity};
 use super::scene::{JointSet, Primitive};
 use super::{RelationalParse, TaskProgram, MAX_FRAMES};
+use crate::limits::{PROGRAM_CONSTRAINTS, PROGRAM_FRAMES, PROGRAM_TEXT_CHARS};
 use crate::skeleton::Joint;
 
 /// Largest |coordinate| or length of a scene, in metres.
@@ -94,6 +95,17 @@ impl Checker {
         }
     }
 
+    /// Words for people and the prior: at most [`PROGRAM_TEXT_CHARS`] characters and no control
+    /// characters other than newline and tab (they would reach terminals and reports raw).
+    fn words(&mut self, path: &str, text: &str) {
+        if let Err(over) = PROGRAM_TEXT_CHARS.check(text.chars().count() as u64, "the text") {
+            self.push(path, over.into());
+        }
+        if let Some((at, c)) = text.chars().enumerate().find(|(_, c)| c.is_control() && !matches!(c, '\n' | '\t')) {
+            self.inconsistent(path, format!("character {at} is the control character {c:?}; write plain text"));
+        }
+    }
+
     fn distinct_joints(&mut self, path: &str, joints: &[Joint]) {
         let mut seen = HashSet::new();
         for (i, joint) in joints.iter().enumerate() {
@@ -104,21 +116,22 @@ impl Checker {
     }
 
     fn program(&mut self, program: &TaskProgram) {
-        if program.frames == 0 || program.frames > MAX_FRAMES {
-            self.push(
-                "frames",
-                Problem::OutOfRange {
-                    value: f64::from(program.frames),
-                    min: 1.0,
-                    max: f64::from(MAX_FRAMES),
-                    unit: "",
-                },
-            );
+        if program.frames == 0 {
+            self.push("frames", Problem::OutOfRange { value: 0.0, min: 1.0, max: f64::from(MAX_FRAMES), unit: "" });
+            return;
+        }
+        if let Err(over) = PROGRAM_FRAMES.check(u64::from(program.frames), "the clip length") {
+            self.push("frames", over.into());
+            return;
+        }
+        if let Err(over) = PROGRAM_CONSTRAINTS.check(program.constraints.len() as u64, "the program's constraint count") {
+            self.push("constraints", over.into());
             return;
         }
         if program.constraints.is_empty() {
             self.push("constraints", Problem::Empty);
         }
+        self.words("text", &program.text);
         let mut ids = HashSet::new();
         for (i, constraint) in program.constraints.iter().enumerate() {
             let path = index("constraints", i);
@@ -128,7 +141,17 @@ impl Checker {
                     .strip_prefix('c')
                     .is_some_and(|n| !n.is_empty() && !n.starts_with('0') && n.bytes().all(|b| b.is_ascii_digit()));
             if !well_formed {
-                self.inconsistent(field(&path, "id"), format!("id `{id}` must look like `c1`, `c2`, ..."));
+                self.inconsistent(
+                    field(&path, "id"),
+                    format!(
+                        "id `{}` must be `c` and a number from 1 to 9999 without leading zeros (`c1`, `c2`, ..., \
+                         `c9999`)",
+                        id.chars().take(40).collect::<String>().escape_debug()
+                    ),
+                );
+            }
+            if let Some(description) = &constraint.description {
+                self.words(&field(&path, "description"), description);
             }
             if !ids.insert(id.as_str()) {
                 self.push(field(&path, "id"), Problem::DuplicateId(id.clone()));

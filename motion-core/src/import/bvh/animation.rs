@@ -5,11 +5,17 @@ use std::path::Path;
 
 use glam::{DQuat, DVec3};
 
-use super::{Axis, Bvh, Channel, LengthUnit, UpAxis};
-use crate::import::ImportError;
+use super::{invalid, Axis, Bvh, Channel, LengthUnit, UpAxis};
+use crate::import::{in_reach, short_number, ImportError, MAX_POSITION_M};
 
-/// The motion of a [`Bvh`] ready for forward kinematics: per frame and node a local rotation and
-/// translation, metres, file axes (positions come out in ours).
+/// Largest accepted rotation channel value, degrees (unwrapped angles of a long spin stay far
+/// below; beyond it an angle has lost its precision and is an export error).
+const MAX_ROTATION_DEG: f64 = 1e6;
+
+/// The motion of a [`Bvh`] ready for forward kinematics: the channel values in metres and
+/// radians, file axes (positions come out in ours). Local transforms are made from them when a
+/// time is posed, so memory grows with the file's values, not with frames × nodes (a rig's
+/// channel-less nodes cost nothing per frame).
 #[derive(Debug, Clone)]
 pub struct BvhAnimation {
     unit: LengthUnit,
@@ -19,45 +25,75 @@ pub struct BvhAnimation {
     parents: Vec<Option<usize>>,
     /// Rest offsets, metres.
     offsets_m: Vec<DVec3>,
-    /// Local rotations, `[frames, nodes]`.
-    rotations: Vec<DQuat>,
-    /// Local translations (offsets with position channels applied), metres, `[frames, nodes]`.
-    translations: Vec<DVec3>,
+    /// Per node: the index of its first value on a frame row, and its channels.
+    channels: Vec<(usize, Vec<Channel>)>,
+    /// Channel values `[frames, channel_count]`, row-major: positions in metres, rotations in
+    /// radians.
+    values: Vec<f64>,
+    channel_count: usize,
 }
 
 impl BvhAnimation {
-    /// Converts a parsed file: lengths × the unit, Euler channels to quaternions (intrinsic, in the
-    /// order written). Fails for a [`LengthUnit::MetresPer`] that is not positive and finite.
+    /// Converts a parsed file: lengths × the unit, degrees to radians. Fails for a
+    /// [`LengthUnit::MetresPer`] that is not positive and finite, and for an OFFSET or a
+    /// position further than [`MAX_POSITION_M`] from the origin or a rotation beyond
+    /// ±10⁶ degrees (the error names the line, joint, frame and channel).
     pub fn new(bvh: &Bvh, unit: LengthUnit, up: UpAxis, path: &Path) -> Result<Self, ImportError> {
         let scale = unit.metres();
         if !(scale.is_finite() && scale > 0.0) {
             return Err(ImportError::Invalid {
                 path: path.into(),
                 location: "options".into(),
-                message: format!("metres per file unit must be positive and finite, found {scale}"),
+                message: format!("metres per file unit must be positive and finite, found {}", short_number(scale)),
             });
         }
+        let out_of_range = |line: usize, joint: &str, what: String, limit: String| {
+            invalid(path, line, Some(joint), format!("{what} is out of range ({limit})"))
+        };
+        let far = format!("more than {} m from the origin", short_number(MAX_POSITION_M));
         let joints = bvh.joints();
-        let offsets_m: Vec<DVec3> = joints.iter().map(|j| j.offset * scale).collect();
+        let mut offsets_m = Vec::with_capacity(joints.len());
+        for joint in joints {
+            let m = joint.offset * scale;
+            if let Some(v) = joint.offset.to_array().into_iter().find(|v| !in_reach(v * scale)) {
+                let what = format!("OFFSET: {} ({} m)", short_number(v), short_number(v * scale));
+                return Err(out_of_range(joint.line, &joint.name, what, far.clone()));
+            }
+            offsets_m.push(m);
+        }
+        let mut channels = Vec::with_capacity(joints.len());
+        let mut first = 0;
+        for joint in joints {
+            channels.push((first, joint.channels.clone()));
+            first += joint.channels.len();
+        }
         let frames = bvh.frames();
-        let mut rotations = Vec::with_capacity(frames * joints.len());
-        let mut translations = Vec::with_capacity(frames * joints.len());
-        for values in (0..frames).filter_map(|k| bvh.frame(k)) {
-            let mut values = values.iter();
-            for (joint, offset) in joints.iter().zip(&offsets_m) {
-                let (mut rot, mut pos) = (DQuat::IDENTITY, *offset);
-                for (channel, v) in joint.channels.iter().zip(values.by_ref()) {
-                    match channel {
-                        Channel::Position(Axis::X) => pos.x = v * scale,
-                        Channel::Position(Axis::Y) => pos.y = v * scale,
-                        Channel::Position(Axis::Z) => pos.z = v * scale,
-                        Channel::Rotation(Axis::X) => rot *= DQuat::from_rotation_x(v.to_radians()),
-                        Channel::Rotation(Axis::Y) => rot *= DQuat::from_rotation_y(v.to_radians()),
-                        Channel::Rotation(Axis::Z) => rot *= DQuat::from_rotation_z(v.to_radians()),
-                    }
+        let mut values = Vec::with_capacity(frames * first);
+        for k in 0..frames {
+            let (Some(row), Some(line)) = (bvh.frame(k), bvh.frame_line(k)) else { break };
+            let mut row = row.iter();
+            for joint in joints {
+                for (channel, &v) in joint.channels.iter().zip(row.by_ref()) {
+                    let converted = match channel {
+                        Channel::Position(_) if !in_reach(v * scale) => {
+                            let what = format!(
+                                "frame {k}, {}: {} ({} m)",
+                                channel.name(),
+                                short_number(v),
+                                short_number(v * scale)
+                            );
+                            return Err(out_of_range(line, &joint.name, what, far.clone()));
+                        }
+                        Channel::Position(_) => v * scale,
+                        Channel::Rotation(_) if v.abs() > MAX_ROTATION_DEG => {
+                            let what = format!("frame {k}, {}: {} degrees", channel.name(), short_number(v));
+                            let limit = format!("beyond ±{} degrees", short_number(MAX_ROTATION_DEG));
+                            return Err(out_of_range(line, &joint.name, what, limit));
+                        }
+                        Channel::Rotation(_) => v.to_radians(),
+                    };
+                    values.push(converted);
                 }
-                rotations.push(rot);
-                translations.push(pos);
             }
         }
         Ok(Self {
@@ -67,8 +103,9 @@ impl BvhAnimation {
             frames,
             parents: joints.iter().map(|j| j.parent).collect(),
             offsets_m,
-            rotations,
-            translations,
+            channels,
+            values,
+            channel_count: first,
         })
     }
 
@@ -96,19 +133,36 @@ impl BvhAnimation {
     /// [`Bvh::joints`] order. Rotations are slerped and translations lerped between the two
     /// nearest frames; times outside the clip hold its end frames.
     pub fn positions_at(&self, t_s: f64) -> Vec<DVec3> {
-        let n = self.parents.len();
         let last = self.frames.saturating_sub(1);
         let x = (t_s / self.frame_time_s).clamp(0.0, last as f64);
         let x = if x.is_nan() { 0.0 } else { x };
         let k = (x.floor() as usize).min(last);
         let k1 = (k + 1).min(last);
         let a = x - k as f64;
-        let locals = (0..n).filter_map(|j| {
-            let (r0, r1) = (self.rotations.get(k * n + j)?, self.rotations.get(k1 * n + j)?);
-            let (t0, t1) = (self.translations.get(k * n + j)?, self.translations.get(k1 * n + j)?);
-            Some((r0.slerp(*r1, a), t0.lerp(*t1, a)))
+        let locals = (0..self.parents.len()).map(|j| {
+            let ((r0, t0), (r1, t1)) = (self.local(k, j), self.local(k1, j));
+            (r0.slerp(r1, a), t0.lerp(t1, a))
         });
         self.forward_kinematics(locals)
+    }
+
+    /// Local rotation and translation of node `j` at frame `k`: its OFFSET with the position
+    /// channels applied, and its Euler channels composed in the order written.
+    fn local(&self, k: usize, j: usize) -> (DQuat, DVec3) {
+        let (mut rot, mut pos) = (DQuat::IDENTITY, self.offsets_m[j]);
+        let (first, channels) = &self.channels[j];
+        let row = self.values.get(k * self.channel_count + first..).unwrap_or_default();
+        for (channel, &v) in channels.iter().zip(row) {
+            match channel {
+                Channel::Position(Axis::X) => pos.x = v,
+                Channel::Position(Axis::Y) => pos.y = v,
+                Channel::Position(Axis::Z) => pos.z = v,
+                Channel::Rotation(Axis::X) => rot *= DQuat::from_rotation_x(v),
+                Channel::Rotation(Axis::Y) => rot *= DQuat::from_rotation_y(v),
+                Channel::Rotation(Axis::Z) => rot *= DQuat::from_rotation_z(v),
+            }
+        }
+        (rot, pos)
     }
 
     /// World positions of the rest skeleton (OFFSETs only, no rotations), metres, our axes.
@@ -136,7 +190,7 @@ impl BvhAnimation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::import::bvh::tests::TINY;
+    use crate::import::bvh::tests::{edit, TINY};
 
     fn animation(text: &str, unit: LengthUnit, up: UpAxis) -> BvhAnimation {
         let (bvh, _) = Bvh::parse(text, Path::new("t.bvh")).unwrap();
@@ -145,6 +199,25 @@ mod tests {
 
     fn close(a: &[DVec3], b: &[[f64; 3]]) -> bool {
         a.len() == b.len() && a.iter().zip(b).all(|(p, q)| (*p - DVec3::from_array(*q)).length() < 1e-9)
+    }
+
+    #[test]
+    fn absurd_values_name_the_file_line_frame_and_channel() {
+        let path = Path::new("t.bvh");
+        for (line, text, unit, place, what) in [
+            (20, "1 1e308 3 90 0 0 0 0 90", LengthUnit::Metres, "line 20, joint Hips", "frame 1, Yposition: 1e308"),
+            (20, "1 2 3 90 0 0 0 0 90", LengthUnit::MetresPer(1e300), "line 6, joint Arm", "OFFSET: 1 (1e300 m)"),
+            (19, "0 0 0 0 0 0 0 2e7 0", LengthUnit::Metres, "line 19, joint Arm", "frame 0, Xrotation: 2e7"),
+            (8, "OFFSET 1e7 0 0", LengthUnit::Centimetres, "line 6, joint Arm", "OFFSET: 1e7"),
+        ] {
+            let (bvh, _) = Bvh::parse(&edit(line, Some(text)), path).unwrap();
+            let e = BvhAnimation::new(&bvh, unit, UpAxis::Y, path).unwrap_err().to_string();
+            assert!(e.starts_with("t.bvh: ") && e.contains(place) && e.contains(what), "{e}");
+            assert!(e.contains("out of range"), "{e}");
+        }
+        // 1e5 cm is 1 km: far, but a place.
+        let (bvh, _) = Bvh::parse(&edit(20, Some("1e5 2 3 90 0 0 0 0 90")), path).unwrap();
+        assert!(BvhAnimation::new(&bvh, LengthUnit::Centimetres, UpAxis::Y, path).is_ok());
     }
 
     #[test]

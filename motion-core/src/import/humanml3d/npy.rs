@@ -1,0 +1,93 @@
+//! A reader of NumPy `.npy` float arrays that checks the header against the file's size before
+//! reading, so a truncated or corrupt file is an error naming the file, never a panic or a huge
+//! allocation.
+
+use std::path::Path;
+
+use super::invalid;
+use crate::import::ImportError;
+use crate::limits::{read_bytes, MOCAP_FILE_BYTES};
+
+/// A float array read from a `.npy` file, converted to f32, C order.
+pub(super) struct NpyArray {
+    pub(super) shape: Vec<usize>,
+    pub(super) data: Vec<f32>,
+}
+
+const NPY_MAGIC: &[u8] = b"\x93NUMPY";
+
+/// Reads a little-endian `<f4` or `<f8` `.npy` file (format versions 1–3) of at most
+/// [`MOCAP_FILE_BYTES`]. `check_shape` sees the header's shape before the data is sized
+/// against it or converted, so a shape over a limit is refused from the header alone.
+pub(super) fn read_float_npy(
+    path: &Path,
+    check_shape: impl FnOnce(&[usize]) -> Result<(), ImportError>,
+) -> Result<NpyArray, ImportError> {
+    let bytes = read_bytes(path, &MOCAP_FILE_BYTES)?;
+    let bad = |message: String| invalid(path, "npy header", message);
+    if bytes.len() < 10 || !bytes.starts_with(NPY_MAGIC) {
+        return Err(bad("not a .npy file (no \\x93NUMPY magic)".into()));
+    }
+    let (header_start, header_len) = match bytes[6] {
+        1 => (10, usize::from(u16::from_le_bytes([bytes[8], bytes[9]]))),
+        2 | 3 => match bytes.get(8..12) {
+            Some(&[a, b, c, d]) => (12, u32::from_le_bytes([a, b, c, d]) as usize),
+            _ => return Err(bad("truncated header".into())),
+        },
+        v => return Err(bad(format!("unsupported .npy version {v}"))),
+    };
+    let data_start = header_start + header_len;
+    let header = bytes.get(header_start..data_start).ok_or_else(|| bad("truncated header".into()))?;
+    let header = std::str::from_utf8(header).map_err(|_| bad("header is not text".into()))?;
+    let descr = dict_value(header, "descr")
+        .and_then(|v| v.strip_prefix('\'')?.split_once('\''))
+        .ok_or_else(|| bad(format!("no readable 'descr' in {header:?}")))?
+        .0;
+    let item_size: usize = match descr {
+        "<f4" => 4,
+        "<f8" => 8,
+        other => return Err(bad(format!("dtype '{other}'; expected float32 ('<f4') or float64 ('<f8')"))),
+    };
+    if dict_value(header, "fortran_order").is_some_and(|v| v.starts_with("True")) {
+        return Err(bad("Fortran-ordered arrays are not supported".into()));
+    }
+    let shape = dict_value(header, "shape")
+        .and_then(parse_shape)
+        .ok_or_else(|| bad(format!("no readable 'shape' in {header:?}")))?;
+    check_shape(&shape)?;
+    let expected = shape
+        .iter()
+        .try_fold(item_size, |acc, d| acc.checked_mul(*d))
+        .ok_or_else(|| bad(format!("shape {shape:?} is too large")))?;
+    let data = &bytes[data_start.min(bytes.len())..];
+    if data.len() != expected {
+        return Err(invalid(
+            path,
+            "data",
+            format!(
+                "shape {shape:?} of {descr} needs {expected} bytes; the file has {} (truncated or corrupt)",
+                data.len()
+            ),
+        ));
+    }
+    let data = if item_size == 4 {
+        data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+    } else {
+        data.chunks_exact(8)
+            .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32)
+            .collect()
+    };
+    Ok(NpyArray { shape, data })
+}
+
+/// The text after `'key':` in a numpy header dict (the value and everything after it).
+fn dict_value<'h>(header: &'h str, key: &str) -> Option<&'h str> {
+    let at = header.find(&format!("'{key}'"))? + key.len() + 2;
+    header[at..].trim_start().strip_prefix(':').map(str::trim_start)
+}
+
+/// Parses `(3, 263)` (the start of a header value) into dimensions.
+fn parse_shape(value: &str) -> Option<Vec<usize>> {
+    let inner = value.strip_prefix('(')?.split_once(')')?.0;
+    inner.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse().ok()).collect()
+}
