@@ -48,11 +48,49 @@ static CORPUS: LazyLock<Vec<String>> = LazyLock::new(|| {
 /// Text fragments that matter to the parsers: JSON syntax, extremes, wrappers, control and
 /// multi-byte characters, and the vocabulary's names in the wrong places.
 const FRAGMENTS: &[&str] = &[
-    "{", "}", "[", "]", ",", ":", "\"", "\\", "\\u0000", "\\ud800", "null", "true", "-0", "1e308", "-1e308", "1e-320",
-    "NaN", "Infinity", "99999999999999999999", "4294967296", "-1", "0", "0.5", "10000", "\u{feff}", "\u{1b}[2J",
-    "\u{0}", "é", "𝄞", "```json\n", "\n```", "<think>", "</think>", "\"frames\": ", "\"constraints\": []",
-    "\"op\": \"and\", \"args\": [", "\"op\": \"not\", \"arg\": ", "\"kind\": \"gap\"", "\"joint\": \"pelvis\"",
-    "\"keyframes\": [\"last\"]", "\"id\": \"c1\"", "{\"fraction\": 2}", "{\"frame\": 99999}",
+    "{",
+    "}",
+    "[",
+    "]",
+    ",",
+    ":",
+    "\"",
+    "\\",
+    "\\u0000",
+    "\\ud800",
+    "null",
+    "true",
+    "-0",
+    "1e308",
+    "-1e308",
+    "1e-320",
+    "NaN",
+    "Infinity",
+    "99999999999999999999",
+    "4294967296",
+    "-1",
+    "0",
+    "0.5",
+    "10000",
+    "\u{feff}",
+    "\u{1b}[2J",
+    "\u{0}",
+    "é",
+    "𝄞",
+    "```json\n",
+    "\n```",
+    "<think>",
+    "</think>",
+    "\"frames\": ",
+    "\"constraints\": []",
+    "\"op\": \"and\", \"args\": [",
+    "\"op\": \"not\", \"arg\": ",
+    "\"kind\": \"gap\"",
+    "\"joint\": \"pelvis\"",
+    "\"keyframes\": [\"last\"]",
+    "\"id\": \"c1\"",
+    "{\"fraction\": 2}",
+    "{\"frame\": 99999}",
 ];
 
 /// One edit of a reply.
@@ -146,7 +184,8 @@ fn apply(text: &mut String, mutation: &Mutation) {
                 .map(|(i, _)| i)
                 .collect();
             if let Some(&start) = starts.get(n % starts.len().max(1)) {
-                let end = text[start..].find(|c: char| !(c.is_ascii_digit() || c == '.')).map_or(text.len(), |e| start + e);
+                let end =
+                    text[start..].find(|c: char| !(c.is_ascii_digit() || c == '.')).map_or(text.len(), |e| start + e);
                 text.replace_range(start..end, FRAGMENTS[f]);
             }
         }
@@ -199,7 +238,8 @@ fn peak_memory() -> Option<u64> {
 fn mutated_replies_never_panic_and_stay_bounded() {
     let cases = std::env::var("MOGEN_FUZZ_CASES").ok().and_then(|n| n.parse().ok()).unwrap_or(3000);
     let mut runner = TestRunner::new(Config { cases, failure_persistence: None, ..Config::default() });
-    let strategy = (0..CORPUS.len(), prop::collection::vec(mutation(), 0..6), prop_oneof![Just("stop"), Just("length")]);
+    let strategy =
+        (0..CORPUS.len(), prop::collection::vec(mutation(), 0..6), prop_oneof![Just("stop"), Just("length")]);
     let start = std::time::Instant::now();
     runner
         .run(&strategy, |(seed, mutations, finish)| {

@@ -220,7 +220,8 @@ impl TaskReport {
         if let Some((name, _)) = scalars.iter().find(|(_, v)| !v.is_finite()) {
             return Some((*name).to_owned());
         }
-        let penetration = self.max_scene_penetration_m.iter().chain(self.scene_penetration_per_sample_m.iter().flatten());
+        let penetration =
+            self.max_scene_penetration_m.iter().chain(self.scene_penetration_per_sample_m.iter().flatten());
         if penetration.into_iter().any(|v| !v.is_finite()) {
             return Some("scene penetration".to_owned());
         }

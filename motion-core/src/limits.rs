@@ -119,12 +119,8 @@ pub const RIG_JOINTS: Limit = Limit {
 };
 
 /// Bytes of an imported mocap file (a 30-minute 120 fps BVH is about 150 MB).
-pub const MOCAP_FILE_BYTES: Limit = Limit {
-    name: "mocap file size",
-    max: 512 << 20,
-    unit: "bytes",
-    advice: "split the capture into shorter files",
-};
+pub const MOCAP_FILE_BYTES: Limit =
+    Limit { name: "mocap file size", max: 512 << 20, unit: "bytes", advice: "split the capture into shorter files" };
 
 /// Bytes of one LLM reply body (a program with the largest allowed constraints fits in far less).
 pub const LLM_REPLY_BYTES: Limit = Limit {
@@ -191,7 +187,10 @@ mod tests {
     fn a_value_over_the_limit_names_the_limit_and_the_advice() {
         assert!(PROGRAM_FRAMES.check(1000, "frames").is_ok());
         let err = PROGRAM_FRAMES.check(4999, "the clip length").unwrap_err().to_string();
-        assert!(err.contains("the clip length is 4999 frames, over the limit of 1000 frames (program frames)"), "{err}");
+        assert!(
+            err.contains("the clip length is 4999 frames, over the limit of 1000 frames (program frames)"),
+            "{err}"
+        );
         assert!(err.contains("in parts"), "{err}");
     }
 

@@ -304,7 +304,8 @@ mod tests {
         let broken = Tensor::from_vec(values, weight.shape(), &Device::Cpu).unwrap();
         named.push((name.clone(), broken));
         let damaged = dir.path().join("damaged.safetensors");
-        Prior::write(&damaged, &named, prior.mdm.config(), &prior.encoder, &prior.mean_std, prior.rest.as_ref()).unwrap();
+        Prior::write(&damaged, &named, prior.mdm.config(), &prior.encoder, &prior.mean_std, prior.rest.as_ref())
+            .unwrap();
         let err = Prior::load(&damaged, &Device::Cpu).unwrap_err().to_string();
         assert!(err.contains(&format!("tensor `{name}` has 1 of")) && err.contains("damaged"), "{err}");
 

@@ -3,7 +3,9 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use agent::llm::{escape_controls, ApiKey, ClientConfig, Llm, LlmSettings, OutputMode, ReplySource, RetryPolicy, DEFAULT_MODEL};
+use agent::llm::{
+    escape_controls, ApiKey, ClientConfig, Llm, LlmSettings, OutputMode, ReplySource, RetryPolicy, DEFAULT_MODEL,
+};
 use agent::plan::{plan_from_file, plan_task, PlanSettings, PlannedTask};
 use clap::Args;
 use motion_core::export::OutputFolder;

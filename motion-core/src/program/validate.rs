@@ -124,7 +124,8 @@ impl Checker {
             self.push("frames", over.into());
             return;
         }
-        if let Err(over) = PROGRAM_CONSTRAINTS.check(program.constraints.len() as u64, "the program's constraint count") {
+        if let Err(over) = PROGRAM_CONSTRAINTS.check(program.constraints.len() as u64, "the program's constraint count")
+        {
             self.push("constraints", over.into());
             return;
         }
