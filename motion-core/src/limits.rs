@@ -94,6 +94,16 @@ pub const BATCH_SAMPLES: Limit = Limit {
     advice: "run several batches with different --seed values",
 };
 
+/// Samples × frames² of one optimised batch: DNO's unrolled sampler keeps every attention map
+/// for the backward pass, so memory grows with the batch and the square of the clip length
+/// (1 sample of 1000 frames peaks at 1.9 GB; the limit allows 4 of them, or 64 of 250 frames).
+pub const BATCH_ATTENTION: Limit = Limit {
+    name: "samples × frames² per optimised batch",
+    max: 4_000_000,
+    unit: "frame pairs",
+    advice: "use fewer samples per run (-n) or a shorter clip",
+};
+
 /// Bytes of a program file (the largest shipped program is under 10 KiB).
 pub const PROGRAM_FILE_BYTES: Limit = Limit {
     name: "program file size",

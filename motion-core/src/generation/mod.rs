@@ -28,6 +28,7 @@ use crate::constraints::{CompiledProgram, ConstraintError};
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
 use crate::dno::{optimize_with_restarts, DnoConfig, Solver, UnrolledDdim};
+use crate::limits;
 use crate::prior::Prior;
 use crate::program::{Primitive, TaskProgram};
 use crate::quality::{poses_to_tensor, tensor_to_poses};
@@ -102,6 +103,30 @@ pub struct GenerationConfig {
     /// support (a balance beam, a ground away from y = 0).
     #[serde(default)]
     pub foot_lock: FootLockConfig,
+}
+
+impl GenerationConfig {
+    /// Settings a run of `frames` frames can use: at least one sample, within
+    /// [`limits::BATCH_SAMPLES`] and [`limits::BATCH_ATTENTION`] (checked before any tensor is
+    /// made), a finite guidance ≥ 0 and a finite jitter weight ≥ 0.
+    pub fn check(&self, frames: usize) -> Result<(), GenerationError> {
+        if self.samples == 0 {
+            return Err(GenerationError::Setting("samples must be at least 1".into()));
+        }
+        limits::BATCH_SAMPLES.check(self.samples as u64, "the batch")?;
+        let pairs = (self.samples as u64).saturating_mul((frames as u64).saturating_pow(2));
+        limits::BATCH_ATTENTION.check(pairs, format_args!("{} samples of {frames} frames", self.samples))?;
+        if !(self.guidance.is_finite() && self.guidance >= 0.0) {
+            return Err(GenerationError::Setting(format!("guidance must be finite and ≥ 0, got {}", self.guidance)));
+        }
+        if !(self.jitter_weight.is_finite() && self.jitter_weight >= 0.0) {
+            return Err(GenerationError::Setting(format!(
+                "the jitter weight must be finite and ≥ 0, got {}",
+                self.jitter_weight
+            )));
+        }
+        Ok(())
+    }
 }
 
 fn default_jitter_weight() -> f64 {
@@ -193,6 +218,9 @@ pub enum GenerationError {
         /// Bad values in the whole tensor.
         count: usize,
     },
+    /// The batch is over one of the [`limits`].
+    #[error(transparent)]
+    Limit(#[from] limits::LimitExceeded),
     /// A tensor operation failed.
     #[error(transparent)]
     Tensor(#[from] candle_core::Error),
@@ -262,14 +290,9 @@ pub fn generate(
     device: &Device,
     mut progress: impl FnMut(&Progress),
 ) -> Result<Generated, GenerationError> {
-    if config.samples == 0 {
-        return Err(GenerationError::Setting("samples must be at least 1".into()));
-    }
-    if !(config.guidance.is_finite() && config.guidance >= 0.0) {
-        return Err(GenerationError::Setting(format!("guidance must be finite and ≥ 0, got {}", config.guidance)));
-    }
-    let start = Instant::now();
     let frames = compiled.frames();
+    config.check(frames)?;
+    let start = Instant::now();
     let shape = (config.samples, frames, FEATURE_DIM);
     let text = prior.encode_text(&vec![program.text.as_str(); config.samples], device)?;
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
@@ -368,6 +391,20 @@ fn has_raised_support(program: &TaskProgram) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_batch_over_the_memory_limit_is_refused_before_any_tensor() {
+        let mut config = GenerationConfig::new(Method::Dno);
+        config.samples = 5;
+        assert!(config.check(800).is_ok());
+        let err = config.check(1000).unwrap_err().to_string();
+        assert!(err.contains("5 samples of 1000 frames is 5000000 frame pairs, over the limit of 4000000"), "{err}");
+        config.samples = 65;
+        assert!(config.check(40).unwrap_err().to_string().contains("samples per run"));
+        config.samples = 1;
+        config.jitter_weight = f64::INFINITY;
+        assert!(config.check(40).unwrap_err().to_string().contains("jitter weight"));
+    }
 
     #[test]
     fn a_non_finite_result_names_its_sample_and_frame() {

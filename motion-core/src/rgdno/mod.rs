@@ -285,9 +285,7 @@ pub fn generate_rg_dno(
 ) -> Result<(Generated, RgDnoReport), RgDnoError> {
     let RgDnoTask { program, compiled, corpus } = task;
     rg.validate(compiled.frames())?;
-    if config.samples == 0 {
-        return Err(GenerationError::Setting("samples must be at least 1".into()).into());
-    }
+    config.check(compiled.frames())?;
     let start = Instant::now();
     let groups = program.constraint_groups().ok_or(RgDnoError::NoParse)?;
     let parse = program.relational_parse.as_ref().ok_or(RgDnoError::NoParse)?;
