@@ -50,8 +50,8 @@ pub enum PriorError {
     Normalization {
         /// The file.
         path: PathBuf,
-        /// What is wrong.
-        source: NormalizationError,
+        /// What is wrong (boxed: a candle error inside is large).
+        source: Box<NormalizationError>,
     },
 }
 
@@ -161,7 +161,7 @@ impl Prior {
                 .map_err(|e| format(format!("tensor `{key}`: {e}")))
         };
         let mean_std = MeanStd::from_vecs(stat(MEAN_KEY)?, stat(STD_KEY)?, device)
-            .map_err(|source| PriorError::Normalization { path: path.into(), source })?;
+            .map_err(|source| PriorError::Normalization { path: path.into(), source: Box::new(source) })?;
         let rest = meta
             .get(REST_KEY)
             .map(|json| serde_json::from_str(json).map_err(|e| format(format!("bad {REST_KEY}: {e}"))))
