@@ -4,6 +4,8 @@ mod commands;
 
 use agent::paths;
 
+use std::process::ExitCode;
+
 use clap::{Parser, Subcommand};
 
 /// Constrained human motion generation driven by language.
@@ -79,7 +81,29 @@ enum ReportCommand {
     Loss(commands::report::LossArgs),
 }
 
-fn main() -> anyhow::Result<()> {
+/// Runs the command; an error is printed as its chain of causes (`what: why: ...`, a cause
+/// whose message its parent already quotes is not repeated), without a backtrace even when
+/// `RUST_BACKTRACE` is set, and the exit status is 1.
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            let mut message = String::new();
+            for cause in error.chain().map(ToString::to_string) {
+                if !message.contains(&cause) {
+                    if !message.is_empty() {
+                        message.push_str(": ");
+                    }
+                    message.push_str(&cause);
+                }
+            }
+            eprintln!("error: {message}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)

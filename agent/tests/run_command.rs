@@ -74,3 +74,26 @@ fn bad_programs_and_missing_files_get_clear_errors() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success() && stderr.contains("nope.json"), "{stderr}");
 }
+
+/// With stderr redirected (a log, CI) the run still reports progress, as plain lines; a user
+/// error is one line of causes with no backtrace, even with `RUST_BACKTRACE` set.
+#[test]
+fn progress_goes_to_a_log_and_errors_carry_no_backtrace() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = write(dir.path(), "task.json", PROGRAM);
+    let out = dir.path().join("out").display().to_string();
+    let output = mogen(&["run", &program, "--steps", "12", "--out", &out]);
+    assert!(output.status.success());
+    let log = String::from_utf8_lossy(&output.stderr);
+    assert!(log.contains("dno round 0: step 1/12 loss") && log.contains("dno round 0: step 12/12 loss"), "{log}");
+
+    let output = Command::new(env!("CARGO_BIN_EXE_mogen"))
+        .args(["run", &dir.path().join("missing.json").display().to_string()])
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1));
+    assert!(stderr.starts_with("error: cannot read the task file: ") && stderr.contains("missing.json"), "{stderr}");
+    assert!(!stderr.to_lowercase().contains("backtrace") && stderr.lines().count() == 1, "{stderr}");
+}

@@ -207,13 +207,17 @@ pub fn run_program(
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let start = std::time::Instant::now();
-    // Not a terminal (a log, CI): a plain line every tenth of a stage instead of the bar.
+    // Not a terminal (a log, CI): instead of the bar, a plain line on the first and last step
+    // of a stage and at least every PLAIN_PROGRESS_EVERY between.
+    let mut last_line: Option<std::time::Instant> = None;
     let mut show = |stage: &str, round: usize, step: usize, steps: usize, loss: f64| {
         bar.set_prefix(stage.to_owned());
         bar.set_length(steps as u64);
         bar.set_position(step as u64);
         bar.set_message(format!("{loss:.5} (round {round})"));
-        if bar.is_hidden() && (step % (steps / 10).max(1) == 0 || step == steps) {
+        let due = last_line.is_none_or(|t| t.elapsed() >= PLAIN_PROGRESS_EVERY);
+        if bar.is_hidden() && (due || step <= 1 || step == steps) {
+            last_line = Some(std::time::Instant::now());
             eprintln!(
                 "{stage} round {round}: step {step}/{steps} loss {loss:.5} ({:.0} s)",
                 start.elapsed().as_secs_f64()
@@ -271,6 +275,9 @@ pub fn run_program(
     eprintln!("wrote {}/{{program.json,features.npy,joints.npy,report.json,strip.png}}", out.display());
     Ok(report)
 }
+
+/// Longest silence on a non-terminal stderr during generation.
+const PLAIN_PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// Why RG-DNO did not produce motions: a reason to fall back to DNO, or an error.
 enum RgDnoFailure {
