@@ -5,8 +5,8 @@ use std::path::Path;
 
 use candle_core::{DType, Tensor};
 
-/// Writes `tensors` (converted to f32 on the CPU) with header `metadata` to `path`, creating the
-/// parent folder. Errors are messages; callers add the path and their context.
+/// Writes `tensors` (converted to f32 on the CPU) with header `metadata` to `path` atomically,
+/// creating the parent folder. Errors are messages; callers add the path and their context.
 pub(crate) fn write_safetensors(
     path: &Path,
     tensors: &[(String, Tensor)],
@@ -30,10 +30,9 @@ pub(crate) fn write_safetensors(
         })
         .collect::<Result<Vec<_>, _>>()?;
     let bytes = safetensors::tensor::serialize(views, Some(metadata)).map_err(|e| e.to_string())?;
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| e.to_string())?;
-    }
-    std::fs::write(path, bytes).map_err(|e| e.to_string())
+    // Through a temporary file and a rename: a kill while saving a prior, a database or a
+    // training checkpoint leaves the previous file whole.
+    crate::export::write_atomically(path, &bytes).map_err(|e| e.to_string())
 }
 
 /// The string metadata of a safetensors file's header (empty when it has none). Errors are
