@@ -90,11 +90,30 @@ fn bad_input_is_named_and_writes_nothing() {
 
     let text = dir.path().join("text.npy");
     std::fs::write(&text, "not an array").unwrap();
-    check(&text, &["text.npy", "not an npy array"]);
+    check(&text, &["text.npy", "not a .npy file"]);
+
+    // A header promising more than the file holds (or than memory allows) is refused from the
+    // header, before anything is allocated for it.
+    let huge = dir.path().join("huge.npy");
+    let mut bytes = npy_header("(1000000000000, 22, 3)");
+    bytes.extend_from_slice(&[0; 64]);
+    std::fs::write(&huge, bytes).unwrap();
+    check(&huge, &["huge.npy", "1000000000000 frames at 20 fps, over the limit of 72000"]);
 
     let mut values = standing(2, 5);
     values[(5 + 2) * 66 + 3 * 3 + 1] = f32::NAN; // sample 1, frame 2, spine1, y
     let nan = dir.path().join("nan.npy");
     Tensor::from_vec(values, (2, 5, 22, 3), &Device::Cpu).unwrap().write_npy(&nan).unwrap();
     check(&nan, &["sample 1", "frame 2", "spine1", "not finite"]);
+}
+
+/// The first bytes of a float32 `.npy` (version 1.0) of `shape`, e.g. `(2, 22, 3)`.
+fn npy_header(shape: &str) -> Vec<u8> {
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
+    header.push_str(&" ".repeat(63 - (10 + header.len()) % 64));
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    bytes
 }

@@ -18,6 +18,7 @@ pub mod metrics;
 pub mod model;
 pub mod motion;
 pub mod nn;
+pub mod npy;
 pub mod prior;
 pub mod program;
 pub mod quality;

@@ -8,11 +8,10 @@
 //! replaced folders are hidden siblings (`.<name>.staging-<pid>-<n>`); those of a process that no
 //! longer runs are removed by the next run into the same target.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use candle_core::{DType, Tensor};
+use candle_core::Tensor;
 
 use super::ExportError;
 
@@ -97,7 +96,8 @@ impl OutputFolder {
 
     /// Writes `tensor` as a little-endian f32 NumPy array (`.npy` version 1.0), built in memory.
     pub fn write_npy(&self, name: &str, tensor: &Tensor) -> Result<(), ExportError> {
-        let bytes = npy_bytes(tensor).map_err(|e| ExportError::Write { path: self.target.join(name), message: e })?;
+        let bytes = crate::npy::npy_bytes(tensor)
+            .map_err(|e| ExportError::Write { path: self.target.join(name), message: e })?;
         self.write(name, &bytes)
     }
 
@@ -216,58 +216,9 @@ fn remove_abandoned(parent: &Path, name: &str) {
     }
 }
 
-/// `tensor` as the bytes of a `.npy` (version 1.0) file of little-endian f32, C order.
-pub fn npy_bytes(tensor: &Tensor) -> Result<Vec<u8>, String> {
-    let values = tensor
-        .to_dtype(DType::F32)
-        .and_then(|t| t.flatten_all())
-        .and_then(|t| t.to_vec1::<f32>())
-        .map_err(|e| e.to_string())?;
-    let shape: Vec<String> = tensor.dims().iter().map(ToString::to_string).collect();
-    let shape = match shape.len() {
-        1 => format!("({},)", shape[0]),
-        _ => format!("({})", shape.join(", ")),
-    };
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
-    // Magic (6) + version (2) + header length (2) + header + newline, padded to 64 bytes.
-    let unpadded = 10 + header.len() + 1;
-    header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
-    header.push('\n');
-    let length = u16::try_from(header.len()).map_err(|_| format!("shape {shape} is too long for an npy header"))?;
-    let mut bytes = Vec::with_capacity(10 + header.len() + 4 * values.len());
-    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
-    bytes.extend_from_slice(&length.to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    let mut body = std::io::BufWriter::new(&mut bytes);
-    for value in values {
-        body.write_all(&value.to_le_bytes()).map_err(|e| e.to_string())?;
-    }
-    body.flush().map_err(|e| e.to_string())?;
-    drop(body);
-    Ok(bytes)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use candle_core::Device;
-
-    #[test]
-    fn npy_bytes_round_trip_through_candle() {
-        let dir = tempfile::tempdir().unwrap();
-        for shape in [vec![5], vec![2, 3, 4]] {
-            let n: usize = shape.iter().product();
-            let values: Vec<f32> = (0..n).map(|i| i as f32 * 0.5 - 1.0).collect();
-            let tensor = Tensor::from_vec(values.clone(), shape.as_slice(), &Device::Cpu).unwrap();
-            let bytes = npy_bytes(&tensor).unwrap();
-            assert_eq!((bytes.len() - 4 * n) % 64, 0, "header padded to 64 bytes");
-            let path = dir.path().join("a.npy");
-            std::fs::write(&path, bytes).unwrap();
-            let back = Tensor::read_npy(&path).unwrap();
-            assert_eq!(back.dims(), shape.as_slice());
-            assert_eq!(back.flatten_all().unwrap().to_vec1::<f32>().unwrap(), values);
-        }
-    }
 
     #[test]
     fn a_folder_appears_whole_or_not_at_all() {

@@ -21,7 +21,7 @@ pub mod viewer;
 
 use std::path::{Path, PathBuf};
 
-pub use folder::{npy_bytes, OutputFolder};
+pub use folder::OutputFolder;
 pub use outputs::{read_joints_npy, write_outputs, ExportInput, ExportManifest, ExportedSample, Probe};
 pub use rotations::{RigSkeleton, RotationTrack, SolveFit, ANIMATED_OFFSETS};
 pub use scene::{position_targets, scene_boxes, PositionTarget, SceneBox, SceneExtent, SceneRole};
@@ -52,6 +52,9 @@ pub enum ExportError {
         /// What is wrong with it.
         message: String,
     },
+    /// An input file is unreadable, malformed or over a limit.
+    #[error(transparent)]
+    Import(#[from] crate::import::ImportError),
     /// Writing a file failed.
     #[error("{path}: {message}")]
     Write {

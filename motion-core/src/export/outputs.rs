@@ -22,7 +22,6 @@ use super::scene::{scene_boxes, PositionTarget, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
 use super::{write_atomically, ExportError};
 use crate::program::Primitive;
-use crate::quality::tensor_to_poses;
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
 /// The joints whose forward-kinematics positions the manifest lists: the root, ends of the
@@ -171,28 +170,50 @@ fn probes(fk: &[Pose]) -> Vec<Probe> {
         .collect()
 }
 
-/// Reads joint positions from an npy file of shape `[frames, 22, 3]` (one motion) or
-/// `[samples, frames, 22, 3]`, m. Non-finite values are left for [`RotationTrack::solve`] to
+/// Reads joint positions from an npy file (float32 or float64) of shape `[frames, 22, 3]` (one
+/// motion) or `[samples, frames, 22, 3]`, m, bounded like imported mocap (file size, clip
+/// length; checked from the header). Non-finite values are left for [`RotationTrack::solve`] to
 /// name; a missing file or another shape is an error naming the file.
 pub fn read_joints_npy(path: &Path) -> Result<Vec<Vec<Pose>>, ExportError> {
     let fail = |message: String| ExportError::Read { path: path.into(), message };
     if !path.is_file() {
         return Err(fail("no such file".into()));
     }
-    let tensor = candle_core::Tensor::read_npy(path).map_err(|e| fail(format!("not an npy array: {e}")))?;
-    let tensor = match tensor.dims() {
-        [_, joints, 3] if *joints == NUM_JOINTS => tensor.unsqueeze(0),
-        [_, _, joints, 3] if *joints == NUM_JOINTS => Ok(tensor),
-        dims => {
-            return Err(fail(format!(
-                "shape {dims:?}; expected [frames, {NUM_JOINTS}, 3] or [samples, frames, {NUM_JOINTS}, 3]"
-            )))
+    let shape_error = |shape: &[usize]| {
+        let shape = shape.to_vec();
+        crate::import::ImportError::Invalid {
+            path: path.into(),
+            location: "shape".into(),
+            message: format!(
+                "{shape:?}; expected [frames, {NUM_JOINTS}, 3] or [samples, frames, {NUM_JOINTS}, 3] with at least \
+                 one frame"
+            ),
         }
-    }
-    .map_err(|e| fail(e.to_string()))?;
-    let (samples, frames) = (tensor.dim(0).unwrap_or(0), tensor.dim(1).unwrap_or(0));
-    if samples == 0 || frames == 0 {
-        return Err(fail(format!("{samples} samples of {frames} frames: nothing to export")));
-    }
-    tensor_to_poses(&tensor).map_err(|e| fail(e.to_string()))
+    };
+    let array = crate::npy::read_float_npy(path, |shape| {
+        let frames = match *shape {
+            [frames, NUM_JOINTS, 3] | [_, frames, NUM_JOINTS, 3] if frames > 0 && shape[0] > 0 => frames,
+            _ => return Err(shape_error(shape)),
+        };
+        crate::limits::CLIP_FRAMES.check(frames as u64, format_args!("{}", path.display()))?;
+        Ok(())
+    })?;
+    let frames = array.shape[array.shape.len() - 3];
+    let to_f64 = |v: &[f32]| glam::DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+    Ok(array
+        .data
+        .chunks_exact(frames * NUM_JOINTS * 3)
+        .map(|motion| {
+            motion
+                .chunks_exact(NUM_JOINTS * 3)
+                .map(|frame| {
+                    let mut pose = [glam::DVec3::ZERO; NUM_JOINTS];
+                    for (joint, xyz) in pose.iter_mut().zip(frame.chunks_exact(3)) {
+                        *joint = to_f64(xyz);
+                    }
+                    pose
+                })
+                .collect()
+        })
+        .collect())
 }

@@ -18,15 +18,14 @@
 //! allocation. [`HumanMl3dClip`] poses a clip's features for the motion database.
 
 mod clip;
-mod npy;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Tensor};
 
+use crate::npy::read_float_npy;
 pub use clip::HumanMl3dClip;
-use npy::read_float_npy;
 
 use super::{check_clip_length, ImportError};
 use crate::limits::{read_text, MOCAP_FILE_BYTES};

@@ -1,17 +1,24 @@
-//! A reader of NumPy `.npy` float arrays that checks the header against the file's size before
+//! NumPy `.npy` float arrays: a reader that checks the header against the file's size before
 //! reading, so a truncated or corrupt file is an error naming the file, never a panic or a huge
-//! allocation.
+//! allocation, and a writer that builds the file in memory for one write.
 
 use std::path::Path;
 
-use super::invalid;
+use candle_core::{DType, Tensor};
+
 use crate::import::ImportError;
 use crate::limits::{read_bytes, MOCAP_FILE_BYTES};
 
 /// A float array read from a `.npy` file, converted to f32, C order.
-pub(super) struct NpyArray {
-    pub(super) shape: Vec<usize>,
-    pub(super) data: Vec<f32>,
+pub(crate) struct NpyArray {
+    /// Dimensions.
+    pub(crate) shape: Vec<usize>,
+    /// Values, C order.
+    pub(crate) data: Vec<f32>,
+}
+
+fn invalid(path: &Path, location: &str, message: String) -> ImportError {
+    ImportError::Invalid { path: path.to_path_buf(), location: location.into(), message }
 }
 
 const NPY_MAGIC: &[u8] = b"\x93NUMPY";
@@ -19,7 +26,7 @@ const NPY_MAGIC: &[u8] = b"\x93NUMPY";
 /// Reads a little-endian `<f4` or `<f8` `.npy` file (format versions 1–3) of at most
 /// [`MOCAP_FILE_BYTES`]. `check_shape` sees the header's shape before the data is sized
 /// against it or converted, so a shape over a limit is refused from the header alone.
-pub(super) fn read_float_npy(
+pub(crate) fn read_float_npy(
     path: &Path,
     check_shape: impl FnOnce(&[usize]) -> Result<(), ImportError>,
 ) -> Result<NpyArray, ImportError> {
@@ -90,4 +97,55 @@ fn dict_value<'h>(header: &'h str, key: &str) -> Option<&'h str> {
 fn parse_shape(value: &str) -> Option<Vec<usize>> {
     let inner = value.strip_prefix('(')?.split_once(')')?.0;
     inner.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse().ok()).collect()
+}
+
+/// `tensor` as the bytes of a `.npy` (version 1.0) file of little-endian f32, C order.
+pub fn npy_bytes(tensor: &Tensor) -> Result<Vec<u8>, String> {
+    let values = tensor
+        .to_dtype(DType::F32)
+        .and_then(|t| t.flatten_all())
+        .and_then(|t| t.to_vec1::<f32>())
+        .map_err(|e| e.to_string())?;
+    let shape: Vec<String> = tensor.dims().iter().map(ToString::to_string).collect();
+    let shape = match shape.len() {
+        1 => format!("({},)", shape[0]),
+        _ => format!("({})", shape.join(", ")),
+    };
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
+    // Magic (6) + version (2) + header length (2) + header + newline, padded to 64 bytes.
+    let unpadded = 10 + header.len() + 1;
+    header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
+    header.push('\n');
+    let length = u16::try_from(header.len()).map_err(|_| format!("shape {shape} is too long for an npy header"))?;
+    let mut bytes = Vec::with_capacity(10 + header.len() + 4 * values.len());
+    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
+    bytes.extend_from_slice(&length.to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for value in values {
+        bytes.extend_from_slice(&value.to_le_bytes());
+    }
+    Ok(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::Device;
+
+    #[test]
+    fn npy_bytes_round_trip_through_candle() {
+        let dir = tempfile::tempdir().unwrap();
+        for shape in [vec![5], vec![2, 3, 4]] {
+            let n: usize = shape.iter().product();
+            let values: Vec<f32> = (0..n).map(|i| i as f32 * 0.5 - 1.0).collect();
+            let tensor = Tensor::from_vec(values.clone(), shape.as_slice(), &Device::Cpu).unwrap();
+            let bytes = npy_bytes(&tensor).unwrap();
+            assert_eq!((bytes.len() - 4 * n) % 64, 0, "header padded to 64 bytes");
+            let path = dir.path().join("a.npy");
+            std::fs::write(&path, bytes).unwrap();
+            let back = Tensor::read_npy(&path).unwrap();
+            assert_eq!(back.dims(), shape.as_slice());
+            assert_eq!(back.flatten_all().unwrap().to_vec1::<f32>().unwrap(), values);
+        }
+    }
 }
