@@ -32,9 +32,9 @@ pub use signal::{centre_of_mass_weights, point, root_relative, second_difference
 pub use support::FOOT_HALF_WIDTH_M;
 
 use crate::program::{
-    BoneDirection, ComInSupport, Condition, Count, Equal, Expr, Extremum, FootContact, GreaterThan, JointSet, LessThan,
-    Metric, Primitive, ProgramError, Quantity, Reduce, SceneConstraint, SelfCollision, StayNearInitial, Steps,
-    TaskProgram,
+    BoneDirection, ComInSupport, Condition, Count, Equal, Expr, Extremum, FootContact, FrameRef, GreaterThan, JointSet,
+    LessThan, Metric, Primitive, ProgramError, Quantity, Reduce, SceneConstraint, SelfCollision, StayNearInitial,
+    Steps, TaskProgram,
 };
 use crate::skeleton::{Joint, FPS};
 use frames::{condition_mask, reduce, Frames};
@@ -376,18 +376,16 @@ impl Compiler<'_> {
                 frames: self.select(frames, self.frames)?,
                 reduce: *reduce,
             },
-            Expr::FootContact(FootContact { feet, at, max_height_m, max_speed_m_per_s }) => {
-                let mut kept: Vec<usize> = at
-                    .iter()
-                    .map(|f| {
-                        f.resolve(self.frames as u32).map(|f| f as usize).ok_or_else(|| {
-                            candle_core::Error::Msg(format!(
-                                "frame {f:?} is outside the clip of {} frames",
-                                self.frames
-                            ))
-                        })
+            Expr::FootContact(FootContact { feet, at, during, max_height_m, max_speed_m_per_s }) => {
+                let resolve = |f: &FrameRef| {
+                    f.resolve(self.frames as u32).map(|f| f as usize).ok_or_else(|| {
+                        candle_core::Error::Msg(format!("frame {f:?} is outside the clip of {} frames", self.frames))
                     })
-                    .collect::<Result<_>>()?;
+                };
+                let mut kept: Vec<usize> = at.iter().map(resolve).collect::<Result<_>>()?;
+                if let Some(range) = during {
+                    kept.extend(resolve(&range.from)?..=resolve(&range.to)?);
+                }
                 kept.sort_unstable();
                 kept.dedup();
                 Node::FootContact {

@@ -381,6 +381,23 @@ fn bones_feet_and_self_collision() {
         &m,
         0.2501,
     );
+    // Contact over a stretch of frames ("stand on the right foot"): standing still, the left foot
+    // lifted 0.2 m on frames 3..=6 of 10. The right foot's contact during 2..=7 costs nothing;
+    // the left foot's costs (y + 0.2 − 0.05)² on 4 of its 6 frames.
+    let mut one_foot: Vec<_> = (0..10).map(|_| STANDING).collect();
+    let left = Joint::LeftFoot as usize;
+    for pose in &mut one_foot[3..=6] {
+        pose[left][1] += 0.2;
+    }
+    let during = |foot: &str| {
+        format!(
+            r#"{{"op": "foot_contact", "feet": ["{foot}"], "during": {{"from": {{"frame": 2}}, "to": {{"frame": 7}}}}, "max_height_m": 0.05}}"#
+        )
+    };
+    close(&during("right_foot"), &one_foot, 0.0);
+    let y = STANDING[left][1];
+    close(&during("left_foot"), &one_foot, (y + 0.2 - 0.05).powi(2) * 4.0 / 6.0);
+    gradient_ok(&during("left_foot"), &one_foot);
     close(
         r#"{"op": "self_collision", "limbs": ["left_wrist"], "torso": ["pelvis"], "min_distance_m": 0.3, "axes": "xz"}"#,
         &m,

@@ -9,7 +9,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use super::quantity::{Axes, Condition, FrameRef, FrameSelection, Quantity, Reduce};
+use super::quantity::{Axes, Condition, FrameRange, FrameRef, FrameSelection, Quantity, Reduce};
 use super::scene::{Body, Primitive};
 use super::serde_util::{tag_first_deserialize, JointName, NonEmpty};
 use crate::skeleton::Joint;
@@ -272,8 +272,14 @@ pub struct FootContact {
     /// Foot joints (`left_ankle`, `right_ankle`, `left_foot`, `right_foot`).
     #[schemars(with = "NonEmpty<JointName>")]
     pub feet: NonEmpty<Joint>,
-    /// Frames of contact (of the clip; a speed at the last frame uses the backward difference).
-    pub at: NonEmpty<FrameRef>,
+    /// Frames of contact (of the clip; a speed at the last frame uses the backward difference);
+    /// may be left out when `during` is given.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub at: Vec<FrameRef>,
+    /// A stretch of contact: every frame `from..=to` (with `at`'s frames), e.g. "stand on the
+    /// right foot for two seconds" is the right foot in contact during 40 frames.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub during: Option<FrameRange>,
     /// Height below which a foot counts as on the ground (m).
     #[schemars(range(min = 0.0, max = 100.0))]
     pub max_height_m: f64,

@@ -452,3 +452,27 @@ proptest! {
         }
     }
 }
+
+/// Issue 19: a contact may last a stretch of frames (`during`); it needs frames from somewhere.
+#[test]
+fn foot_contact_takes_single_frames_a_range_or_both() {
+    let program = |contact: &str| {
+        format!(
+            r#"{{"text": "stand on the right foot", "frames": 40, "constraints": [{{"id": "c1", "expr": {{"op": "foot_contact", "feet": ["right_foot"], {contact} "max_height_m": 0.05}}}}]}}"#
+        )
+    };
+    let errors = |contact: &str| TaskProgram::from_json_validated(&program(contact)).err().unwrap_or_default();
+    assert_eq!(errors(r#""during": {"from": {"frame": 5}, "to": "last"},"#), []);
+    assert_eq!(errors(r#""at": ["first"], "during": {"from": "middle", "to": "last"},"#), []);
+    assert_names(&errors(""), "constraints[0].expr", "`at` (single frames), `during` (a range) or both");
+    assert_names(
+        &errors(r#""during": {"from": {"frame": 5}, "to": {"frame": 40}},"#),
+        "constraints[0].expr.during.to.frame",
+        "outside the clip",
+    );
+    assert_names(
+        &errors(r#""during": {"from": "last", "to": "first"},"#),
+        "constraints[0].expr.during",
+        "39..=0 is empty",
+    );
+}

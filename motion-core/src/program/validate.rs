@@ -5,7 +5,7 @@ use std::collections::HashSet;
 
 use super::error::{Problem, ProgramError};
 use super::expr::{Count, Expr, FootContact, SelfCollision};
-use super::quantity::{Condition, FrameRef, FrameSelection, Point, Quantity};
+use super::quantity::{Condition, FrameRange, FrameRef, FrameSelection, Point, Quantity};
 use super::scene::{JointSet, Primitive};
 use super::{RelationalParse, TaskProgram, MAX_FRAMES};
 use crate::limits::{PROGRAM_CONSTRAINTS, PROGRAM_FRAMES, PROGRAM_TEXT_CHARS};
@@ -286,15 +286,17 @@ impl Checker {
                     self.frame_ref(&index(&field(path, "keyframes"), i), *key, n);
                 }
             }
-            FrameSelection::Range(range) => {
-                let at = field(path, "range");
-                self.frame_ref(&field(&at, "from"), range.from, n);
-                self.frame_ref(&field(&at, "to"), range.to, n);
-                if let (Some(from), Some(to)) = (range.from.resolve(n), range.to.resolve(n)) {
-                    if from > to {
-                        self.inconsistent(at, format!("frame range {from}..={to} is empty"));
-                    }
-                }
+            FrameSelection::Range(range) => self.frame_range(&field(path, "range"), range, n),
+        }
+    }
+
+    /// Both ends inside a signal of `n` frames, `from` not after `to`.
+    fn frame_range(&mut self, at: &str, range: &FrameRange, n: u32) {
+        self.frame_ref(&field(at, "from"), range.from, n);
+        self.frame_ref(&field(at, "to"), range.to, n);
+        if let (Some(from), Some(to)) = (range.from.resolve(n), range.to.resolve(n)) {
+            if from > to {
+                self.inconsistent(at, format!("frame range {from}..={to} is empty"));
             }
         }
     }
@@ -517,6 +519,13 @@ impl Checker {
         self.distinct_joints(&feet, &e.feet);
         for (i, frame) in e.at.iter().enumerate() {
             self.frame_ref(&index(&field(path, "at"), i), *frame, self.frames);
+        }
+        match &e.during {
+            Some(range) => self.frame_range(&field(path, "during"), range, self.frames),
+            None if e.at.is_empty() => {
+                self.inconsistent(path, "give the contact frames: `at` (single frames), `during` (a range) or both")
+            }
+            None => {}
         }
         self.number(&field(path, "max_height_m"), e.max_height_m, 0.0, MAX_ABS_M, "m");
         if let Some(speed) = e.max_speed_m_per_s {
