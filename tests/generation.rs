@@ -90,7 +90,8 @@ fn the_foot_clean_up_runs_on_every_output_and_switches_off() {
     use motion_core::quality::tensor_to_poses;
     let (prior, program, compiled) = setup();
     let device = Device::Cpu;
-    let on_config = config(Method::Dno, 4);
+    let mut on_config = config(Method::Dno, 4);
+    on_config.refine.enabled = false;
     let on = generate(&prior, &program, &compiled, &on_config, &device, |_| {}).unwrap();
     let mut off_config = on_config.clone();
     off_config.foot_lock.enabled = false;
@@ -127,4 +128,37 @@ fn the_foot_clean_up_runs_on_every_output_and_switches_off() {
         let bound = before * (1.0 + CONSTRAINT_TOLERANCE_RELATIVE) + CONSTRAINT_TOLERANCE_ABSOLUTE;
         assert!(*after <= bound, "clean-up raised the constraint error {before} to {after}");
     }
+}
+
+#[test]
+fn the_refinement_draws_dno_motions_out_of_the_walls_keeps_bones_rigid_and_switches_off() {
+    use motion_core::metrics::bone_length_range;
+    use motion_core::quality::tensor_to_poses;
+    let (prior, program, compiled) = setup();
+    let device = Device::Cpu;
+    let mut off_config = config(Method::Dno, 12);
+    off_config.refine.enabled = false;
+    off_config.foot_lock.enabled = false;
+    let off = generate(&prior, &program, &compiled, &off_config, &device, |_| {}).unwrap();
+    let mut on_config = off_config.clone();
+    on_config.refine.enabled = true;
+    let on = generate(&prior, &program, &compiled, &on_config, &device, |_| {}).unwrap();
+    let r_off = report(&program, &compiled, &off, &off_config).unwrap();
+    let r_on = report(&program, &compiled, &on, &on_config).unwrap();
+    // Off: the network's motion is written as it is; on: the same motion, refined.
+    assert!(!r_off.cleanup.refine_enabled && r_off.cleanup.refine.iter().all(|r| !r.applied));
+    assert_eq!(r_on.cleanup.before.max_scene_penetration_m, r_off.max_scene_penetration_m);
+    let before = r_off.scene_penetration_per_sample_m.clone().unwrap();
+    let after = r_on.scene_penetration_per_sample_m.clone().unwrap();
+    for ((&b, &a), refined) in before.iter().zip(&after).zip(&r_on.cleanup.refine) {
+        assert!(b > 0.05, "the test needs a motion in the walls, got {b} m");
+        assert!(refined.applied && a < b * 0.5, "penetration {b} → {a} m ({refined:?})");
+        assert!(refined.max_offset_m <= on_config.refine.max_offset_m + 1e-3);
+    }
+    for motion in tensor_to_poses(&on.joints).unwrap() {
+        assert!(bone_length_range(&motion) < 1e-4, "bones stretch {} m", bone_length_range(&motion));
+    }
+    // The unconstrained baseline is never refined.
+    let base = generate(&prior, &program, &compiled, &config(Method::Unconstrained, 0), &device, |_| {}).unwrap();
+    assert!(base.refine.iter().all(|r| !r.applied));
 }

@@ -13,6 +13,7 @@ use crate::metrics::{
 };
 use crate::program::TaskProgram;
 use crate::quality::tensor_to_poses;
+use crate::refine::RefineReport;
 use crate::skeleton::Pose;
 
 /// One constraint's errors.
@@ -62,14 +63,23 @@ pub struct BeforeCleanup {
     pub steps: Option<Vec<usize>>,
 }
 
-/// What the contact-aware clean-up ([`crate::cleanup::foot_lock`]) did to the run.
+/// What the finishing stages did to the run: the kinematic refinement ([`crate::refine`]) and
+/// the contact-aware clean-up ([`crate::cleanup::foot_lock`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CleanupReport {
-    /// Whether it ran (when not, `before` equals the report's own figures).
+    /// Whether the foot clean-up ran (when neither stage ran, `before` equals the report's own
+    /// figures).
     pub enabled: bool,
     /// Per sample: contacts locked, displacements, foot skate before and after.
     pub samples: Vec<FootLockReport>,
-    /// The run's figures before it.
+    /// Whether the refinement ran.
+    #[serde(default)]
+    pub refine_enabled: bool,
+    /// Per sample: whether the refinement was kept, the program's error before and after it and
+    /// the largest joint offset.
+    #[serde(default)]
+    pub refine: Vec<RefineReport>,
+    /// The run's figures before both stages (the network's motion).
     pub before: BeforeCleanup,
 }
 
@@ -259,6 +269,8 @@ pub fn report(
     let cleanup = CleanupReport {
         enabled: config.foot_lock.enabled,
         samples: generated.foot_lock.clone(),
+        refine_enabled: config.refines(),
+        refine: generated.refine.clone(),
         before: BeforeCleanup {
             constraint_error: mean(&raw.per_sample),
             success_rate: raw.success_rate,

@@ -22,6 +22,7 @@ pub mod npy;
 pub mod prior;
 pub mod program;
 pub mod quality;
+pub mod refine;
 pub mod render;
 pub mod representation;
 pub mod rgdno;

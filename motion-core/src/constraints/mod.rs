@@ -242,6 +242,27 @@ impl CompiledProgram {
         proxy
     }
 
+    /// This program without its counting constraints (any constraint with a `steps` or `count`
+    /// term): what a joint-space refinement may act on ([`crate::refine`]), since a count is
+    /// made by the motion's own strides and extrema, not by shifting joints.
+    pub fn without_counts(&self) -> CompiledProgram {
+        let counts = |node: &Node| {
+            let mut found = false;
+            let _ = node.walk(&mut |n| {
+                found |= matches!(n, Node::Count { .. } | Node::Steps { .. });
+                Ok(())
+            });
+            found
+        };
+        let constraints = self.constraints.iter().filter(|c| !counts(&c.node)).cloned().collect();
+        CompiledProgram { frames: self.frames, constraints }
+    }
+
+    /// Whether the program has no constraint.
+    pub fn is_empty(&self) -> bool {
+        self.constraints.is_empty()
+    }
+
     /// Only the constraints with these ids (RG-DNO's subsets `C1`, `C2`, `C_R`); unknown ids are
     /// ignored.
     pub fn subset(&self, ids: &[String]) -> CompiledProgram {
@@ -436,11 +457,12 @@ fn com_outside_support(joints: &Tensor, feet: crate::program::Support, frames: &
     support::signed_distance(&com, &points)
 }
 
-/// A scene constraint's error per sample `[B]` from per-point errors `[B, T, P]`: each frame's
-/// worst point (m, the deepest penetration), then `how` over the frames; `mean` averages over
-/// the frames that violate (a mask without gradient), so a violation keeps its depth however
-/// few frames it lasts and cannot be averaged away by the frames that are clear.
-fn scene_reduce(errors: &Tensor, how: Reduce) -> Result<Tensor> {
+/// A scene or self-collision constraint's error per sample `[B]` from per-point errors
+/// `[B, T, P]`: each frame's worst point (m, the deepest penetration or the closest limb), then
+/// `how` over the frames; `mean` averages over the frames that violate (a mask without
+/// gradient), so a violation keeps its depth however few frames and points it involves and
+/// cannot be averaged away by the frames and points that are clear.
+fn worst_point_reduce(errors: &Tensor, how: Reduce) -> Result<Tensor> {
     let worst = errors.max(D::Minus1)?; // [B, T]
     match how {
         Reduce::Mean => {
@@ -543,7 +565,7 @@ impl Node {
             Node::Steps { target } => (count::soft_step_count(joints)? - *target)?.sqr()?,
             Node::Scene { joints: set, surface, primitive, frames, reduce: how } => {
                 let points = frames.select(&body_points(joints, set, *surface)?)?;
-                scene_reduce(&primitive_error(&points, primitive, false)?, *how)?
+                worst_point_reduce(&primitive_error(&points, primitive, false)?, *how)?
             }
             Node::BoneDirection { joint: j, parent, direction, frames, reduce: how } => {
                 let bone = frames.select(&(joint(joints, *j)? - joint(joints, *parent)?)?)?;
@@ -575,7 +597,7 @@ impl Node {
                 let a = frames.select(&joints.index_select(limbs, 2)?)?.unsqueeze(3)?; // [B, F, L, 1, 3]
                 let b = frames.select(&joints.index_select(torso, 2)?)?.unsqueeze(2)?; // [B, F, 1, K, 3]
                 let distance = norm(&select_axes(&a.broadcast_sub(&b)?, *axes)?)?; // [B, F, L, K]
-                reduce(&(*min_distance - distance)?.relu()?, None, *how)?
+                worst_point_reduce(&(*min_distance - distance)?.relu()?.flatten_from(2)?, *how)?
             }
             Node::ComInSupport { support: feet, margin, frames, reduce: how } => {
                 let distance = com_outside_support(joints, *feet, frames)?;

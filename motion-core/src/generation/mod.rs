@@ -8,10 +8,12 @@
 //! are the compiled program's `Σ wᵢ·Eᵢ` on the joints recovered from the features; terms that
 //! stay near "the initial motion" compare with `G(z0)` (ProgMoGen's `pred_res_0`).
 //!
-//! Every method's motion then goes through the contact-aware clean-up
+//! Every method's motion then goes through the kinematic refinement against the program's
+//! geometric constraints ([`crate::refine`], a bounded smooth offset layer on a rigid skeleton,
+//! switchable off with [`GenerationConfig::refine`]) and the contact-aware clean-up
 //! ([`crate::cleanup::foot_lock`], switchable off with [`GenerationConfig::foot_lock`]): the
-//! returned joints are the cleaned ones, the network's joints are kept beside them so that a
-//! report can give every figure before and after it.
+//! returned joints are the finished ones, the network's joints are kept beside them so that a
+//! report can give every figure before and after both.
 
 mod direct;
 
@@ -32,6 +34,7 @@ use crate::limits;
 use crate::prior::Prior;
 use crate::program::{Primitive, TaskProgram};
 use crate::quality::{poses_to_tensor, tensor_to_poses};
+use crate::refine::{refine, RefineConfig, RefineReport};
 use crate::representation::FEATURE_DIM;
 
 /// A generation method.
@@ -103,9 +106,19 @@ pub struct GenerationConfig {
     /// support (a balance beam, a ground away from y = 0).
     #[serde(default)]
     pub foot_lock: FootLockConfig,
+    /// The kinematic refinement of every method's output against the program's geometric
+    /// constraints ([`crate::refine`]; on by default), before the foot clean-up.
+    #[serde(default)]
+    pub refine: RefineConfig,
 }
 
 impl GenerationConfig {
+    /// Whether the kinematic refinement runs: when switched on, for every method but
+    /// [`Method::Unconstrained`], whose motion ignores the program by definition.
+    pub fn refines(&self) -> bool {
+        self.refine.enabled && self.method != Method::Unconstrained
+    }
+
     /// Settings a run of `frames` frames can use: at least one sample, within
     /// [`limits::BATCH_SAMPLES`] and [`limits::BATCH_ATTENTION`] (checked before any tensor is
     /// made), a finite guidance ≥ 0 and a finite jitter weight ≥ 0.
@@ -125,7 +138,7 @@ impl GenerationConfig {
                 self.jitter_weight
             )));
         }
-        Ok(())
+        self.refine.validate().map_err(GenerationError::Setting)
     }
 }
 
@@ -182,6 +195,7 @@ impl GenerationConfig {
             direct: DirectConfig::default(),
             jitter_weight: default_jitter_weight(),
             foot_lock: FootLockConfig::default(),
+            refine: RefineConfig::default(),
         }
     }
 }
@@ -265,9 +279,12 @@ pub struct Generated {
     pub features: Tensor,
     /// Joint positions `[B, T, 22, 3]` (m, y up) after the clean-up: the output.
     pub joints: Tensor,
-    /// The joints of `features` before the clean-up, `[B, T, 22, 3]` (the same tensor as
-    /// `joints` when the clean-up is off).
+    /// The joints of `features` before the refinement and the clean-up, `[B, T, 22, 3]` (the
+    /// same tensor as `joints` when both are off).
     pub raw_joints: Tensor,
+    /// Per sample, what the kinematic refinement did (its error before and after, the largest
+    /// joint offset).
+    pub refine: Vec<RefineReport>,
     /// Per sample, what the clean-up did (with the foot skate before and after).
     pub foot_lock: Vec<FootLockReport>,
     /// The unconstrained start `G(z0)` as joints, `[B, T, 22, 3]`.
@@ -328,15 +345,17 @@ pub fn generate(
             (run.best.x, history)
         }
     };
-    finish(prior, program, config, features, initial_joints, loss_history, start)
+    finish(prior, program, compiled, config, features, initial_joints, loss_history, start)
 }
 
-/// What every method ends with: the joints of `features`, the clean-up (with its floor
-/// planting off for programs on a raised support) and the [`Generated`] record, timed from
-/// `start`.
+/// What every method ends with: the joints of `features`, the kinematic refinement against
+/// the program, the clean-up (with its floor planting off for programs on a raised support)
+/// and the [`Generated`] record, timed from `start`.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn finish(
     prior: &Prior,
     program: &TaskProgram,
+    compiled: &CompiledProgram,
     config: &GenerationConfig,
     features: Tensor,
     initial_joints: Tensor,
@@ -346,14 +365,18 @@ pub(crate) fn finish(
     ensure_finite(&features, &format!("{}'s motion features", config.method))?;
     let raw_joints = prior.to_joints(&features)?;
     ensure_finite(&raw_joints, &format!("{}'s joint positions", config.method))?;
+    let refine_config = RefineConfig { enabled: config.refines(), ..config.refine.clone() };
+    let (refined, refine) = refine(&raw_joints, compiled, Some(&initial_joints), &refine_config)?;
+    ensure_finite(&refined, "the refinement's joint positions")?;
     let mut lock = config.foot_lock.clone();
     lock.plant_on_floor &= !has_raised_support(program);
-    let (joints, foot_lock) = clean_up(&raw_joints, &lock)?;
+    let (joints, foot_lock) = clean_up(&refined, &lock)?;
     ensure_finite(&joints, "the foot clean-up's joint positions")?;
     Ok(Generated {
         features,
         joints,
         raw_joints,
+        refine,
         foot_lock,
         initial_joints,
         loss_history,

@@ -53,7 +53,9 @@ pub enum Expr {
     /// `loss_foot_both_ends`, `loss_ground_contact`).
     FootContact(FootContact),
     /// Limbs kept away from the torso: per pair and frame `relu(min_distance_m − ‖a − b‖)`
-    /// (RG-DNO `loss_self_collision`, ProgMoGen HSI-5's wrist–pelvis term).
+    /// (RG-DNO `loss_self_collision`, ProgMoGen HSI-5's wrist–pelvis term); each frame's closest
+    /// pair, reduced over the frames as a scene constraint is (mean: over the violating frames),
+    /// so one limb in the torso is not averaged away by the pairs that are clear.
     SelfCollision(SelfCollision),
     /// The centre of mass projected on the ground lies inside the support region, the convex hull
     /// (x, z) of the supporting feet's ankle and foot joints shrunk by `margin_m`: per frame
@@ -307,7 +309,8 @@ pub struct SelfCollision {
     /// Frames the constraint applies to (default: all).
     #[serde(default)]
     pub frames: FrameSelection,
-    /// Reduction over frames and pairs (default: mean).
+    /// Reduction over frames of each frame's closest pair (default: mean, over the frames that
+    /// violate).
     #[serde(default)]
     pub reduce: Reduce,
 }

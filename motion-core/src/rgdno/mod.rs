@@ -415,7 +415,7 @@ pub fn generate_rg_dno(
     seconds.final_round = clock.elapsed().as_secs_f64();
 
     let history = run.history.into_iter().map(|h| h.loss).collect();
-    let generated = finish(prior, program, config, features, initial_joints.clone(), history, start)?;
+    let generated = finish(prior, program, compiled, config, features, initial_joints.clone(), history, start)?;
     let report = RgDnoReport {
         retrieval_set: groups.retrieval,
         random_noise_set: groups.random_noise,
