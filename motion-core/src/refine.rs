@@ -16,7 +16,8 @@
 //!
 //! `L = E_geo(Q) + w_a·Σ_j mean_t ‖D[t+1] − 2D[t] + D[t−1]‖² + w_v·Σ_j mean_t ‖D[t+1] − D[t]‖²
 //!      + w_o·Σ_j mean_t ‖D‖² + w_k·Σ_{trunk bones p→c} mean_t ‖D_c − D_p‖²/ℓ²
-//!      + W·Σ_j mean_t relu(‖D‖ − cap)² + W·Σ_j mean_t relu(min(J_y, 0) − Q_y)²`
+//!      + W·Σ_j mean_t relu(‖D‖ − cap)² + W·Σ_j mean_t relu(min(J_y, 0) − Q_y)²
+//!      + W·Σ_{ankles, toes} mean_t [J_y < 5 cm]·‖D‖²`
 //!
 //! (`D_c − D_p` is the change of a bone vector, `ℓ` its length: the trunk term is the squared
 //! chord of each trunk bone's turn.)
@@ -25,7 +26,8 @@
 //! a count is made by the motion's own strides, never by shifting joints), `W` a fixed steep
 //! weight that keeps every joint within [`RefineConfig::max_offset_m`] of where it was and
 //! above the floor `y = 0` (or no deeper than it was: a crouch bends the knees, it does not sink
-//! the feet). Adam on
+//! the feet), and that holds every ankle and toe that is on the ground (lower than 5 cm) where
+//! it is, so stance feet are neither lifted nor slid. Adam on
 //! `P` with a cosine-decayed step of [`RefineConfig::lr_m`] metres.
 //!
 //! **Honesty.** The layer is bounded and smooth, so it cannot turn a walk into a crawl: a
@@ -40,7 +42,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::constraints::{CompiledProgram, ConstraintError};
 use crate::representation::{rigid_bones, RestSkeleton};
-use crate::skeleton::Joint;
+use crate::skeleton::{Joint, CONTACT_JOINTS};
 use crate::training::AdamW;
 
 /// The trunk's bones, by child joint: their turns are weighted by [`RefineConfig::trunk_stiffness`].
@@ -55,6 +57,9 @@ const TRUNK: [Joint; 9] = [
     Joint::LeftCollar,
     Joint::RightCollar,
 ];
+
+/// An ankle or toe lower than this (m) is on the ground and held in place by the layer.
+const PLANTED_HEIGHT_M: f64 = 0.05;
 
 /// Weight `W` of the hinge on offsets beyond the cap (per m² of excess, summed over joints).
 const CAP_WEIGHT: f64 = 1.0e4;
@@ -198,18 +203,25 @@ pub fn refine(
 
 /// The offset layer's penalty per sample `[B]` for the refined joints `q` `[B, T, 22, 3]` over
 /// the motion `start`, with `D = q − start`: acceleration, velocity, size, trunk turn, the cap
-/// hinge and the floor hinge, each summed over joints and averaged over frames.
+/// hinge, the floor hinge and the planted feet, each summed over joints and averaged over
+/// frames.
 fn layer_penalty(q: &Tensor, start: &Tensor, rest: &RestSkeleton, config: &RefineConfig) -> Result<Tensor> {
     let d = &(q - start)?;
     let frames = d.dim(1)?;
     let per_sample = |t: &Tensor| -> Result<Tensor> { t.sum(D::Minus1)?.sum(D::Minus1)?.mean(D::Minus1) };
     let length = (d.sqr()?.sum_keepdim(D::Minus1)? + 1e-12)?.sqrt()?;
-    // No joint goes below the floor y = 0, nor deeper than it already was.
     let height = |t: &Tensor| t.narrow(D::Minus1, 1, 1);
+    // Feet on the ground stay where they are: an ankle or toe lower than PLANTED_HEIGHT_M
+    // keeps its position (the legs bend above it), so the layer neither lifts nor slides them.
+    let contact = Tensor::new(CONTACT_JOINTS.map(|j| j.index() as u32).as_slice(), d.device())?;
+    let planted = height(&start.index_select(&contact, 2)?)?.lt(PLANTED_HEIGHT_M)?.to_dtype(d.dtype())?;
+    let held = d.index_select(&contact, 2)?.broadcast_mul(&planted)?;
+    // No joint goes below the floor y = 0, nor deeper than it already was.
     let sinking = (height(start)?.minimum(0.0)? - height(q)?)?.relu()?;
     let mut total = ((per_sample(&d.sqr()?)? * config.offset_weight)?
         + (per_sample(&(length - config.max_offset_m)?.relu()?.sqr()?)? * CAP_WEIGHT)?
-        + (per_sample(&sinking.sqr()?)? * CAP_WEIGHT)?)?;
+        + (per_sample(&sinking.sqr()?)? * CAP_WEIGHT)?
+        + (per_sample(&held.sqr()?)? * CAP_WEIGHT)?)?;
     if config.trunk_stiffness > 0.0 {
         let (parents, children): (Vec<u32>, Vec<u32>) =
             TRUNK.iter().filter_map(|&c| Some((c.parent()?.index() as u32, c.index() as u32))).unzip();
@@ -315,9 +327,13 @@ mod tests {
             for j in 0..NUM_JOINTS {
                 assert!(b[j][1] >= a[j][1].min(0.0) - 1e-3, "joint {j} sank through the floor: {}", b[j][1]);
             }
-            // Legs and pelvis keep their motion; the arms carry the change.
-            for j in [0, 1, 2, 4, 5, 7, 8, 10, 11] {
-                assert!(distance(a[j], b[j]) < 0.01, "leg joint {j} moved {} m", distance(a[j], b[j]));
+            // Legs and pelvis keep their motion within 2 cm, the toes on the ground within 2 mm;
+            // the arms carry the change.
+            for j in [0, 1, 2, 4, 5, 7, 8] {
+                assert!(distance(a[j], b[j]) < 0.02, "leg joint {j} moved {} m", distance(a[j], b[j]));
+            }
+            for j in [10, 11] {
+                assert!(distance(a[j], b[j]) < 0.002, "planted toe {j} moved {} m", distance(a[j], b[j]));
             }
         }
         // The layer is smooth: no joint's acceleration grows by more than 5 mm/frame².
