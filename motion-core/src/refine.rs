@@ -163,10 +163,11 @@ pub fn refine(
     let start = joints.detach().to_dtype(DType::F32)?;
     let p = Var::from_tensor(&start)?;
     let mut adam = AdamW::new(vec![p.clone()], 0.0)?;
+    let layer = Layer::new(&start, &rest)?;
     for step in 0..config.steps {
         let q = rigid_bones(p.as_tensor(), &rest)?;
         let objective = (geometric.evaluate(&q.to_dtype(joints.dtype())?, initial)?.total.to_dtype(DType::F32)?
-            + layer_penalty(&q, &start, &rest, config)?)?;
+            + layer.penalty(&q, config)?)?;
         let grads = objective.sum_all()?.backward()?;
         let decay = ((std::f64::consts::PI * step as f64 / config.steps as f64).cos() + 1.0) / 2.0;
         adam.step(&grads, config.lr_m * decay)?;
@@ -201,47 +202,74 @@ pub fn refine(
     Ok((out, reports))
 }
 
-/// The offset layer's penalty per sample `[B]` for the refined joints `q` `[B, T, 22, 3]` over
-/// the motion `start`, with `D = q − start`: acceleration, velocity, size, trunk turn, the cap
-/// hinge, the floor hinge and the planted feet, each summed over joints and averaged over
-/// frames.
-fn layer_penalty(q: &Tensor, start: &Tensor, rest: &RestSkeleton, config: &RefineConfig) -> Result<Tensor> {
-    let d = &(q - start)?;
-    let frames = d.dim(1)?;
-    let per_sample = |t: &Tensor| -> Result<Tensor> { t.sum(D::Minus1)?.sum(D::Minus1)?.mean(D::Minus1) };
-    let length = (d.sqr()?.sum_keepdim(D::Minus1)? + 1e-12)?.sqrt()?;
-    let height = |t: &Tensor| t.narrow(D::Minus1, 1, 1);
-    // Feet on the ground stay where they are: an ankle or toe lower than PLANTED_HEIGHT_M
-    // keeps its position (the legs bend above it), so the layer neither lifts nor slides them.
-    let contact = Tensor::new(CONTACT_JOINTS.map(|j| j.index() as u32).as_slice(), d.device())?;
-    let planted = height(&start.index_select(&contact, 2)?)?.lt(PLANTED_HEIGHT_M)?.to_dtype(d.dtype())?;
-    let held = d.index_select(&contact, 2)?.broadcast_mul(&planted)?;
-    // No joint goes below the floor y = 0, nor deeper than it already was.
-    let sinking = (height(start)?.minimum(0.0)? - height(q)?)?.relu()?;
-    let mut total = ((per_sample(&d.sqr()?)? * config.offset_weight)?
-        + (per_sample(&(length - config.max_offset_m)?.relu()?.sqr()?)? * CAP_WEIGHT)?
-        + (per_sample(&sinking.sqr()?)? * CAP_WEIGHT)?
-        + (per_sample(&held.sqr()?)? * CAP_WEIGHT)?)?;
-    if config.trunk_stiffness > 0.0 {
+/// What the offset layer's penalty compares with, built once from the motion `start`
+/// `[B, T, 22, 3]`: the trunk's bone indices and inverse lengths, the planted feet and the floor
+/// each joint may not go below.
+struct Layer {
+    start: Tensor,
+    contact: Tensor,
+    /// `[B, T, 4, 1]`: 1 where an ankle or toe is lower than [`PLANTED_HEIGHT_M`].
+    planted: Tensor,
+    /// `[B, T, 22, 1]`: `min(J_y, 0)`.
+    floor: Tensor,
+    trunk_parents: Tensor,
+    trunk_children: Tensor,
+    /// `[1, 1, 9, 1]`: 1/ℓ of each trunk bone.
+    trunk_scale: Tensor,
+}
+
+impl Layer {
+    fn new(start: &Tensor, rest: &RestSkeleton) -> Result<Self> {
+        let device = start.device();
+        let height = |t: &Tensor| t.narrow(D::Minus1, 1, 1);
+        let contact = Tensor::new(CONTACT_JOINTS.map(|j| j.index() as u32).as_slice(), device)?;
+        let planted = height(&start.index_select(&contact, 2)?)?.lt(PLANTED_HEIGHT_M)?.to_dtype(start.dtype())?;
         let (parents, children): (Vec<u32>, Vec<u32>) =
             TRUNK.iter().filter_map(|&c| Some((c.parent()?.index() as u32, c.index() as u32))).unzip();
-        let inverse_lengths: Vec<f32> =
-            TRUNK.iter().map(|&c| (1.0 / rest.bone_lengths_m[c.index()].max(1e-3)) as f32).collect();
-        let pick = |list: Vec<u32>| -> Result<Tensor> { d.index_select(&Tensor::new(list, d.device())?, 2) };
-        let turn = (pick(children)? - pick(parents)?)?;
-        let scale = Tensor::from_vec(inverse_lengths, (1, 1, TRUNK.len(), 1), d.device())?.to_dtype(d.dtype())?;
-        let turn = turn.broadcast_mul(&scale)?;
-        total = (total + (per_sample(&turn.sqr()?)? * config.trunk_stiffness)?)?;
+        let inverse_lengths: Vec<f64> = TRUNK.iter().map(|&c| 1.0 / rest.bone_lengths_m[c.index()].max(1e-3)).collect();
+        Ok(Self {
+            start: start.clone(),
+            floor: height(start)?.minimum(0.0)?,
+            planted,
+            contact,
+            trunk_parents: Tensor::new(parents, device)?,
+            trunk_children: Tensor::new(children, device)?,
+            trunk_scale: Tensor::from_vec(inverse_lengths, (1, 1, TRUNK.len(), 1), device)?.to_dtype(start.dtype())?,
+        })
     }
-    if frames >= 2 {
-        let velocity = (d.narrow(1, 1, frames - 1)? - d.narrow(1, 0, frames - 1)?)?;
-        total = (total + (per_sample(&velocity.sqr()?)? * config.velocity_weight)?)?;
-        if frames >= 3 {
-            let acceleration = (velocity.narrow(1, 1, frames - 2)? - velocity.narrow(1, 0, frames - 2)?)?;
-            total = (total + (per_sample(&acceleration.sqr()?)? * config.acceleration_weight)?)?;
+
+    /// The penalty per sample `[B]` for the refined joints `q` `[B, T, 22, 3]`, with
+    /// `D = q − start`: acceleration, velocity, size, trunk turn, the cap hinge, the floor hinge
+    /// and the planted feet, each summed over joints and averaged over frames.
+    fn penalty(&self, q: &Tensor, config: &RefineConfig) -> Result<Tensor> {
+        let d = &(q - &self.start)?;
+        let frames = d.dim(1)?;
+        let per_sample = |t: &Tensor| -> Result<Tensor> { t.sum(D::Minus1)?.sum(D::Minus1)?.mean(D::Minus1) };
+        let length = (d.sqr()?.sum_keepdim(D::Minus1)? + 1e-12)?.sqrt()?;
+        // Feet on the ground stay where they are: an ankle or toe lower than PLANTED_HEIGHT_M
+        // keeps its position (the legs bend above it), so the layer neither lifts nor slides them.
+        let held = d.index_select(&self.contact, 2)?.broadcast_mul(&self.planted)?;
+        // No joint goes below the floor y = 0, nor deeper than it already was.
+        let sinking = (&self.floor - q.narrow(D::Minus1, 1, 1)?)?.relu()?;
+        let mut total = ((per_sample(&d.sqr()?)? * config.offset_weight)?
+            + (per_sample(&(length - config.max_offset_m)?.relu()?.sqr()?)? * CAP_WEIGHT)?
+            + (per_sample(&sinking.sqr()?)? * CAP_WEIGHT)?
+            + (per_sample(&held.sqr()?)? * CAP_WEIGHT)?)?;
+        if config.trunk_stiffness > 0.0 {
+            let turn = (d.index_select(&self.trunk_children, 2)? - d.index_select(&self.trunk_parents, 2)?)?;
+            let turn = turn.broadcast_mul(&self.trunk_scale)?;
+            total = (total + (per_sample(&turn.sqr()?)? * config.trunk_stiffness)?)?;
         }
+        if frames >= 2 {
+            let velocity = (d.narrow(1, 1, frames - 1)? - d.narrow(1, 0, frames - 1)?)?;
+            total = (total + (per_sample(&velocity.sqr()?)? * config.velocity_weight)?)?;
+            if frames >= 3 {
+                let acceleration = (velocity.narrow(1, 1, frames - 2)? - velocity.narrow(1, 0, frames - 2)?)?;
+                total = (total + (per_sample(&acceleration.sqr()?)? * config.acceleration_weight)?)?;
+            }
+        }
+        Ok(total)
     }
-    Ok(total)
 }
 
 fn per_sample(t: &Tensor) -> Result<Vec<f64>> {
@@ -397,7 +425,7 @@ mod tests {
         // Every joint 0.1 m lower: the feet go under the floor, so the floor hinge is active too.
         let lowered =
             (&q - Tensor::new(&[0.0, 0.1, 0.0], &Device::Cpu).unwrap().broadcast_as(q.shape()).unwrap()).unwrap();
-        finite_difference_check(&lowered, |q| layer_penalty(q, &motion, &rest, &config)?.sum_all(), 1e-6, 1e-4)
-            .unwrap();
+        let layer = Layer::new(&motion, &rest).unwrap();
+        finite_difference_check(&lowered, |q| layer.penalty(q, &config)?.sum_all(), 1e-6, 1e-4).unwrap();
     }
 }
