@@ -84,7 +84,16 @@ enum ReportCommand {
 /// Runs the command; an error is printed as its chain of causes (`what: why: ...`, a cause
 /// whose message its parent already quotes is not repeated), without a backtrace even when
 /// `RUST_BACKTRACE` is set, and the exit status is 1.
+///
+/// Library errors (candle's among them) capture a backtrace into their message when
+/// `RUST_BACKTRACE` is set, unless `RUST_LIB_BACKTRACE` says otherwise: it is set to 0 here
+/// when the user has not set it, so a damaged prior file reads as one line while a panic still
+/// prints its backtrace.
 fn main() -> ExitCode {
+    if std::env::var_os("RUST_LIB_BACKTRACE").is_none() {
+        // Before any thread starts and before any backtrace is captured.
+        std::env::set_var("RUST_LIB_BACKTRACE", "0");
+    }
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {

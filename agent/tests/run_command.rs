@@ -97,3 +97,40 @@ fn progress_goes_to_a_log_and_errors_carry_no_backtrace() {
     assert!(stderr.starts_with("error: cannot read the task file: ") && stderr.contains("missing.json"), "{stderr}");
     assert!(!stderr.to_lowercase().contains("backtrace") && stderr.lines().count() == 1, "{stderr}");
 }
+
+/// A prior file whose header disagrees with its tensors (here `latent_dim` 64 over 128-wide
+/// weights) is a user error: one line naming the file and the tensor, no backtrace, even with
+/// `RUST_BACKTRACE` set (candle captures one into the error's message otherwise), and nothing
+/// written.
+#[test]
+fn a_damaged_prior_is_one_line_without_a_backtrace() {
+    let shipped = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures/model/prior.safetensors")).unwrap();
+    let n = usize::try_from(u64::from_le_bytes(shipped[..8].try_into().unwrap())).unwrap();
+    let mut header: serde_json::Value = serde_json::from_slice(&shipped[8..8 + n]).unwrap();
+    let meta = &mut header["__metadata__"];
+    let mut config: serde_json::Value = serde_json::from_str(meta["mdm_config"].as_str().unwrap()).unwrap();
+    config["latent_dim"] = 64.into();
+    meta["mdm_config"] = config.to_string().into();
+    let mut text = header.to_string().into_bytes();
+    text.resize(text.len().div_ceil(8) * 8, b' ');
+    let mut bytes = (text.len() as u64).to_le_bytes().to_vec();
+    bytes.extend_from_slice(&text);
+    bytes.extend_from_slice(&shipped[8 + n..]);
+    let dir = tempfile::tempdir().unwrap();
+    let prior = dir.path().join("damaged.safetensors");
+    std::fs::write(&prior, bytes).unwrap();
+    let out = dir.path().join("out");
+
+    let output = Command::new(env!("CARGO_BIN_EXE_mogen"))
+        .args(["sample", "a person walks forward", "--prior", &prior.display().to_string()])
+        .args(["-o", &out.display().to_string()])
+        .env("RUST_BACKTRACE", "1")
+        .env_remove("RUST_LIB_BACKTRACE")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("damaged.safetensors") && stderr.contains("shape mismatch"), "{stderr}");
+    assert!(stderr.lines().count() == 1 && !stderr.contains("error.rs"), "{stderr}");
+    assert!(!out.exists(), "an output folder was written for a failed run");
+}
