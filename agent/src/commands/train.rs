@@ -78,6 +78,10 @@ pub struct TrainArgs {
     ff_size: Option<usize>,
     #[arg(long)]
     layers: Option<usize>,
+    /// Dropout inside the denoiser while training, in [0, 1) (MDM's 0.1; the shipped prior was
+    /// trained with 0, which let it learn the turning labels: see the model card).
+    #[arg(long, default_value_t = MdmConfig::small().dropout, value_parser = super::flags::fraction)]
+    dropout: f64,
     /// What the network's output head predicts: `x0` (MDM) or `velocity` (v = √ᾱ·ε − √(1−ᾱ)·x0;
     /// x̂0 stays close to a lightly noised input).
     #[arg(long, default_value_t = MdmConfig::small().prediction)]
@@ -103,6 +107,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         ff_size: args.ff_size.unwrap_or(small.ff_size),
         num_layers: args.layers.unwrap_or(small.num_layers),
         prediction: args.prediction,
+        dropout: args.dropout,
         ..small
     };
     let config = TrainConfig {
