@@ -1,6 +1,7 @@
 //! Scene primitives as per-point errors: points `[B, T, P, 3]` → `[B, T, P]` (m, or m² for the
-//! balance beam). Formulas are documented on [`Primitive`]'s variants. Gates (`z_range_m`) test
-//! each point's own z without gradient, as ProgMoGen's if-else frame selection does.
+//! balance beam). Formulas are documented on [`Primitive`]'s variants. Gates (`z_range_m`,
+//! `x_range_m`, a beam's `extent_m`) test each point's own coordinate without gradient, as
+//! ProgMoGen's if-else frame selection does.
 
 use candle_core::{Result, Tensor, D};
 
@@ -18,13 +19,13 @@ pub fn primitive_error(points: &Tensor, primitive: &Primitive, physical: bool) -
             let error = ((coord(0)? - *centre_x_m)?.abs()? - half)?.relu()?;
             gate(error, &coord(2)?, *z_range_m)
         }
-        Primitive::OverheadBarrier(OverheadBarrier { underside_height_m, margin_m, z_range_m }) => {
+        Primitive::OverheadBarrier(OverheadBarrier { underside_height_m, margin_m, z_range_m, x_range_m }) => {
             let error = (coord(1)? - (underside_height_m - margin(*margin_m)))?.relu()?;
-            gate(error, &coord(2)?, Some(*z_range_m))
+            gate(gate(error, &coord(2)?, Some(*z_range_m))?, &coord(0)?, *x_range_m)
         }
-        Primitive::Hurdle(Hurdle { height_m, margin_m, z_range_m }) => {
+        Primitive::Hurdle(Hurdle { height_m, margin_m, z_range_m, x_range_m }) => {
             let error = ((height_m + margin(*margin_m)) - coord(1)?)?.relu()?;
-            gate(error, &coord(2)?, Some(*z_range_m))
+            gate(gate(error, &coord(2)?, Some(*z_range_m))?, &coord(0)?, *x_range_m)
         }
         Primitive::Ground(Ground { height_m }) => (*height_m - coord(1)?)?.relu(),
         Primitive::InsideBox(InsideBox { x_range_m, y_range_m, z_range_m }) => {
@@ -43,11 +44,21 @@ pub fn primitive_error(points: &Tensor, primitive: &Primitive, physical: bool) -
             let signed = dot(&points.broadcast_sub(&origin)?, &n)?;
             (margin(*margin_m) - signed)?.relu()
         }
-        Primitive::BalanceBeam(BalanceBeam { point_m, direction, half_width_m }) => {
-            let origin = constant(point_m, points.dtype(), points.device())?;
-            let d = constant(&unit(*direction), points.dtype(), points.device())?;
-            let distance = norm(&cross(&points.broadcast_sub(&origin)?, &d)?)?;
-            (distance - *half_width_m)?.relu()?.sqr()
+        Primitive::BalanceBeam(BalanceBeam { point_m, direction, half_width_m, horizontal, extent_m }) => {
+            let (origin, direction) = match horizontal {
+                true => ([point_m[0], 0.0, point_m[2]], [direction[0], 0.0, direction[2]]),
+                false => (*point_m, *direction),
+            };
+            let flat = match horizontal {
+                true => constant(&[1.0, 0.0, 1.0], points.dtype(), points.device())?,
+                false => constant(&[1.0; 3], points.dtype(), points.device())?,
+            };
+            let origin = constant(&origin, points.dtype(), points.device())?;
+            let d = constant(&unit(direction), points.dtype(), points.device())?;
+            let offset = points.broadcast_mul(&flat)?.broadcast_sub(&origin)?;
+            let distance = norm(&cross(&offset, &d)?)?;
+            let error = (distance - *half_width_m)?.relu()?.sqr()?;
+            gate(error, &dot(&offset, &d)?, *extent_m)
         }
     }
 }
@@ -58,10 +69,11 @@ pub fn is_obstacle(primitive: &Primitive) -> bool {
     !matches!(primitive, Primitive::BalanceBeam(_))
 }
 
-/// Zeroes the error of points whose z lies outside `range` (strictly inside counts).
-fn gate(error: Tensor, z: &Tensor, range: Option<[f64; 2]>) -> Result<Tensor> {
+/// Zeroes the error of points whose coordinate `c` (`[B, T, P]`: z, x, or the position along a
+/// beam) lies outside `range` (strictly inside counts); no gradient flows through the gate.
+fn gate(error: Tensor, c: &Tensor, range: Option<[f64; 2]>) -> Result<Tensor> {
     let Some([lo, hi]) = range else { return Ok(error) };
-    let z = z.detach();
-    let inside = (z.gt(lo)?.to_dtype(error.dtype())? * z.lt(hi)?.to_dtype(error.dtype())?)?;
+    let c = c.detach();
+    let inside = (c.gt(lo)?.to_dtype(error.dtype())? * c.lt(hi)?.to_dtype(error.dtype())?)?;
     error * inside
 }

@@ -319,6 +319,60 @@ fn scene_primitives_on_joints() {
     );
 }
 
+/// Scene primitives on part of the path (issue 19): a table (an overhead barrier with an x
+/// extent), a hurdle with one, a beam on the floor measured in the ground plane and a beam along
+/// part of the walk. The standing pose's head is at x = 0, y = 1.6; its left toe at x = 0.1,
+/// y = 0.02, z = 0, 0.05, … 0.2 over the 5 frames.
+#[test]
+fn scene_primitives_limited_to_a_stretch() {
+    let m = glide(5);
+    let scene = |joint: &str, primitive: &str, reduce: &str| {
+        format!(
+            r#"{{"op": "scene", "body": {{"joints": {{"only": ["{joint}"]}}}}, "primitive": {primitive}, "reduce": "{reduce}"}}"#
+        )
+    };
+    let table = |x: &str| {
+        format!(
+            r#"{{"kind": "overhead_barrier", "underside_height_m": 1.5, "z_range_m": [-1.0, 10.0], "x_range_m": {x}}}"#
+        )
+    };
+    // A table beside the path does not touch the head; one over it does (0.1 m in).
+    close(&scene("head", &table("[0.5, 1.5]"), "mean"), &m, 0.0);
+    close(&scene("head", &table("[-0.5, 0.5]"), "mean"), &m, 0.1);
+    // A foot standing inside a hurdle 0.1 m high is 0.08 m in it; beside it, clear.
+    let hurdle =
+        |x: &str| format!(r#"{{"kind": "hurdle", "height_m": 0.1, "z_range_m": [-1.0, 10.0], "x_range_m": {x}}}"#);
+    close(&scene("left_foot", &hurdle("[0.0, 0.3]"), "mean"), &m, 0.08);
+    close(&scene("left_foot", &hurdle("[0.3, 0.6]"), "mean"), &m, 0.0);
+    // A line on the floor under the left toe: in 3-D the toe, 2 cm up, is off it by 2 cm, and
+    // lifted 20 cm by 22 cm; measured in the ground plane it stays on the line.
+    let line = |horizontal: bool| {
+        format!(
+            r#"{{"kind": "balance_beam", "point_m": [0.1, 0.0, 0.0], "direction": [0.0, 0.0, 1.0], "horizontal": {horizontal}}}"#
+        )
+    };
+    let mut lifted = glide(5);
+    for pose in &mut lifted {
+        pose[Joint::LeftFoot.index()][1] += 0.2;
+    }
+    close(&scene("left_foot", &line(false), "mean"), &m, 0.02f64.powi(2));
+    close(&scene("left_foot", &line(false), "mean"), &lifted, 0.22f64.powi(2));
+    close(&scene("left_foot", &line(true), "mean"), &lifted, 0.0);
+    // A beam 10 cm to the toe's right along 0.07 < z < 0.17 only: frames 2 and 3 are tested, each
+    // (0.1 − 0.05)² off it.
+    let stretch = |extent: &str| {
+        format!(
+            r#"{{"kind": "balance_beam", "point_m": [0.0, 0.0, 0.0], "direction": [0.0, 0.0, 1.0], "half_width_m": 0.05, "horizontal": true{extent}}}"#
+        )
+    };
+    close(&scene("left_foot", &stretch(""), "sum"), &m, 5.0 * 0.05f64.powi(2));
+    close(&scene("left_foot", &stretch(r#", "extent_m": [0.07, 0.17]"#), "sum"), &m, 2.0 * 0.05f64.powi(2));
+    // A beam on the floor needs a horizontal direction.
+    let upright = r#"{"text": "", "frames": 5, "constraints": [{"id": "c1", "expr": {"op": "scene", "body": {"joints": "all"}, "primitive": {"kind": "balance_beam", "point_m": [0.0, 0.0, 0.0], "direction": [0.0, 1.0, 0.0], "horizontal": true}}}]}"#;
+    let error = format!("{:?}", TaskProgram::from_json_validated(upright).unwrap_err());
+    assert!(error.contains("direction") && error.contains("horizontal"), "{error}");
+}
+
 /// The scene error is the depth of the worst point, whatever the number of clear points and
 /// frames around it: a head 0.3 m into a barrier for 2 frames of 100 costs 0.3, more than a
 /// head 0.1 m in for all 100, and a deeper violation always costs more.
@@ -469,6 +523,8 @@ fn every_primitive_has_the_finite_difference_gradient() {
         r#"{"op": "scene", "body": {"joints": "all"}, "primitive": {"kind": "inside_box", "x_range_m": [-0.15, 0.15], "y_range_m": [0.0, 1.5], "z_range_m": [0.0, 0.2]}}"#.into(),
         r#"{"op": "scene", "body": {"joints": "all"}, "primitive": {"kind": "wall", "point_m": [0.0, 0.0, 0.3], "normal": [0.2, 0.0, -1.0], "margin_m": 0.1}}"#.into(),
         r#"{"op": "scene", "body": {"joints": {"only": ["left_foot", "right_foot"]}}, "primitive": {"kind": "balance_beam", "point_m": [0.5, 0.1, 0.4], "direction": [0.4, 0.0, 1.0]}}"#.into(),
+        r#"{"op": "scene", "body": {"joints": {"only": ["left_foot", "right_foot"]}}, "primitive": {"kind": "balance_beam", "point_m": [0.5, 0.1, 0.4], "direction": [0.4, 0.0, 1.0], "horizontal": true, "extent_m": [-1.0, 0.1]}}"#.into(),
+        r#"{"op": "scene", "body": {"joints": "all", "surface": true}, "primitive": {"kind": "overhead_barrier", "underside_height_m": 1.3, "z_range_m": [-1.0, 3.0], "x_range_m": [-0.1, 0.3]}}"#.into(),
         r#"{"op": "bone_direction", "joint": "left_elbow", "direction": [1.0, 0.0, 1.0]}"#.into(),
         r#"{"op": "foot_contact", "feet": ["left_foot", "right_ankle"], "at": ["first", "last"], "max_height_m": 0.01, "max_speed_m_per_s": 0.2}"#.into(),
         r#"{"op": "self_collision", "limbs": ["left_wrist", "right_elbow"], "torso": ["pelvis", "spine2"], "min_distance_m": 0.35, "axes": "xyz"}"#.into(),

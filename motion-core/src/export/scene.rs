@@ -153,21 +153,23 @@ pub fn scene_boxes(primitives: &[Primitive], targets: &[PositionTarget], extent:
             }
             Primitive::OverheadBarrier(bar) => {
                 let [z0, z1] = bar.z_range_m;
+                let [x0, x1] = bar.x_range_m.unwrap_or(x_span);
                 let y = bar.underside_height_m;
                 out.push(aligned(
                     "overhead barrier".into(),
                     SceneRole::Obstacle,
-                    DVec3::new(x_span[0], y, z0),
-                    DVec3::new(x_span[1], y + THICKNESS_M, z1),
+                    DVec3::new(x0, y, z0),
+                    DVec3::new(x1, y + THICKNESS_M, z1),
                 ));
             }
             Primitive::Hurdle(hurdle) => {
                 let [z0, z1] = hurdle.z_range_m;
+                let [x0, x1] = hurdle.x_range_m.unwrap_or(x_span);
                 out.push(aligned(
                     "hurdle".into(),
                     SceneRole::Obstacle,
-                    DVec3::new(x_span[0], 0.0, z0),
-                    DVec3::new(x_span[1], hurdle.height_m, z1),
+                    DVec3::new(x0, 0.0, z0),
+                    DVec3::new(x1, hurdle.height_m, z1),
                 ));
             }
             Primitive::Ground(_) => {}
@@ -208,8 +210,11 @@ pub fn scene_boxes(primitives: &[Primitive], targets: &[PositionTarget], extent:
             }
             Primitive::BalanceBeam(beam) => {
                 let direction = DVec3::from_array(beam.direction).try_normalize().unwrap_or(DVec3::Z);
-                let point = DVec3::from_array(beam.point_m);
-                let length = (extent.max_m - extent.min_m).length() + 2.0 * PAD_M;
+                // A stretch of the beam, or an endless one drawn as long as the scene.
+                let (point, length) = match beam.extent_m {
+                    Some([from, to]) => (DVec3::from_array(beam.point_m) + direction * ((from + to) / 2.0), to - from),
+                    None => (DVec3::from_array(beam.point_m), (extent.max_m - extent.min_m).length() + 2.0 * PAD_M),
+                };
                 let half_width = if beam.half_width_m > 0.0 { beam.half_width_m } else { LINE_BEAM_HALF_WIDTH_M };
                 let rotation = DQuat::from_rotation_arc(DVec3::Z, direction);
                 // The beam's top surface on its centre line.
@@ -244,7 +249,7 @@ pub fn scene_boxes(primitives: &[Primitive], targets: &[PositionTarget], extent:
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::program::{Gap, OverheadBarrier};
+    use crate::program::{BalanceBeam, Gap, OverheadBarrier};
 
     fn extent() -> SceneExtent {
         SceneExtent { min_m: DVec3::new(-0.3, 0.0, 0.0), max_m: DVec3::new(0.3, 1.7, 5.0) }
@@ -267,6 +272,7 @@ mod tests {
             underside_height_m: 0.5,
             margin_m: 0.0,
             z_range_m: [2.0, 3.0],
+            x_range_m: None,
         });
         let boxes = scene_boxes(&[bar], &[], extent());
         let b = &boxes[0];
@@ -275,6 +281,30 @@ mod tests {
             b.centre_m[0] - b.half_extents_m[0] <= -1.3 + 1e-12 && b.centre_m[0] + b.half_extents_m[0] >= 1.3 - 1e-12
         );
         assert_eq!(b.role, SceneRole::Obstacle);
+    }
+
+    #[test]
+    fn a_table_covers_its_x_range_and_a_beam_its_stretch() {
+        let table = Primitive::OverheadBarrier(OverheadBarrier {
+            underside_height_m: 1.0,
+            margin_m: 0.0,
+            z_range_m: [3.2, 3.8],
+            x_range_m: Some([-1.0, 0.1]),
+        });
+        let beam = Primitive::BalanceBeam(BalanceBeam {
+            point_m: [0.0, 0.0, 0.0],
+            direction: [0.0, 0.0, 1.0],
+            half_width_m: 0.1,
+            horizontal: true,
+            extent_m: Some([1.0, 3.0]),
+        });
+        let boxes = scene_boxes(&[table, beam], &[], extent());
+        let t = &boxes[0];
+        assert!((t.centre_m[0] - t.half_extents_m[0] + 1.0).abs() < 1e-12);
+        assert!((t.centre_m[0] + t.half_extents_m[0] - 0.1).abs() < 1e-12);
+        let b = &boxes[1];
+        // Centred on its stretch (z from 1 to 3 m along +z) and as long as it.
+        assert!((b.centre_m[2] - 2.0).abs() < 1e-12 && (b.half_extents_m[2] - 1.0).abs() < 1e-12, "{b:?}");
     }
 
     #[test]

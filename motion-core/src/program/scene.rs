@@ -38,7 +38,8 @@ pub enum JointSet {
 }
 
 /// A scene primitive. Lengths in metres; `margin_m` (≥ 0) keeps points that much further from
-/// the obstacle; `z_range_m` = `[min, max]` gates by each point's z (absent: the whole path).
+/// the obstacle; `z_range_m` = `[min, max]` gates by each point's z (absent: the whole path), and
+/// `x_range_m` likewise by x where a primitive has one (a table is an overhead barrier with both).
 #[derive(Debug, Clone, PartialEq, Serialize, JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Primitive {
@@ -47,10 +48,10 @@ pub enum Primitive {
     /// on x; RG-DNO Task-1).
     Gap(Gap),
     /// A barrier whose underside is at `underside_height_m`: error `relu(y − (h − margin_m))` for
-    /// points inside `z_range_m` (HSI-4, RG-DNO Task-2).
+    /// points inside `z_range_m` (and `x_range_m` when given: a table top) (HSI-4, RG-DNO Task-2).
     OverheadBarrier(OverheadBarrier),
     /// A hurdle of `height_m` standing on the ground: error `relu(h + margin_m − y)` for points
-    /// inside `z_range_m` (they must pass above it).
+    /// inside `z_range_m` (and `x_range_m` when given) (they must pass above it).
     Hurdle(Hurdle),
     /// The ground `y = height_m`: error `relu(height_m − y)`.
     Ground(Ground),
@@ -62,7 +63,10 @@ pub enum Primitive {
     Wall(Wall),
     /// A balance beam: the line through `point_m` along `direction`; error
     /// `relu(distance_to_line − half_width_m)²` (GEO-2 with `half_width_m` 0, squared as
-    /// ProgMoGen's `loss_distance_3d_point_line`).
+    /// ProgMoGen's `loss_distance_3d_point_line`). With `horizontal` the distance is taken in the
+    /// ground plane (x, z), so a foot lifted above the beam is still on it; with `extent_m` only
+    /// points whose position along the beam lies inside it are tested (a beam along part of the
+    /// path).
     BalanceBeam(BalanceBeam),
 }
 
@@ -110,6 +114,10 @@ pub struct OverheadBarrier {
     /// Where the barrier is along z (m).
     #[schemars(inner(range(min = -100.0, max = 100.0)))]
     pub z_range_m: [f64; 2],
+    /// Where the barrier is across, along x (m); absent: it spans the whole width.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(inner(inner(range(min = -100.0, max = 100.0))))]
+    pub x_range_m: Option<[f64; 2]>,
 }
 
 /// Fields of [`Primitive::Hurdle`].
@@ -126,6 +134,10 @@ pub struct Hurdle {
     /// Where the hurdle is along z (m).
     #[schemars(inner(range(min = -100.0, max = 100.0)))]
     pub z_range_m: [f64; 2],
+    /// Where the hurdle is across, along x (m); absent: it spans the whole width.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(inner(inner(range(min = -100.0, max = 100.0))))]
+    pub x_range_m: Option<[f64; 2]>,
 }
 
 /// Fields of [`Primitive::Ground`].
@@ -184,4 +196,13 @@ pub struct BalanceBeam {
     #[serde(default)]
     #[schemars(range(min = 0.0, max = 100.0))]
     pub half_width_m: f64,
+    /// Measure the distance in the ground plane (x, z) only: a beam on the floor, where lifting
+    /// the swing foot does not leave it. The direction then needs a horizontal part.
+    #[serde(default)]
+    pub horizontal: bool,
+    /// `[from, to]`: the stretch of the beam, in metres along `direction` from `point_m`; points
+    /// beyond it are not tested. Absent: an endless line.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(inner(inner(range(min = -100.0, max = 100.0))))]
+    pub extent_m: Option<[f64; 2]>,
 }

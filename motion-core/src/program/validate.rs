@@ -472,11 +472,17 @@ impl Checker {
                     self.inconsistent(at("margin_m"), "the margin leaves no room under the barrier");
                 }
                 self.interval_m(&at("z_range_m"), &barrier.z_range_m);
+                if let Some(range) = &barrier.x_range_m {
+                    self.interval_m(&at("x_range_m"), range);
+                }
             }
             Primitive::Hurdle(hurdle) => {
                 self.number(&at("height_m"), hurdle.height_m, 0.0, MAX_ABS_M, "m");
                 self.number(&at("margin_m"), hurdle.margin_m, 0.0, MAX_ABS_M, "m");
                 self.interval_m(&at("z_range_m"), &hurdle.z_range_m);
+                if let Some(range) = &hurdle.x_range_m {
+                    self.interval_m(&at("x_range_m"), range);
+                }
             }
             Primitive::Ground(ground) => {
                 self.number(&at("height_m"), ground.height_m, -MAX_ABS_M, MAX_ABS_M, "m");
@@ -501,6 +507,13 @@ impl Checker {
                 self.point_m(&at("point_m"), &beam.point_m);
                 self.direction(&at("direction"), &beam.direction);
                 self.number(&at("half_width_m"), beam.half_width_m, 0.0, MAX_ABS_M, "m");
+                let [dx, _, dz] = beam.direction;
+                if beam.horizontal && beam.direction.iter().all(|v| v.is_finite()) && dx.hypot(dz) < 1e-6 {
+                    self.inconsistent(at("direction"), "a horizontal beam needs a direction with an x or z part");
+                }
+                if let Some(range) = &beam.extent_m {
+                    self.interval_m(&at("extent_m"), range);
+                }
             }
         }
     }

@@ -406,6 +406,7 @@ mod tests {
             underside_height_m: 1.5,
             margin_m: 0.0,
             z_range_m: [2.0, 2.5],
+            x_range_m: None,
         });
         let out = tempfile::tempdir().unwrap();
         let path = out.path().join("motion.gif");

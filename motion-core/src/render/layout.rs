@@ -291,6 +291,9 @@ fn scene_x_range(p: &Primitive) -> Option<[f64; 2]> {
     match p {
         Primitive::Gap(Gap { centre_x_m, width_m, .. }) => Some([centre_x_m - width_m, centre_x_m + width_m]),
         Primitive::InsideBox(InsideBox { x_range_m, .. }) => *x_range_m,
+        Primitive::OverheadBarrier(OverheadBarrier { x_range_m, .. }) | Primitive::Hurdle(Hurdle { x_range_m, .. }) => {
+            *x_range_m
+        }
         Primitive::Wall(Wall { point_m, normal, .. }) if normal[0].abs() > 0.9 => Some([point_m[0]; 2]),
         _ => None,
     }
@@ -306,7 +309,8 @@ fn side_box(p: &Primitive, top_y: f64) -> Option<(f64, f64, [f64; 2])> {
 }
 
 /// A primitive's solid parts in the top view, each ([z0, z1], [x0, x1]), m: both walls of a
-/// gap, the outside of a box's x range, a wall's slab 5 cm thick.
+/// gap, the outside of a box's x range, a wall's slab 5 cm thick, the footprint of a barrier or
+/// hurdle that covers part of the width (one spanning it is drawn in the side view only).
 fn top_boxes(p: &Primitive, z: (f64, f64), x: (f64, f64)) -> Vec<([f64; 2], [f64; 2])> {
     match p {
         Primitive::Gap(g) => {
@@ -323,6 +327,8 @@ fn top_boxes(p: &Primitive, z: (f64, f64), x: (f64, f64)) -> Vec<([f64; 2], [f64
             let zr = z_range_m.unwrap_or([z.0, z.1]);
             vec![(zr, [x.0, *lo]), (zr, [*hi, x.1])]
         }
+        Primitive::OverheadBarrier(OverheadBarrier { x_range_m: Some(xr), z_range_m, .. })
+        | Primitive::Hurdle(Hurdle { x_range_m: Some(xr), z_range_m, .. }) => vec![(*z_range_m, *xr)],
         _ => Vec::new(),
     }
 }

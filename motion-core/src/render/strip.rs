@@ -63,6 +63,7 @@ mod tests {
             underside_height_m: 1.2,
             margin_m: 0.0,
             z_range_m: [2.0, 3.0],
+            x_range_m: None,
         });
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("strip.png");
