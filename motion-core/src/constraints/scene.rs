@@ -45,20 +45,21 @@ pub fn primitive_error(points: &Tensor, primitive: &Primitive, physical: bool) -
             (margin(*margin_m) - signed)?.relu()
         }
         Primitive::BalanceBeam(BalanceBeam { point_m, direction, half_width_m, horizontal, extent_m }) => {
-            let (origin, direction) = match horizontal {
-                true => ([point_m[0], 0.0, point_m[2]], [direction[0], 0.0, direction[2]]),
-                false => (*point_m, *direction),
+            // On a horizontal beam every point, the beam and its direction are dropped onto the
+            // ground plane (y = 0), so the distance is measured in x and z only.
+            let (offset, direction) = if *horizontal {
+                let flat = constant(&[1.0, 0.0, 1.0], points.dtype(), points.device())?;
+                let origin = constant(&[point_m[0], 0.0, point_m[2]], points.dtype(), points.device())?;
+                (points.broadcast_mul(&flat)?.broadcast_sub(&origin)?, [direction[0], 0.0, direction[2]])
+            } else {
+                (points.broadcast_sub(&constant(point_m, points.dtype(), points.device())?)?, *direction)
             };
-            let flat = match horizontal {
-                true => constant(&[1.0, 0.0, 1.0], points.dtype(), points.device())?,
-                false => constant(&[1.0; 3], points.dtype(), points.device())?,
-            };
-            let origin = constant(&origin, points.dtype(), points.device())?;
             let d = constant(&unit(direction), points.dtype(), points.device())?;
-            let offset = points.broadcast_mul(&flat)?.broadcast_sub(&origin)?;
-            let distance = norm(&cross(&offset, &d)?)?;
-            let error = (distance - *half_width_m)?.relu()?.sqr()?;
-            gate(error, &dot(&offset, &d)?, *extent_m)
+            let error = (norm(&cross(&offset, &d)?)? - *half_width_m)?.relu()?.sqr()?;
+            match extent_m {
+                Some(_) => gate(error, &dot(&offset, &d)?, *extent_m),
+                None => Ok(error),
+            }
         }
     }
 }
