@@ -148,7 +148,7 @@ pub fn refine(
 ) -> std::result::Result<(Tensor, Vec<RefineReport>), ConstraintError> {
     let batch = joints.dim(0)?;
     let before = per_sample(&compiled.evaluate(joints, initial)?.total)?;
-    let geometric = compiled.without_counts();
+    let geometric = compiled.geometric();
     let unchanged = |e: &f64| RefineReport {
         applied: false,
         error_before: *e,

@@ -1,10 +1,11 @@
 //! Differentiable counting (RG-DNO supp. D, eqs. 15–16): soft counts of the peaks or valleys of
-//! scalar signals, e.g. steps as peaks of the foot speed, claps as valleys of the hand distance.
+//! scalar signals, e.g. steps as peaks of the foot speed, claps as valleys of the hand distance;
+//! steps as leg alternations; events as entries into a region of a signal (hands that meet).
 
 use candle_core::{Result, Tensor, D};
 
 use super::geometry::sigmoid;
-use crate::program::Extremum;
+use crate::program::{EventRegion, Extremum};
 use crate::skeleton::Joint;
 
 /// Soft number of extrema of `s` `[B, n]` at the interior frames listed in `frames` (indices of
@@ -67,6 +68,38 @@ pub fn soft_step_count(joints: &Tensor) -> Result<Tensor> {
     ((change.sqr()? + 1e-8)?.sqrt()? * 0.5)?.sum(D::Minus1)
 }
 
+/// Soft number of events of `s` `[B, n]` (the frames searched, in order), `[B]`: with `e` the
+/// signed depth into the event region (`θ − s` for `below: θ`, `s − θ` for `above: θ`), the
+/// soft state `l = σ(e/w) − σ((−e − h)/w)` ∈ [−1, 1] is +1 inside the region, −1 beyond the
+/// hysteresis band `h` and 0 inside the band, `w = h/4`, and
+/// `n = ½·(Σ_t ½·√((l[t+1] − l[t])² + ε) + (1 + l[0])/2 + (1 + l[n−1])/2)`:
+/// each entry into the region and the way out beyond the band add 1, an event under way at the
+/// first or last frame counts once. The soft form of [`crate::metrics::event_count`], which it
+/// equals when the signal leaves the band between events; a signal that enters the band and goes
+/// back out adds ½ where the metric adds 0. The sigmoids reach about `2h` beyond `θ`: a signal
+/// further out gets next to no gradient (the prior's motion must come near the event).
+pub fn soft_event_count(s: &Tensor, region: EventRegion, hysteresis: f64) -> Result<Tensor> {
+    let (batch, n) = s.dims2()?;
+    if n == 0 {
+        return Tensor::zeros(batch, s.dtype(), s.device());
+    }
+    let depth = match region {
+        EventRegion::Below(threshold) => (threshold - s)?,
+        EventRegion::Above(threshold) => (s - threshold)?,
+    };
+    let edge = hysteresis / 4.0;
+    let state = (sigmoid(&(&depth / edge)?)? - sigmoid(&((depth.neg()? - hysteresis)? / edge)?)?)?;
+    let ends = ((state.narrow(1, 0, 1)? + state.narrow(1, n - 1, 1)?)?.squeeze(1)? + 2.0)? / 2.0;
+    let changes = match n {
+        1 => Tensor::zeros(batch, s.dtype(), s.device())?,
+        _ => {
+            let change = (state.narrow(1, 1, n - 1)? - state.narrow(1, 0, n - 1)?)?;
+            ((change.sqr()? + 1e-8)?.sqrt()? * 0.5)?.sum(D::Minus1)?
+        }
+    };
+    (changes + ends)? * 0.5
+}
+
 /// Box filter of odd width `w` along axis 1 of `s` `[B, n]`, "valid" mode: `[B, n − w + 1]`,
 /// output frame i is the mean of input frames i..i+w (centred on input frame i + (w − 1)/2).
 pub fn box_filter(s: &Tensor, w: usize) -> Result<Tensor> {
@@ -105,6 +138,40 @@ mod tests {
         assert!((first[0] - 1.0).abs() < 1e-9);
         let smooth = box_filter(&s, 3).unwrap().to_vec2::<f64>().unwrap();
         assert!((smooth[0][0] - 2.0 / 3.0).abs() < 1e-12 && smooth[0].len() == 6);
+    }
+
+    /// Wrist distances (m) of three claps and of hands that come no closer than 0.17 m.
+    #[test]
+    fn counts_events_by_hand_and_as_the_metric() {
+        let claps = [0.4, 0.3, 0.15, 0.01, 0.0, 0.2, 0.35, 0.01, 0.3, 0.25, 0.0, 0.01, 0.3, 0.4];
+        let near = [0.4, 0.3, 0.17, 0.2, 0.35, 0.18, 0.3, 0.17, 0.4, 0.4, 0.3, 0.2, 0.17, 0.3];
+        // A clap under way at the first frame counts once, and one still under way at the last.
+        let ends = [0.01, 0.3, 0.4, 0.3, 0.2, 0.0];
+        let region = EventRegion::Below(0.06);
+        for (values, expected) in [(&claps[..], 3.0), (&near[..], 0.0), (&ends[..], 2.0)] {
+            let s = Tensor::new(values, &Device::Cpu).unwrap().unsqueeze(0).unwrap();
+            let soft = soft_event_count(&s, region, 0.05).unwrap().to_vec1::<f64>().unwrap()[0];
+            // Within 0.1 of the count when the signal goes 5 cm past θ (the sigmoids' soft edges).
+            assert!((soft - expected).abs() < 0.1, "{values:?}: soft {soft}");
+            assert_eq!(crate::metrics::event_count(values, region, 0.05) as f64, expected);
+        }
+        // Above: a pelvis rising past 1.2 m twice.
+        let hops = [1.0, 1.0, 1.35, 1.4, 1.0, 1.0, 1.4, 1.0];
+        let s = Tensor::new(&hops, &Device::Cpu).unwrap().unsqueeze(0).unwrap();
+        let soft = soft_event_count(&s, EventRegion::Above(1.2), 0.1).unwrap().to_vec1::<f64>().unwrap()[0];
+        assert!((soft - 2.0).abs() < 0.1, "{soft}");
+    }
+
+    #[test]
+    fn soft_events_have_the_finite_difference_gradient() {
+        let s = Tensor::new(&[[0.3f64, 0.12, 0.07, 0.05, 0.09, 0.13, 0.2, 0.1, 0.06]], &Device::Cpu).unwrap();
+        crate::testing::finite_difference_check(
+            &s,
+            |s| soft_event_count(s, EventRegion::Below(0.06), 0.05)?.sum_all(),
+            1e-7,
+            1e-4,
+        )
+        .unwrap();
     }
 
     fn clip_tensor(name: &str) -> (Vec<crate::skeleton::Pose>, Tensor) {

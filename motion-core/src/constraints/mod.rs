@@ -10,7 +10,9 @@
 //! frame masks of conditions and scene gates, which select without gradient as ProgMoGen does.
 
 mod body;
+mod carry;
 mod count;
+mod flight;
 mod frames;
 mod geometry;
 mod probe;
@@ -24,6 +26,9 @@ mod tests;
 use candle_core::{Result, Tensor, D};
 
 pub use body::{bone_radius_m, surface_points, HEAD_RADIUS_M, SURFACE_POINTS};
+pub use carry::{carry_errors, torso_distance, TORSO_CHAIN};
+pub use count::soft_event_count;
+pub use flight::{flight_deficit, FLIGHT_JOINTS};
 pub use geometry::NORM_EPS;
 pub use probe::{probe_motion, GradientCheck, STANDING};
 pub use satisfaction::{Check, Satisfaction, Unit};
@@ -32,9 +37,9 @@ pub use signal::{centre_of_mass_weights, point, root_relative, second_difference
 pub use support::FOOT_HALF_WIDTH_M;
 
 use crate::program::{
-    BoneDirection, ComInSupport, Condition, Count, Equal, Expr, Extremum, FootContact, FrameRef, GreaterThan, JointSet,
-    LessThan, Metric, Primitive, ProgramError, Quantity, Reduce, SceneConstraint, SelfCollision, StayNearInitial,
-    Steps, TaskProgram,
+    Airborne, BoneDirection, CarriedLoad, Carry, ComInSupport, Condition, Count, Equal, EventRegion, Events, Expr,
+    Extremum, FootContact, FrameRef, GreaterThan, JointSet, LessThan, Metric, Primitive, ProgramError, Quantity,
+    Reduce, SceneConstraint, SelfCollision, StayNearInitial, Steps, TaskProgram,
 };
 use crate::skeleton::{Joint, FPS};
 use frames::{condition_mask, reduce, Frames};
@@ -121,11 +126,32 @@ enum Node {
     Steps {
         target: f64,
     },
+    Events {
+        signal: Quantity,
+        region: EventRegion,
+        hysteresis: f64,
+        target: f64,
+        frames: Frames,
+    },
+    Airborne {
+        clearance: f64,
+        length: usize,
+        /// Start frames `[W]` (u32) of the windows of `length` selected frames.
+        starts: Tensor,
+    },
+    Carry {
+        hands: [Joint; 2],
+        diameter: f64,
+        clearance: f64,
+        frames: Frames,
+        reduce: Reduce,
+    },
     Scene {
         joints: Tensor,
         surface: bool,
         primitive: Primitive,
         frames: Frames,
+        when: Option<Condition>,
         reduce: Reduce,
     },
     BoneDirection {
@@ -152,6 +178,7 @@ enum Node {
     ComInSupport {
         support: crate::program::Support,
         margin: f64,
+        load: Option<CarriedLoad>,
         frames: Frames,
         reduce: Reduce,
     },
@@ -242,19 +269,21 @@ impl CompiledProgram {
         proxy
     }
 
-    /// This program without its counting constraints (any constraint with a `steps` or `count`
-    /// term): what a joint-space refinement may act on ([`crate::refine`]), since a count is
-    /// made by the motion's own strides and extrema, not by shifting joints.
-    pub fn without_counts(&self) -> CompiledProgram {
-        let counts = |node: &Node| {
+    /// This program's geometric constraints only, without those a motion makes by moving (any
+    /// constraint with a `steps`, `count`, `events` or `airborne` term): what a joint-space
+    /// refinement may act on ([`crate::refine`]), since a count is made by the motion's own
+    /// strides and extrema and a flight by a jump, not by shifting joints.
+    pub fn geometric(&self) -> CompiledProgram {
+        let made_by_moving = |node: &Node| {
             let mut found = false;
             let _ = node.walk(&mut |n| {
-                found |= matches!(n, Node::Count { .. } | Node::Steps { .. });
+                found |=
+                    matches!(n, Node::Count { .. } | Node::Steps { .. } | Node::Events { .. } | Node::Airborne { .. });
                 Ok(())
             });
             found
         };
-        let constraints = self.constraints.iter().filter(|c| !counts(&c.node)).cloned().collect();
+        let constraints = self.constraints.iter().filter(|c| !made_by_moving(&c.node)).cloned().collect();
         CompiledProgram { frames: self.frames, constraints }
     }
 
@@ -276,11 +305,15 @@ impl CompiledProgram {
     pub fn max_scene_penetration(&self, joints: &Tensor) -> Result<Option<Tensor>> {
         let mut worst: Option<Tensor> = None;
         let mut visit = |node: &Node| -> Result<()> {
-            if let Node::Scene { joints: set, surface, primitive, frames, .. } = node {
+            if let Node::Scene { joints: set, surface, primitive, frames, when, .. } = node {
                 if is_obstacle(primitive) {
                     let points = frames.select(&body_points(joints, set, *surface)?)?;
-                    let depth = primitive_error(&points, primitive, true)?;
-                    let depth = depth.reshape((depth.dim(0)?, ()))?.max(D::Minus1)?;
+                    let depth = primitive_error(&points, primitive, true)?.max(D::Minus1)?; // [B, F]
+                    let depth = match scene_mask(joints, frames, when)? {
+                        Some(mask) => (depth * mask)?,
+                        None => depth,
+                    };
+                    let depth = depth.max(D::Minus1)?;
                     worst = Some(match worst.take() {
                         None => depth,
                         Some(w) => w.maximum(&depth)?,
@@ -295,12 +328,13 @@ impl CompiledProgram {
         Ok(worst)
     }
 
-    /// `(constraint id, target count)` of every counting expression, for the step-count metric.
+    /// `(constraint id, target count)` of every counting expression (counts, steps, events), for
+    /// the step-count metric and retrieval's check of counting tasks.
     pub fn count_targets(&self) -> Vec<(String, u32)> {
         let mut found = Vec::new();
         for c in &self.constraints {
             let _ = c.node.walk(&mut |node: &Node| {
-                if let Node::Count { target, .. } | Node::Steps { target } = node {
+                if let Node::Count { target, .. } | Node::Steps { target } | Node::Events { target, .. } = node {
                     found.push((c.id.clone(), *target as u32));
                 }
                 Ok(())
@@ -377,7 +411,34 @@ impl Compiler<'_> {
                 }
             }
             Expr::Steps(Steps { target_count }) => Node::Steps { target: f64::from(*target_count) },
-            Expr::Scene(SceneConstraint { body, primitive, frames, reduce }) => {
+            Expr::Events(events @ Events { signal, event, target_count, frames, .. }) => Node::Events {
+                signal: signal.clone(),
+                region: *event,
+                hysteresis: events.hysteresis(),
+                target: f64::from(*target_count),
+                frames: self.select(frames, self.length(signal))?,
+            },
+            Expr::Airborne(Airborne { clearance_m, min_frames, frames }) => {
+                let length = *min_frames as usize;
+                let starts = flight::window_starts(self.select(frames, self.frames)?.kept(), length);
+                if starts.is_empty() {
+                    candle_core::bail!("constraint {id}: no {length} consecutive frames in its frames");
+                }
+                let n = starts.len();
+                Node::Airborne {
+                    clearance: *clearance_m,
+                    length,
+                    starts: Tensor::from_vec(starts.into_iter().map(|f| f as u32).collect::<Vec<_>>(), n, self.device)?,
+                }
+            }
+            Expr::Carry(Carry { hands, diameter_m, clearance_m, frames, reduce }) => Node::Carry {
+                hands: *hands,
+                diameter: *diameter_m,
+                clearance: *clearance_m,
+                frames: self.select(frames, self.frames)?,
+                reduce: *reduce,
+            },
+            Expr::Scene(SceneConstraint { body, primitive, frames, when, reduce }) => {
                 let joints = match &body.joints {
                     JointSet::All => Joint::ALL.to_vec(),
                     JointSet::Only(list) => list.to_vec(),
@@ -387,6 +448,7 @@ impl Compiler<'_> {
                     surface: body.surface,
                     primitive: primitive.clone(),
                     frames: self.select(frames, self.frames)?,
+                    when: when.clone(),
                     reduce: *reduce,
                 }
             }
@@ -426,9 +488,10 @@ impl Compiler<'_> {
                     reduce: *reduce,
                 }
             }
-            Expr::ComInSupport(ComInSupport { support, margin_m, frames, reduce }) => Node::ComInSupport {
+            Expr::ComInSupport(ComInSupport { support, margin_m, load, frames, reduce }) => Node::ComInSupport {
                 support: *support,
                 margin: *margin_m,
+                load: load.clone(),
                 frames: self.select(frames, self.frames)?,
                 reduce: *reduce,
             },
@@ -445,10 +508,16 @@ impl Compiler<'_> {
 }
 
 /// The tested points `[B, T, P, 3]`: the listed joints, then the surface points if asked for.
-/// Signed distance (m, positive outside) of the centre of mass from the support region of
-/// `feet` on the selected frames, both projected on the ground (x, z), `[B, F]`.
-fn com_outside_support(joints: &Tensor, feet: crate::program::Support, frames: &Frames) -> Result<Tensor> {
-    let com = point(joints, &crate::program::Point::CentreOfMass(Default::default()))?;
+/// Signed distance (m, positive outside) of the centre of mass (with a carried `load`) from the
+/// support region of `feet` on the selected frames, both projected on the ground (x, z), `[B, F]`.
+fn com_outside_support(
+    joints: &Tensor,
+    feet: crate::program::Support,
+    load: &Option<CarriedLoad>,
+    frames: &Frames,
+) -> Result<Tensor> {
+    let centre = crate::program::CentreOfMass { exclude_head: false, load: load.clone() };
+    let com = point(joints, &crate::program::Point::CentreOfMass(centre))?;
     let com = frames.select(&select_axes(&com, crate::program::Axes::Xz)?)?;
     let list = support::support_joints(feet);
     let index =
@@ -459,17 +528,31 @@ fn com_outside_support(joints: &Tensor, feet: crate::program::Support, frames: &
 
 /// A scene or self-collision constraint's error per sample `[B]` from per-point errors
 /// `[B, T, P]`: each frame's worst point (m, the deepest penetration or the closest limb), then
-/// `how` over the frames; `mean` averages over the frames that violate (a mask without
-/// gradient), so a violation keeps its depth however few frames and points it involves and
-/// cannot be averaged away by the frames and points that are clear.
-fn worst_point_reduce(errors: &Tensor, how: Reduce) -> Result<Tensor> {
+/// `how` over the frames (those `mask` `[B, T]` keeps, when given); `mean` averages over the
+/// frames that violate (a mask without gradient), so a violation keeps its depth however few
+/// frames and points it involves and cannot be averaged away by the frames and points that are
+/// clear.
+fn worst_point_reduce(errors: &Tensor, mask: Option<&Tensor>, how: Reduce) -> Result<Tensor> {
     let worst = errors.max(D::Minus1)?; // [B, T]
     match how {
         Reduce::Mean => {
             let violating = worst.detach().gt(0.0)?.to_dtype(worst.dtype())?;
-            reduce(&worst, Some(&violating), Reduce::Mean)
+            let kept = match mask {
+                Some(mask) => (violating * mask)?,
+                None => violating,
+            };
+            reduce(&worst, Some(&kept), Reduce::Mean)
         }
-        other => reduce(&worst, None, other),
+        other => reduce(&worst, mask, other),
+    }
+}
+
+/// The 0/1 mask `[B, F]` of a scene constraint's selected frames where its `when` holds; `None`
+/// without a condition.
+fn scene_mask(joints: &Tensor, frames: &Frames, when: &Option<Condition>) -> Result<Option<Tensor>> {
+    match when {
+        Some(condition) => Ok(Some(frames.select(&condition_mask(joints, condition, joints.dim(1)?)?)?)),
+        None => Ok(None),
     }
 }
 
@@ -563,9 +646,22 @@ impl Node {
                 (total - *target)?.sqr()?
             }
             Node::Steps { target } => (count::soft_step_count(joints)? - *target)?.sqr()?,
-            Node::Scene { joints: set, surface, primitive, frames, reduce: how } => {
+            Node::Events { signal: quantity, region, hysteresis, target, frames } => {
+                let s = frames.select(&signal(joints, quantity)?.squeeze(D::Minus1)?)?;
+                (count::soft_event_count(&s, *region, *hysteresis)? - *target)?.sqr()?
+            }
+            Node::Airborne { clearance, length, starts } => {
+                let deficit = flight::flight_deficit(joints, *clearance)?.sqr()?;
+                flight::window_means(&deficit, starts, *length)?.min(D::Minus1)?
+            }
+            Node::Carry { hands, diameter, clearance, frames, reduce: how } => {
+                let (gap, intrusion) = carry::carry_errors(joints, *hands, *diameter, *clearance)?;
+                reduce(&frames.select(&(gap.sqr()? + intrusion.sqr()?)?)?, None, *how)?
+            }
+            Node::Scene { joints: set, surface, primitive, frames, when, reduce: how } => {
                 let points = frames.select(&body_points(joints, set, *surface)?)?;
-                worst_point_reduce(&primitive_error(&points, primitive, false)?, *how)?
+                let mask = scene_mask(joints, frames, when)?;
+                worst_point_reduce(&primitive_error(&points, primitive, false)?, mask.as_ref(), *how)?
             }
             Node::BoneDirection { joint: j, parent, direction, frames, reduce: how } => {
                 let bone = frames.select(&(joint(joints, *j)? - joint(joints, *parent)?)?)?;
@@ -597,10 +693,10 @@ impl Node {
                 let a = frames.select(&joints.index_select(limbs, 2)?)?.unsqueeze(3)?; // [B, F, L, 1, 3]
                 let b = frames.select(&joints.index_select(torso, 2)?)?.unsqueeze(2)?; // [B, F, 1, K, 3]
                 let distance = norm(&select_axes(&a.broadcast_sub(&b)?, *axes)?)?; // [B, F, L, K]
-                worst_point_reduce(&(*min_distance - distance)?.relu()?.flatten_from(2)?, *how)?
+                worst_point_reduce(&(*min_distance - distance)?.relu()?.flatten_from(2)?, None, *how)?
             }
-            Node::ComInSupport { support: feet, margin, frames, reduce: how } => {
-                let distance = com_outside_support(joints, *feet, frames)?;
+            Node::ComInSupport { support: feet, margin, load, frames, reduce: how } => {
+                let distance = com_outside_support(joints, *feet, load, frames)?;
                 reduce(&(distance + *margin)?.relu()?.sqr()?, None, *how)?
             }
             Node::StayNearInitial { id, quantities, frames } => {

@@ -11,7 +11,9 @@ use super::frames::condition_mask;
 use super::geometry::{constant, joint, norm, select_axes};
 use super::scene::{is_obstacle, primitive_error};
 use super::signal::signal;
-use super::{body_points, com_outside_support, Comparison, CompiledProgram, ConstraintError, Node};
+use super::{
+    body_points, carry, com_outside_support, flight, scene_mask, Comparison, CompiledProgram, ConstraintError, Node,
+};
 use crate::program::{Primitive, Quantity, Reduce};
 
 /// Tolerance on distances, penetrations and positions, m (the bar for ProgMoGen's HSI
@@ -179,14 +181,73 @@ impl Node {
                     tolerance: COUNT_TOLERANCE,
                 })
             }
-            Node::Scene { joints: set, surface, primitive, frames, reduce } => {
+            Node::Events { signal: quantity, region, hysteresis, target, frames } => {
+                let s = frames.select(&signal(joints, quantity)?.squeeze(D::Minus1)?)?;
+                let off = s
+                    .to_dtype(candle_core::DType::F64)?
+                    .to_vec2::<f64>()?
+                    .iter()
+                    .map(|row| (crate::metrics::event_count(row, *region, *hysteresis) as f64 - target).abs())
+                    .collect();
+                let (relation, threshold) = match region {
+                    crate::program::EventRegion::Below(t) => ("below", t),
+                    crate::program::EventRegion::Above(t) => ("above", t),
+                };
+                leaf(Check {
+                    what: format!("events ({} {relation} {threshold}) off the target {target}", kind_name(quantity)),
+                    unit: Unit::Count,
+                    value: off,
+                    tolerance: COUNT_TOLERANCE,
+                })
+            }
+            Node::Airborne { clearance, length, starts } => {
+                // The best flight: the window whose lowest foot frame comes closest to clearing.
+                let deficit = flight::flight_deficit(joints, *clearance)?.to_dtype(candle_core::DType::F64)?;
+                let starts = starts.to_vec1::<u32>()?;
+                let value = deficit
+                    .to_vec2::<f64>()?
+                    .iter()
+                    .map(|row| {
+                        let worst = |&s: &u32| row[s as usize..s as usize + length].iter().copied().fold(0.0, f64::max);
+                        starts.iter().map(worst).fold(f64::INFINITY, f64::min)
+                    })
+                    .collect();
+                leaf(Check {
+                    what: format!("a foot below {clearance} m in the best {length}-frame flight"),
+                    unit: Unit::M,
+                    value,
+                    tolerance: CONTACT_TOLERANCE_M,
+                })
+            }
+            Node::Carry { hands, diameter, clearance, frames, reduce } => {
+                let (gap, intrusion) = carry::carry_errors(joints, *hands, *diameter, *clearance)?;
+                let best = *reduce == Reduce::Min;
+                let checks = vec![
+                    Check {
+                        what: format!("hands off the object's {diameter} m"),
+                        unit: Unit::M,
+                        value: over_frames(&frames.select(&gap.abs()?)?, None, best)?,
+                        tolerance: DISTANCE_TOLERANCE_M,
+                    },
+                    Check {
+                        what: format!("object within {clearance} m of the torso"),
+                        unit: Unit::M,
+                        value: over_frames(&frames.select(&intrusion)?, None, best)?,
+                        tolerance: CONTACT_TOLERANCE_M,
+                    },
+                ];
+                let pass = (0..batch).map(|b| checks.iter().all(|c| c.passes(b))).collect();
+                Ok((checks, pass))
+            }
+            Node::Scene { joints: set, surface, primitive, frames, when, reduce } => {
                 let points = frames.select(&body_points(joints, set, *surface)?)?;
                 let depth = primitive_error(&points, primitive, true)?.max(D::Minus1)?; // [B, F]
                 let depth = match primitive {
                     Primitive::BalanceBeam(_) => depth.sqrt()?, // its error is squared
                     _ => depth,
                 };
-                let value = over_frames(&depth, None, *reduce == Reduce::Min)?;
+                let mask = scene_mask(joints, frames, when)?;
+                let value = over_frames(&depth, mask.as_ref(), *reduce == Reduce::Min)?;
                 let what = match is_obstacle(primitive) {
                     true => format!("penetration into {}", primitive_name(primitive)),
                     false => format!("distance off the {}", primitive_name(primitive)),
@@ -258,8 +319,8 @@ impl Node {
                     tolerance: CONTACT_TOLERANCE_M,
                 })
             }
-            Node::ComInSupport { support: feet, frames, reduce, .. } => {
-                let outside = com_outside_support(joints, *feet, frames)?.relu()?;
+            Node::ComInSupport { support: feet, load, frames, reduce, .. } => {
+                let outside = com_outside_support(joints, *feet, load, frames)?.relu()?;
                 let value = over_frames(&outside, None, *reduce == Reduce::Min)?;
                 leaf(Check {
                     what: "centre of mass outside the support".into(),

@@ -256,6 +256,195 @@ fn counting_peaks_and_valleys() {
     close(&count(3, "peaks", 0.3), &claps, 1.0);
 }
 
+/// The standing glide with the wrists `distance[t]` m apart (side by side in x), frame by frame.
+fn wrists_apart(distance: &[f64]) -> Vec<[[f64; 3]; NUM_JOINTS]> {
+    glide(distance.len())
+        .into_iter()
+        .zip(distance)
+        .map(|(mut pose, d)| {
+            pose[Joint::LeftWrist.index()][0] = d / 2.0;
+            pose[Joint::RightWrist.index()][0] = -d / 2.0;
+            pose
+        })
+        .collect()
+}
+
+/// A clap that claps (issue 19): events count the hands meeting (within 6 cm), so wrists that
+/// stop at 0.17 m make none, where a count of distance minima below 0.2 m counts them as claps.
+#[test]
+fn events_need_the_event_to_happen() {
+    let claps = wrists_apart(&[0.4, 0.3, 0.15, 0.02, 0.01, 0.2, 0.35, 0.02, 0.3, 0.25, 0.01, 0.01, 0.3, 0.4]);
+    let near = wrists_apart(&[0.4, 0.3, 0.17, 0.25, 0.35, 0.18, 0.3, 0.4, 0.4, 0.3, 0.25, 0.17, 0.3, 0.4]);
+    let wrists = r#"{"kind": "distance", "a": {"joint": "left_wrist"}, "b": {"joint": "right_wrist"}, "axes": "xyz"}"#;
+    let events = format!(r#"{{"op": "events", "signal": {wrists}, "event": {{"below": 0.06}}, "target_count": 3}}"#);
+    let minima = format!(
+        r#"{{"op": "count", "signals": [{wrists}], "extremum": "valleys", "threshold": 0.2, "target_count": 3}}"#
+    );
+    // Met: the soft count is within 0.1 of 3 (the sigmoids' soft edges), so the error is below 0.01.
+    let met = error_of(&events, &claps);
+    assert!(met < 0.01, "three claps cost {met}");
+    // Hands that never meet: no event, (0 − 3)² = 9 (to the sigmoids' tails).
+    let missed = error_of(&events, &near);
+    assert!((missed - 9.0).abs() < 0.2, "hands 0.17 m apart cost {missed}");
+    // The count of minima is fooled by them.
+    assert!(error_of(&minima, &near) < 1e-6);
+    // The report counts with the metric: 3 and 0.
+    let judge = |motion: &[[[f64; 3]; NUM_JOINTS]]| {
+        compile(motion.len(), &events).satisfaction(&tensor(motion), None).unwrap().remove(0)
+    };
+    assert_eq!((judge(&claps).checks[0].value.clone(), judge(&claps).pass), (vec![0.0], vec![true]));
+    assert_eq!((judge(&near).checks[0].value.clone(), judge(&near).pass), (vec![3.0], vec![false]));
+    gradient_ok(&events, &wrists_apart(&[0.3, 0.12, 0.07, 0.05, 0.09, 0.13, 0.2, 0.1]));
+    // Three events cannot fit in 4 frames.
+    let text = format!(r#"{{"text": "", "frames": 4, "constraints": [{{"id": "c1", "expr": {events}}}]}}"#);
+    let error = format!("{:?}", TaskProgram::from_json_validated(&text).unwrap_err());
+    assert!(error.contains("target_count"), "{error}");
+}
+
+/// The glide with the whole body lifted `lift` m on `frames`.
+fn lifted(frames: usize, lifted: std::ops::Range<usize>, lift: f64) -> Vec<[[f64; 3]; NUM_JOINTS]> {
+    let mut m = glide(frames);
+    for pose in &mut m[lifted] {
+        for p in pose.iter_mut() {
+            p[1] += lift;
+        }
+    }
+    m
+}
+
+/// A flight phase (issue 19): both feet (ankles and toes) above 10 cm for 3 frames in a row.
+/// Standing, the toes are 2 cm up: 0.08 m short on every frame. A jump lifting the body 0.3 m for
+/// 4 frames meets it; for 2 frames it does not; a foot lifted onto a hurdle with the other on the
+/// ground is no flight.
+#[test]
+fn a_flight_needs_both_feet_off_the_ground() {
+    let flight = r#"{"op": "airborne", "clearance_m": 0.1, "min_frames": 3}"#;
+    close(flight, &glide(10), 0.08f64.powi(2));
+    close(flight, &lifted(10, 4..8, 0.3), 0.0);
+    // Two frames up: every 3-frame window holds a frame on the ground.
+    close(flight, &lifted(10, 4..6, 0.3), 0.08f64.powi(2) / 3.0);
+    let mut one_foot = glide(10);
+    for pose in &mut one_foot[3..8] {
+        pose[Joint::LeftFoot.index()][1] += 0.3;
+        pose[Joint::LeftAnkle.index()][1] += 0.3;
+    }
+    close(flight, &one_foot, 0.08f64.powi(2));
+    // Only the second half of the clip may hold the flight.
+    let late = r#"{"op": "airborne", "clearance_m": 0.1, "min_frames": 3, "frames": {"range": {"from": "middle", "to": "last"}}}"#;
+    close(late, &lifted(10, 1..5, 0.3), 0.08f64.powi(2));
+    close(late, &lifted(10, 6..9, 0.3), 0.0);
+    let judge = |motion: &[[[f64; 3]; NUM_JOINTS]]| {
+        compile(motion.len(), flight).satisfaction(&tensor(motion), None).unwrap().remove(0)
+    };
+    let standing = judge(&glide(10));
+    assert!((standing.checks[0].value[0] - 0.08).abs() < 1e-9 && standing.pass == vec![false]);
+    assert_eq!(judge(&lifted(10, 4..8, 0.3)).pass, vec![true]);
+    gradient_ok(flight, &lifted(8, 3..5, 0.1));
+    gradient_ok(late, &glide(8));
+    // A flight longer than the frames it may happen in is rejected, naming min_frames.
+    let text = format!(r#"{{"text": "", "frames": 10, "constraints": [{{"id": "c1", "expr": {late}}}]}}"#)
+        .replace(r#""min_frames": 3"#, r#""min_frames": 7"#);
+    let error = format!("{:?}", TaskProgram::from_json_validated(&text).unwrap_err());
+    assert!(error.contains("min_frames"), "{error}");
+}
+
+/// A ball of 0.3 m carried between the hands (issue 19, ProgMoGen HOI-2). Standing, the wrists
+/// are 0.44 m apart (0.14 m off) and their midpoint (0, 0.87, 0) lies 0.08 m inside the
+/// pelvis–spine1 capsule (0.03 m below the segment's end, radius 0.11), so the ball's 0.15 m
+/// radius and a 0.05 m clearance intrude 0.28 m; held 0.35 m in front of the chest it costs
+/// nothing; pressed to 0.2 m of the spine it intrudes 0.2 − (0.2 − 0.11) = 0.11 m.
+#[test]
+fn an_object_carried_between_the_hands() {
+    let carry = r#"{"op": "carry", "diameter_m": 0.3, "clearance_m": 0.05}"#;
+    close(carry, &glide(3), 0.14f64.powi(2) + 0.28f64.powi(2));
+    let held = |forward: f64| -> Vec<[[f64; 3]; NUM_JOINTS]> {
+        glide(3)
+            .into_iter()
+            .map(|mut pose| {
+                let z = pose[Joint::Pelvis.index()][2] + forward;
+                pose[Joint::LeftWrist.index()] = [0.15, 1.1, z];
+                pose[Joint::RightWrist.index()] = [-0.15, 1.1, z];
+                pose
+            })
+            .collect()
+    };
+    close(carry, &held(0.35), 0.0);
+    close(carry, &held(0.2), 0.11f64.powi(2));
+    let judge = |motion: &[[[f64; 3]; NUM_JOINTS]]| {
+        compile(motion.len(), carry).satisfaction(&tensor(motion), None).unwrap().remove(0)
+    };
+    assert_eq!(judge(&held(0.35)).pass, vec![true]);
+    let pressed = judge(&held(0.2));
+    assert!((pressed.checks[1].value[0] - 0.11).abs() < 1e-9 && pressed.pass == vec![false], "{pressed:?}");
+    let standing = judge(&glide(3));
+    assert!((standing.checks[0].value[0] - 0.14).abs() < 1e-9, "{standing:?}");
+    gradient_ok(carry, &held(0.25));
+    gradient_ok(
+        r#"{"op": "carry", "hands": ["left_wrist", "right_elbow"], "diameter_m": 0.2, "reduce": "max"}"#,
+        &glide(4),
+    );
+    // Its weight moves the centre of mass: a ball as heavy as the body held 0.5 m ahead puts the
+    // centre of mass halfway to it, past the toes.
+    let mut ahead: Vec<_> = std::iter::repeat_n(STANDING, 4).collect();
+    for pose in &mut ahead {
+        pose[Joint::LeftWrist.index()] = [0.15, 1.1, 0.5];
+        pose[Joint::RightWrist.index()] = [-0.15, 1.1, 0.5];
+    }
+    let w = centre_of_mass_weights(false);
+    let body_z: f64 = (0..NUM_JOINTS).map(|j| w[j] * ahead[0][j][2]).sum();
+    let outside = (body_z + 0.5) / 2.0 - (0.12 + FOOT_HALF_WIDTH_M);
+    let loaded = r#"{"op": "com_in_support", "support": "both_feet", "load": {"between": ["left_wrist", "right_wrist"], "mass_ratio": 1.0}}"#;
+    close(loaded, &ahead, outside.powi(2));
+    gradient_ok(loaded, &ahead);
+}
+
+/// `when` on a scene term (issue 19): "every footfall on the line" tests the left toe only while
+/// it is on the ground (below 5 cm), so the swing may leave the line; a hurdle only while the
+/// pelvis is past z = 0.12, and the maximum penetration honours the same frames.
+#[test]
+fn scene_terms_on_the_frames_a_condition_keeps() {
+    let line = |when: &str| {
+        format!(
+            r#"{{"op": "scene", "body": {{"joints": {{"only": ["left_foot"]}}}}, "primitive": {{"kind": "balance_beam", "point_m": [0.0, 0.0, 0.0], "direction": [0.0, 0.0, 1.0], "half_width_m": 0.05, "horizontal": true}}{when}}}"#
+        )
+    };
+    let planted = r#", "when": {"of": {"kind": "position", "of": {"joint": "left_foot"}, "axes": "y"}, "max": 0.05}"#;
+    // Frames 0-2 swing 0.2 m up and 0.4 m out; frames 3-4 stand on the line's edge zone at 0.1 m.
+    let mut m = glide(5);
+    for pose in &mut m[..3] {
+        pose[Joint::LeftFoot.index()] = [0.4, 0.2, pose[Joint::LeftFoot.index()][2]];
+    }
+    let (swing, stance) = (0.35f64.powi(2), 0.05f64.powi(2));
+    close(&line(""), &m, (3.0 * swing + 2.0 * stance) / 5.0);
+    close(&line(planted), &m, stance);
+    for pose in &mut m[3..] {
+        pose[Joint::LeftFoot.index()][0] = 0.0;
+    }
+    close(&line(planted), &m, 0.0);
+    let judged = compile(5, &line(planted)).satisfaction(&tensor(&m), None).unwrap().remove(0);
+    assert_eq!((judged.checks[0].value.clone(), judged.pass), (vec![0.0], vec![true]));
+    gradient_ok(&line(planted), &glide(6));
+
+    let hurdle = |when: &str| {
+        format!(
+            r#"{{"op": "scene", "body": {{"joints": {{"only": ["left_foot"]}}}}, "primitive": {{"kind": "hurdle", "height_m": 0.1, "z_range_m": [-1.0, 10.0]}}{when}}}"#
+        )
+    };
+    let past = r#", "when": {"of": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "z"}, "min": 0.12}"#;
+    // The toe stands in the hurdle (0.08 m) on frames 0-2 and is lifted over it on frames 3-4,
+    // where the pelvis is past z = 0.12.
+    let mut over = glide(5);
+    for pose in &mut over[3..] {
+        pose[Joint::LeftFoot.index()][1] = 0.2;
+    }
+    let depth = |when: &str| {
+        compile(5, &hurdle(when)).max_scene_penetration(&tensor(&over)).unwrap().unwrap().to_vec1::<f64>().unwrap()[0]
+    };
+    assert!((depth("") - 0.08).abs() < 1e-9);
+    assert_eq!(depth(past), 0.0);
+    close(&hurdle(past), &over, 0.0);
+}
+
 #[test]
 fn scene_primitives_on_joints() {
     let m = glide(5);

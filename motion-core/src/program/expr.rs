@@ -9,7 +9,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use super::quantity::{Axes, Condition, FrameRange, FrameRef, FrameSelection, Quantity, Reduce};
+use super::quantity::{Axes, CarriedLoad, Condition, FrameRange, FrameRef, FrameSelection, Quantity, Reduce};
 use super::scene::{Body, Primitive};
 use super::serde_util::{tag_first_deserialize, JointName, NonEmpty};
 use crate::skeleton::Joint;
@@ -41,6 +41,24 @@ pub enum Expr {
     /// toe separation along the facing direction (the metric's ±5 cm hysteresis, smoothed), so
     /// feet shuffling within ±5 cm count nothing.
     Steps(Steps),
+    /// Counted events (claps, touches, hops): `(n − target_count)²` with `n` the soft number of
+    /// times a scalar signal enters the event region (below or above a threshold) and leaves it
+    /// past a hysteresis band: the soft state `l = σ((θ − s)/w) − σ((s − θ − h)/w)` ∈ [−1, 1]
+    /// (for `below`; mirrored for `above`), `h` the hysteresis, `w = h/4`, and
+    /// `n = ½(Σ_t ½|l[t+1] − l[t]| + (1 + l[first])/2 + (1 + l[last])/2)`. Unlike
+    /// [`Expr::Count`]'s extrema, an event needs the signal to reach the threshold (the hands to
+    /// meet), and its check counts events with [`crate::metrics::event_count`].
+    Events(Events),
+    /// A flight phase: both feet (ankles and toes) higher than `clearance_m` on at least
+    /// `min_frames` consecutive frames somewhere in `frames`. Per frame
+    /// `g[t] = relu(clearance_m − lowest foot joint's y)`; the error is the smallest, over the
+    /// windows of `min_frames` consecutive selected frames, of the window's mean `g²` (m²).
+    Airborne(Airborne),
+    /// An object held between two hands (ProgMoGen HOI-2): per frame
+    /// `(‖a − b‖ − diameter_m)² + relu(r + clearance_m − d_torso)²`, with `r` the object's
+    /// radius, its centre the hands' midpoint, and `d_torso` the distance from that centre to the
+    /// torso's surface (the capsules of the spine bones); reduced over the selected frames.
+    Carry(Carry),
     /// Body points against a scene primitive: the primitive's per-point error; each frame's worst
     /// point, reduced over the selected frames.
     Scene(SceneConstraint),
@@ -76,6 +94,9 @@ tag_first_deserialize!(Expr, "op", {
     Not(Not) = "not",
     Count(Count) = "count",
     Steps(Steps) = "steps",
+    Events(Events) = "events",
+    Airborne(Airborne) = "airborne",
+    Carry(Carry) = "carry",
     Scene(SceneConstraint) = "scene",
     BoneDirection(BoneDirection) = "bone_direction",
     FootContact(FootContact) = "foot_contact",
@@ -225,6 +246,86 @@ pub struct Steps {
     pub target_count: u32,
 }
 
+/// Where [`Expr::Events`]'s event region lies, e.g. `{"below": 0.08}` for hands that meet.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum EventRegion {
+    /// The signal is below this value (a clap: the wrists closer than it).
+    Below(#[schemars(range(min = -1000.0, max = 1000.0))] f64),
+    /// The signal is above this value (a hop: the pelvis higher than it).
+    Above(#[schemars(range(min = -1000.0, max = 1000.0))] f64),
+}
+
+/// Fields of [`Expr::Events`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Events {
+    /// A scalar quantity (one component), e.g. the distance between the wrists.
+    pub signal: Quantity,
+    /// The event region: `{"below": θ}` or `{"above": θ}` in the signal's unit.
+    pub event: EventRegion,
+    /// How far past θ the signal must go back before another event can start, in the signal's
+    /// unit (> 0; default: 0.05 m, 0.1 m/s or 0.5 m/s² by its unit).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(range(min = 0.0, max = 1000.0))]
+    pub hysteresis: Option<f64>,
+    /// Required number of events.
+    #[schemars(range(max = super::MAX_FRAMES))]
+    pub target_count: u32,
+    /// Frames searched (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+}
+
+impl Events {
+    /// The hysteresis, given or the default of the signal's unit.
+    pub fn hysteresis(&self) -> f64 {
+        self.hysteresis.unwrap_or_else(|| self.signal.unit().event_hysteresis())
+    }
+}
+
+/// Fields of [`Expr::Airborne`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Airborne {
+    /// Height both feet's joints must exceed (m); the report calls a frame airborne above 0.1.
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub clearance_m: f64,
+    /// Consecutive frames of flight (20 fps; a jump over a hurdle: about 4).
+    #[schemars(range(min = 1, max = super::MAX_FRAMES))]
+    pub min_frames: u32,
+    /// Frames where the flight may happen (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+}
+
+/// Fields of [`Expr::Carry`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Carry {
+    /// The hands holding the object (default: both wrists).
+    #[serde(default = "default_hands")]
+    #[schemars(with = "[JointName; 2]")]
+    pub hands: [Joint; 2],
+    /// Diameter of the object, the distance between the hands (m).
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub diameter_m: f64,
+    /// Gap kept between the object and the torso's surface (m).
+    #[serde(default)]
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub clearance_m: f64,
+    /// Frames the object is held (default: all).
+    #[serde(default)]
+    pub frames: FrameSelection,
+    /// Reduction over frames (default: mean).
+    #[serde(default)]
+    pub reduce: Reduce,
+}
+
+fn default_hands() -> [Joint; 2] {
+    [Joint::LeftWrist, Joint::RightWrist]
+}
+
 fn default_sharpness() -> f64 {
     10_000.0
 }
@@ -244,6 +345,9 @@ pub struct SceneConstraint {
     /// Frames the constraint applies to (default: all).
     #[serde(default)]
     pub frames: FrameSelection,
+    /// Further keep only frames meeting this condition (e.g. while the pelvis is between two z).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub when: Option<Condition>,
     /// Reduction over frames of each frame's worst point (default: mean, over the frames that
     /// violate, so a short violation is not averaged away by the clear frames).
     #[serde(default)]
@@ -337,6 +441,9 @@ pub struct ComInSupport {
     #[serde(default)]
     #[schemars(range(min = 0.0, max = 100.0))]
     pub margin_m: f64,
+    /// A carried object counted in the centre of mass (PBG-2's heavy ball).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load: Option<CarriedLoad>,
     /// Frames the constraint applies to (default: all).
     #[serde(default)]
     pub frames: FrameSelection,

@@ -33,8 +33,8 @@ use serde::{Deserialize, Serialize};
 
 pub use error::{Problem, ProgramError};
 pub use expr::{
-    Args, BoneDirection, ComInSupport, Count, Equal, Expr, Extremum, FootContact, GreaterThan, LessThan, Metric, Not,
-    SceneConstraint, SelfCollision, StayNearInitial, Steps, Support,
+    Airborne, Args, BoneDirection, Carry, ComInSupport, Count, Equal, EventRegion, Events, Expr, Extremum, FootContact,
+    GreaterThan, LessThan, Metric, Not, SceneConstraint, SelfCollision, StayNearInitial, Steps, Support,
 };
 pub use quantity::{
     Axes, CarriedLoad, CentreOfMass, Condition, Derivative, Displacement, Distance, DistanceToLine, DistanceToPlane,

@@ -83,6 +83,16 @@ impl Unit {
 }
 
 impl Unit {
+    /// Default hysteresis of [`super::Events`] in this unit: how far a signal goes back past
+    /// its threshold between two events (claps: the wrists 5 cm further apart).
+    pub fn event_hysteresis(self) -> f64 {
+        match self {
+            Unit::Metre => 0.05,
+            Unit::MetrePerSecond => 0.1,
+            Unit::MetrePerSecondSquared => 0.5,
+        }
+    }
+
     /// SI symbol.
     pub fn symbol(self) -> &'static str {
         match self {

@@ -388,6 +388,32 @@ fn inconsistent_fields_are_rejected() {
     assert_names(&rust_errors(&window), "constraints[0].expr.primitive.z_range_m", "min must be < max");
 }
 
+/// The constructs of issue 19 reject what means nothing: an object of size 0, a hysteresis of 0,
+/// a flight of 0 frames, a load without mass, one hand holding with itself; each names its field.
+#[test]
+fn events_flights_and_carried_objects_with_nothing_in_them_are_rejected() {
+    let expr = |expr: Value| with("/constraints/1/expr", expr);
+    let carry = expr(json!({"op": "carry", "diameter_m": 0.0}));
+    assert_names(&rust_errors(&carry), "constraints[1].expr.diameter_m", "diameter 0");
+    let same = expr(json!({"op": "carry", "hands": ["left_wrist", "left_wrist"], "diameter_m": 0.3}));
+    assert_names(&rust_errors(&same), "constraints[1].expr.hands[1]", "listed twice");
+    let wrists =
+        json!({"kind": "distance", "a": {"joint": "left_wrist"}, "b": {"joint": "right_wrist"}, "axes": "xyz"});
+    let events =
+        expr(json!({"op": "events", "signal": wrists, "event": {"below": 0.1}, "hysteresis": 0.0, "target_count": 2}));
+    assert_names(&rust_errors(&events), "constraints[1].expr.hysteresis", "wobble");
+    let flight = expr(json!({"op": "airborne", "clearance_m": 0.1, "min_frames": 0}));
+    assert_names(&rust_errors(&flight), "constraints[1].expr.min_frames", "no flight");
+    let load = expr(
+        json!({"op": "com_in_support", "support": "both_feet", "load": {"between": ["left_wrist", "right_wrist"], "mass_ratio": 0.0}}),
+    );
+    assert_names(&rust_errors(&load), "constraints[1].expr.load.mass_ratio", "positive mass");
+    let vector = expr(
+        json!({"op": "events", "signal": {"kind": "position", "of": {"joint": "head"}, "axes": "xz"}, "event": {"above": 1.0}, "target_count": 1}),
+    );
+    assert_names(&rust_errors(&vector), "constraints[1].expr.signal", "must be a scalar");
+}
+
 #[test]
 fn tag_after_other_fields_still_parses_and_names_inner_paths() {
     let text = r#"{"text": "", "frames": 50, "constraints": [{"id": "c1", "expr":
@@ -418,7 +444,16 @@ fn dump_schema() {
 #[test]
 fn schema_describes_ops_and_joints() {
     let schema = json_schema().to_string();
-    for needle in ["less_than", "overhead_barrier", "left_wrist", "retrieval_confidence", "eqs. 15"] {
+    for needle in [
+        "less_than",
+        "overhead_barrier",
+        "left_wrist",
+        "retrieval_confidence",
+        "eqs. 15",
+        "airborne",
+        "carry",
+        "events",
+    ] {
         assert!(schema.contains(needle), "schema lacks {needle}");
     }
 }

@@ -4,8 +4,8 @@
 use std::collections::HashSet;
 
 use super::error::{Problem, ProgramError};
-use super::expr::{Count, Expr, FootContact, SelfCollision};
-use super::quantity::{Condition, FrameRange, FrameRef, FrameSelection, Point, Quantity};
+use super::expr::{Airborne, Count, EventRegion, Events, Expr, FootContact, SelfCollision};
+use super::quantity::{CarriedLoad, Condition, FrameRange, FrameRef, FrameSelection, Point, Quantity};
 use super::scene::{JointSet, Primitive};
 use super::{RelationalParse, TaskProgram, MAX_FRAMES};
 use crate::limits::{PROGRAM_CONSTRAINTS, PROGRAM_FRAMES, PROGRAM_TEXT_CHARS};
@@ -240,15 +240,17 @@ impl Checker {
             Point::Midpoint([a, b]) => self.distinct_joints(&field(path, "midpoint"), &[*a, *b]),
             Point::CentreOfMass(com) => {
                 if let Some(load) = &com.load {
-                    let at = field(&field(path, "centre_of_mass"), "load");
-                    self.distinct_joints(&field(&at, "between"), &load.between);
-                    if self.number(&field(&at, "mass_ratio"), load.mass_ratio, 0.0, 100.0, "") && load.mass_ratio == 0.0
-                    {
-                        self.inconsistent(field(&at, "mass_ratio"), "a carried load needs a positive mass");
-                    }
+                    self.load(&field(&field(path, "centre_of_mass"), "load"), load);
                 }
             }
             Point::FixedM(p) => self.point_m(&field(path, "fixed_m"), p),
+        }
+    }
+
+    fn load(&mut self, at: &str, load: &CarriedLoad) {
+        self.distinct_joints(&field(at, "between"), &load.between);
+        if self.number(&field(at, "mass_ratio"), load.mass_ratio, 0.0, 100.0, "") && load.mass_ratio == 0.0 {
+            self.inconsistent(field(at, "mass_ratio"), "a carried load needs a positive mass");
         }
     }
 
@@ -380,6 +382,20 @@ impl Checker {
                 }
                 self.primitive(&field(path, "primitive"), &scene.primitive);
                 self.frames(&field(path, "frames"), &scene.frames, self.frames);
+                if let Some(when) = &scene.when {
+                    self.condition(&field(path, "when"), when);
+                }
+            }
+            Expr::Events(e) => self.events(path, e),
+            Expr::Airborne(e) => self.airborne(path, e),
+            Expr::Carry(e) => {
+                self.distinct_joints(&field(path, "hands"), &e.hands);
+                let at = field(path, "diameter_m");
+                if self.number(&at, e.diameter_m, 0.0, MAX_ABS_M, "m") && e.diameter_m == 0.0 {
+                    self.inconsistent(at, "an object of diameter 0 is no object");
+                }
+                self.number(&field(path, "clearance_m"), e.clearance_m, 0.0, MAX_ABS_M, "m");
+                self.frames(&field(path, "frames"), &e.frames, self.frames);
             }
             Expr::BoneDirection(e) => {
                 if e.joint.parent().is_none() {
@@ -392,6 +408,9 @@ impl Checker {
             Expr::SelfCollision(e) => self.self_collision(path, e),
             Expr::ComInSupport(e) => {
                 self.number(&field(path, "margin_m"), e.margin_m, 0.0, MAX_ABS_M, "m");
+                if let Some(load) = &e.load {
+                    self.load(&field(path, "load"), load);
+                }
                 self.frames(&field(path, "frames"), &e.frames, self.frames);
             }
             Expr::StayNearInitial(e) => {
@@ -443,6 +462,53 @@ impl Checker {
             );
         }
         self.frames(&field(path, "frames"), &count.frames, n);
+    }
+
+    fn events(&mut self, path: &str, e: &Events) {
+        let at = field(path, "signal");
+        let n = self.scalar(&at, &e.signal);
+        let limit = e.signal.unit().absurd_limit();
+        let unit = unit_name(&e.signal);
+        let (name, threshold) = match e.event {
+            EventRegion::Below(v) => ("below", v),
+            EventRegion::Above(v) => ("above", v),
+        };
+        self.number(&field(&field(path, "event"), name), threshold, -limit, limit, unit);
+        if let Some(h) = e.hysteresis {
+            let at = field(path, "hysteresis");
+            if self.number(&at, h, 0.0, limit, unit) && h == 0.0 {
+                self.inconsistent(at, "a hysteresis of 0 counts every wobble across the threshold");
+            }
+        }
+        let Some(n) = n else { return };
+        // An event and the way back out of it take at least two frames each.
+        let most = n.div_ceil(2);
+        if e.target_count > most {
+            self.inconsistent(
+                field(path, "target_count"),
+                format!("{} events cannot fit: at most {most} in a signal of {n} frames", e.target_count),
+            );
+        }
+        self.frames(&field(path, "frames"), &e.frames, n);
+    }
+
+    fn airborne(&mut self, path: &str, e: &Airborne) {
+        self.number(&field(path, "clearance_m"), e.clearance_m, 0.0, MAX_ABS_M, "m");
+        self.frames(&field(path, "frames"), &e.frames, self.frames);
+        let at = field(path, "min_frames");
+        if e.min_frames == 0 {
+            self.inconsistent(at, "a flight of 0 frames is no flight");
+        } else if let Some(longest) = longest_run(&e.frames, self.frames) {
+            if e.min_frames > longest {
+                self.inconsistent(
+                    at,
+                    format!(
+                        "{} consecutive frames do not fit: the longest run of selected frames is {longest}",
+                        e.min_frames
+                    ),
+                );
+            }
+        }
     }
 
     fn primitive(&mut self, path: &str, primitive: &Primitive) {
@@ -558,6 +624,27 @@ impl Checker {
         self.number(&field(path, "min_distance_m"), e.min_distance_m, 0.0, MAX_ABS_M, "m");
         self.frames(&field(path, "frames"), &e.frames, self.frames);
     }
+}
+
+/// The most consecutive frames a selection keeps in a clip of `n` frames; `None` when a frame
+/// of it lies outside (reported by the frame checks).
+fn longest_run(selection: &FrameSelection, n: u32) -> Option<u32> {
+    let mut kept: Vec<u32> = match selection {
+        FrameSelection::All => return Some(n),
+        FrameSelection::Keyframes(keys) => keys.iter().map(|k| k.resolve(n)).collect::<Option<_>>()?,
+        FrameSelection::Range(range) => {
+            let (from, to) = (range.from.resolve(n)?, range.to.resolve(n)?);
+            return Some((to + 1).saturating_sub(from));
+        }
+    };
+    kept.sort_unstable();
+    kept.dedup();
+    let (mut best, mut run) = (0, 0);
+    for (i, f) in kept.iter().enumerate() {
+        run = if i > 0 && kept[i - 1] + 1 == *f { run + 1 } else { 1 };
+        best = best.max(run);
+    }
+    Some(best)
 }
 
 fn unit_name(quantity: &Quantity) -> &'static str {
