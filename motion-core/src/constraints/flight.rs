@@ -3,6 +3,8 @@
 
 use candle_core::{Result, Tensor, D};
 
+use super::frames::condition_mask;
+use crate::program::Condition;
 use crate::skeleton::Joint;
 
 /// The foot joints that must all clear the ground in flight: ankles and toes.
@@ -43,6 +45,20 @@ pub fn window_means(x: &Tensor, starts: &Tensor, length: usize) -> Result<Tensor
         sum = (sum + x.narrow(1, k, count)?)?;
     }
     (sum / length as f64)?.contiguous()?.index_select(starts, 1)
+}
+
+/// Which windows (`[B, W]`, 0/1, no gradient) lie wholly on frames where `when` holds on the
+/// current motion; `None` without a condition.
+pub fn windows_meeting(
+    joints: &Tensor,
+    when: &Option<Condition>,
+    starts: &Tensor,
+    length: usize,
+) -> Result<Option<Tensor>> {
+    let Some(condition) = when else { return Ok(None) };
+    let mask = condition_mask(joints, condition, joints.dim(1)?)?;
+    let kept = window_means(&mask, starts, length)?;
+    Ok(Some(kept.ge(1.0 - 1e-6)?.to_dtype(joints.dtype())?))
 }
 
 #[cfg(test)]

@@ -138,6 +138,7 @@ enum Node {
         length: usize,
         /// Start frames `[W]` (u32) of the windows of `length` selected frames.
         starts: Tensor,
+        when: Option<Condition>,
     },
     Carry {
         hands: [Joint; 2],
@@ -418,7 +419,7 @@ impl Compiler<'_> {
                 target: f64::from(*target_count),
                 frames: self.select(frames, self.length(signal))?,
             },
-            Expr::Airborne(Airborne { clearance_m, min_frames, frames }) => {
+            Expr::Airborne(Airborne { clearance_m, min_frames, frames, when }) => {
                 let length = *min_frames as usize;
                 let starts = flight::window_starts(self.select(frames, self.frames)?.kept(), length);
                 if starts.is_empty() {
@@ -429,6 +430,7 @@ impl Compiler<'_> {
                     clearance: *clearance_m,
                     length,
                     starts: Tensor::from_vec(starts.into_iter().map(|f| f as u32).collect::<Vec<_>>(), n, self.device)?,
+                    when: when.clone(),
                 }
             }
             Expr::Carry(Carry { hands, diameter_m, clearance_m, frames, reduce }) => Node::Carry {
@@ -650,9 +652,19 @@ impl Node {
                 let s = frames.select(&signal(joints, quantity)?.squeeze(D::Minus1)?)?;
                 (count::soft_event_count(&s, *region, *hysteresis)? - *target)?.sqr()?
             }
-            Node::Airborne { clearance, length, starts } => {
+            Node::Airborne { clearance, length, starts, when } => {
                 let deficit = flight::flight_deficit(joints, *clearance)?.sqr()?;
-                flight::window_means(&deficit, starts, *length)?.min(D::Minus1)?
+                let means = flight::window_means(&deficit, starts, *length)?; // [B, W]
+                match flight::windows_meeting(joints, when, starts, *length)? {
+                    None => means.min(D::Minus1)?,
+                    Some(valid) => {
+                        // Windows that do not meet `when` are pushed far up; a sample with none
+                        // that meets it has no flight where it must: clearance².
+                        let best = (means + ((1.0 - &valid)? * 1e9)?)?.min(D::Minus1)?;
+                        let any = valid.max(D::Minus1)?;
+                        ((best * &any)? + ((1.0 - any)? * clearance.powi(2))?)?
+                    }
+                }
             }
             Node::Carry { hands, diameter, clearance, frames, reduce: how } => {
                 let (gap, intrusion) = carry::carry_errors(joints, *hands, *diameter, *clearance)?;

@@ -200,16 +200,29 @@ impl Node {
                     tolerance: COUNT_TOLERANCE,
                 })
             }
-            Node::Airborne { clearance, length, starts } => {
-                // The best flight: the window whose lowest foot frame comes closest to clearing.
+            Node::Airborne { clearance, length, starts, when } => {
+                // The best flight: the window (meeting `when`) whose lowest foot frame comes
+                // closest to clearing; none meeting it: the whole clearance is missing.
                 let deficit = flight::flight_deficit(joints, *clearance)?.to_dtype(candle_core::DType::F64)?;
+                let valid = match flight::windows_meeting(joints, when, starts, *length)? {
+                    Some(valid) => Some(valid.to_dtype(candle_core::DType::F64)?.to_vec2::<f64>()?),
+                    None => None,
+                };
                 let starts = starts.to_vec1::<u32>()?;
                 let value = deficit
                     .to_vec2::<f64>()?
                     .iter()
-                    .map(|row| {
-                        let worst = |&s: &u32| row[s as usize..s as usize + length].iter().copied().fold(0.0, f64::max);
-                        starts.iter().map(worst).fold(f64::INFINITY, f64::min)
+                    .enumerate()
+                    .map(|(b, row)| {
+                        let worst = |s: u32| row[s as usize..s as usize + length].iter().copied().fold(0.0, f64::max);
+                        let kept = |w: &usize| valid.as_ref().is_none_or(|v| v[b][*w] > 0.5);
+                        let best =
+                            (0..starts.len()).filter(kept).map(|w| worst(starts[w])).fold(f64::INFINITY, f64::min);
+                        if best.is_finite() {
+                            best
+                        } else {
+                            *clearance
+                        }
                     })
                     .collect();
                 leaf(Check {

@@ -341,6 +341,20 @@ fn a_flight_needs_both_feet_off_the_ground() {
     assert_eq!(judge(&lifted(10, 4..8, 0.3)).pass, vec![true]);
     gradient_ok(flight, &lifted(8, 3..5, 0.1));
     gradient_ok(late, &glide(8));
+    // Over the box: every frame of the flight with the pelvis between z = 0.9 and 1.5 (frames
+    // 19-29 of the glide). A jump at frames 4-7 is not there; one at 20-23 is; a box never
+    // reached leaves no flight where it must be: the whole 0.1 m short.
+    let over = |lo: f64, hi: f64| {
+        format!(
+            r#"{{"op": "airborne", "clearance_m": 0.1, "min_frames": 3, "when": {{"of": {{"kind": "position", "of": {{"joint": "pelvis"}}, "axes": "z"}}, "min": {lo}, "max": {hi}}}}}"#
+        )
+    };
+    close(&over(0.9, 1.5), &lifted(30, 4..8, 0.3), 0.08f64.powi(2));
+    close(&over(0.9, 1.5), &lifted(30, 20..24, 0.3), 0.0);
+    close(&over(50.0, 60.0), &lifted(30, 20..24, 0.3), 0.01);
+    let never = compile(30, &over(50.0, 60.0)).satisfaction(&tensor(&lifted(30, 20..24, 0.3)), None).unwrap();
+    assert_eq!((never[0].checks[0].value.clone(), never[0].pass.clone()), (vec![0.1], vec![false]));
+    gradient_ok(&over(0.1, 0.3), &lifted(8, 3..5, 0.1));
     // A flight longer than the frames it may happen in is rejected, naming min_frames.
     let text = format!(r#"{{"text": "", "frames": 10, "constraints": [{{"id": "c1", "expr": {late}}}]}}"#)
         .replace(r#""min_frames": 3"#, r#""min_frames": 7"#);

@@ -50,9 +50,11 @@ pub enum Expr {
     /// meet), and its check counts events with [`crate::metrics::event_count`].
     Events(Events),
     /// A flight phase: both feet (ankles and toes) higher than `clearance_m` on at least
-    /// `min_frames` consecutive frames somewhere in `frames`. Per frame
-    /// `g[t] = relu(clearance_m − lowest foot joint's y)`; the error is the smallest, over the
-    /// windows of `min_frames` consecutive selected frames, of the window's mean `g²` (m²).
+    /// `min_frames` consecutive frames somewhere in `frames` (and, with `when`, where the
+    /// condition holds on every frame of the flight: "over the box" is the pelvis above it). Per
+    /// frame `g[t] = relu(clearance_m − lowest foot joint's y)`; the error is the smallest, over
+    /// the windows of `min_frames` consecutive selected frames, of the window's mean `g²` (m²);
+    /// when no window meets `when`, no flight happened where it must: `clearance_m²`.
     Airborne(Airborne),
     /// An object held between two hands (ProgMoGen HOI-2): per frame
     /// `(‖a − b‖ − diameter_m)² + relu(r + clearance_m − d_torso)²`, with `r` the object's
@@ -297,6 +299,10 @@ pub struct Airborne {
     /// Frames where the flight may happen (default: all).
     #[serde(default)]
     pub frames: FrameSelection,
+    /// Where the flight must happen, e.g. while the pelvis is over the obstacle (every frame of
+    /// the flight meets it; no gradient flows through the selection).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub when: Option<Condition>,
 }
 
 /// Fields of [`Expr::Carry`].

@@ -495,6 +495,9 @@ impl Checker {
     fn airborne(&mut self, path: &str, e: &Airborne) {
         self.number(&field(path, "clearance_m"), e.clearance_m, 0.0, MAX_ABS_M, "m");
         self.frames(&field(path, "frames"), &e.frames, self.frames);
+        if let Some(when) = &e.when {
+            self.condition(&field(path, "when"), when);
+        }
         let at = field(path, "min_frames");
         if e.min_frames == 0 {
             self.inconsistent(at, "a flight of 0 frames is no flight");
