@@ -261,9 +261,10 @@ impl Node {
                 };
                 let mask = scene_mask(joints, frames, when)?;
                 let value = over_frames(&depth, mask.as_ref(), *reduce == Reduce::Min)?;
-                let what = match is_obstacle(primitive) {
-                    true => format!("penetration into {}", primitive_name(primitive)),
-                    false => format!("distance off the {}", primitive_name(primitive)),
+                let what = match primitive {
+                    Primitive::InsideBox(_) => "distance outside the inside_box".to_owned(),
+                    _ if is_obstacle(primitive) => format!("penetration into {}", primitive_name(primitive)),
+                    _ => format!("distance off the {}", primitive_name(primitive)),
                 };
                 leaf(Check { what, unit: Unit::M, value, tolerance: DISTANCE_TOLERANCE_M })
             }

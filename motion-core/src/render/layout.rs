@@ -11,7 +11,7 @@ use tiny_skia::{Color, Pixmap};
 use super::draw::{fill, line, polyline};
 use super::font::draw_text;
 use super::RenderError;
-use crate::program::{Gap, Hurdle, InsideBox, OverheadBarrier, Primitive, Wall};
+use crate::program::{BalanceBeam, Gap, Hurdle, InsideBox, OverheadBarrier, Primitive, Wall};
 use crate::skeleton::{bones, Joint, Pose};
 
 /// One motion of a strip or an animation.
@@ -233,6 +233,12 @@ impl Layout {
             for ([z0, z1], [x0, x1]) in top_boxes(p, self.z, self.x) {
                 fill(pixmap, (self.px_z(z0), self.px_x(x1)), (self.px_z(z1), self.px_x(x0)), obstacle());
             }
+            if let Primitive::BalanceBeam(beam) = p {
+                if let Some((a, b)) = beam_ends(beam, self.z) {
+                    let width = (2.0 * beam.half_width_m.max(0.01) * self.scale) as f32;
+                    line(pixmap, self.top_px(a), self.top_px(b), Color::from_rgba8(190, 140, 60, 140), width.max(2.0));
+                }
+            }
         }
         self.z_axis(pixmap, bottom);
         let mut k = self.x.0.ceil();
@@ -299,6 +305,31 @@ fn scene_x_range(p: &Primitive) -> Option<[f64; 2]> {
     }
 }
 
+/// The ends of a beam's drawn stretch in the ground plane (y = 0): its `extent_m`, or where its
+/// line crosses the shown z range; `None` for a beam without a horizontal part.
+fn beam_ends(beam: &BalanceBeam, z: (f64, f64)) -> Option<(DVec3, DVec3)> {
+    let direction = DVec3::new(beam.direction[0], 0.0, beam.direction[2]).try_normalize()?;
+    let point = DVec3::new(beam.point_m[0], 0.0, beam.point_m[2]);
+    // `extent_m` runs along the horizontal direction on a horizontal beam, else along the 3-D
+    // one, whose ground projection is shorter by this factor.
+    let flat = match beam.horizontal {
+        true => 1.0,
+        false => {
+            let along = DVec3::from_array(beam.direction).try_normalize()?;
+            DVec3::new(along.x, 0.0, along.z).length()
+        }
+    };
+    let [from, to] = match beam.extent_m {
+        Some([from, to]) => [from * flat, to * flat],
+        None if direction.z.abs() > 1e-6 => {
+            let (a, b) = ((z.0 - point.z) / direction.z, (z.1 - point.z) / direction.z);
+            [a.min(b), a.max(b)]
+        }
+        None => return None,
+    };
+    Some((point + direction * from, point + direction * to))
+}
+
 /// A primitive's side-view rectangle: (y low, y high, z range), m.
 fn side_box(p: &Primitive, top_y: f64) -> Option<(f64, f64, [f64; 2])> {
     match p {
@@ -337,6 +368,27 @@ fn top_boxes(p: &Primitive, z: (f64, f64), x: (f64, f64)) -> Vec<([f64; 2], [f64
 mod tests {
     use super::*;
     use crate::import::deepmimic::rest_pose;
+
+    /// A beam's drawn stretch: its extent along a horizontal direction, along the ground
+    /// projection of a sloping one, or the shown z range when it is endless.
+    #[test]
+    fn beams_are_drawn_over_their_stretch() {
+        let beam = |direction: [f64; 3], horizontal: bool, extent_m: Option<[f64; 2]>| BalanceBeam {
+            point_m: [0.5, 0.1, 0.0],
+            direction,
+            half_width_m: 0.05,
+            horizontal,
+            extent_m,
+        };
+        let (a, b) = beam_ends(&beam([0.0, 0.0, 2.0], true, Some([1.0, 3.0])), (-1.0, 6.0)).unwrap();
+        assert!((a - DVec3::new(0.5, 0.0, 1.0)).length() < 1e-12 && (b - DVec3::new(0.5, 0.0, 3.0)).length() < 1e-12);
+        // Rising at 45°: 2 m along it is √2 m along the ground.
+        let (_, b) = beam_ends(&beam([0.0, 1.0, 1.0], false, Some([0.0, 2.0])), (-1.0, 6.0)).unwrap();
+        assert!((b.z - 2f64.sqrt()).abs() < 1e-12);
+        let (a, b) = beam_ends(&beam([0.0, 0.0, 1.0], false, None), (-1.0, 6.0)).unwrap();
+        assert_eq!((a.z, b.z), (-1.0, 6.0));
+        assert!(beam_ends(&beam([0.0, 1.0, 0.0], false, None), (-1.0, 6.0)).is_none());
+    }
 
     /// One motion 3 m along +z with a gap 1 m wide beside it: the layout spans the motion plus
     /// 0.3 m either side and the gap's walls, and world points land where the axes say.
