@@ -326,3 +326,55 @@ fn is_step_count(program: &TaskProgram, id: &str) -> bool {
 fn to_f64(t: &Tensor) -> candle_core::Result<Vec<f64>> {
     t.to_dtype(DType::F64)?.to_vec1::<f64>()
 }
+
+#[cfg(test)]
+mod tests {
+    use candle_core::Device;
+
+    use super::*;
+    use crate::constraints::STANDING;
+    use crate::generation::Method;
+
+    /// The report's maximum scene penetration is the maximum over the samples, not their mean: of
+    /// two standing figures, one with a toe 16 cm under the floor on one frame, the report gives
+    /// 0.16 m, the per-sample figures 0 and 0.16, the floor depth 0.16 and a failed check.
+    #[test]
+    fn a_joint_under_the_floor_is_the_reports_maximum() {
+        let frames = 10;
+        let mut flat = Vec::new();
+        for sample in 0..2 {
+            for t in 0..frames {
+                let mut pose = STANDING;
+                if sample == 1 && t == 5 {
+                    pose[crate::skeleton::Joint::LeftFoot.index()][1] = -0.16;
+                }
+                flat.extend(pose.iter().flatten().copied());
+            }
+        }
+        let joints = Tensor::from_vec(flat, (2, frames, 22, 3), &Device::Cpu).unwrap();
+        let program = TaskProgram::from_json(
+            r#"{"text": "a person stands", "frames": 10, "constraints": [{"id": "c1", "expr":
+                {"op": "scene", "body": {"joints": "all"}, "primitive": {"kind": "ground"}}}]}"#,
+        )
+        .unwrap();
+        let compiled = CompiledProgram::compile(&program, &Device::Cpu).unwrap();
+        let generated = Generated {
+            features: Tensor::zeros((2, frames, 263), DType::F64, &Device::Cpu).unwrap(),
+            joints: joints.clone(),
+            raw_joints: joints.clone(),
+            refine: Vec::new(),
+            foot_lock: Vec::new(),
+            initial_joints: joints,
+            loss_history: vec![Vec::new(); 2],
+            seconds: 0.0,
+        };
+        let r = report(&program, &compiled, &generated, &GenerationConfig::new(Method::Unconstrained)).unwrap();
+        let depths = r.scene_penetration_per_sample_m.clone().unwrap();
+        assert!(depths[0].abs() < 1e-9 && (depths[1] - 0.16).abs() < 1e-9, "{depths:?}");
+        assert!((r.max_scene_penetration_m.unwrap() - 0.16).abs() < 1e-9);
+        // Poses are f32: 0.16 to single precision.
+        assert!((r.max_under_floor_m - 0.16).abs() < 1e-6, "{}", r.max_under_floor_m);
+        assert_eq!(r.constraints[0].pass, vec![true, false]);
+        assert_eq!(r.success_rate, 0.5);
+    }
+}

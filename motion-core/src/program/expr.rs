@@ -47,7 +47,8 @@ pub enum Expr {
     /// (for `below`; mirrored for `above`), `h` the hysteresis, `w = h/4`, and
     /// `n = ½(Σ_t ½|l[t+1] − l[t]| + (1 + l[first])/2 + (1 + l[last])/2)`. Unlike
     /// [`Expr::Count`]'s extrema, an event needs the signal to reach the threshold (the hands to
-    /// meet), and its check counts events with [`crate::metrics::event_count`].
+    /// meet), and its check counts events with [`crate::metrics::event_count`] (the soft count
+    /// adds ½ for a signal that goes into the band and back where the metric adds 0).
     Events(Events),
     /// A flight phase: both feet (ankles and toes) higher than `clearance_m` on at least
     /// `min_frames` consecutive frames somewhere in `frames` (and, with `when`, where the
