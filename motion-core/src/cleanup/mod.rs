@@ -25,7 +25,9 @@
 //!    toe its ankle's), so the foot turns about the planted joint. A target out of the leg's
 //!    reach gives the closest point the leg reaches with the knee a little bent (soft reach,
 //!    [`FootLockConfig::soft_reach_m`]) and is counted. The IK never takes a knee, ankle or toe
-//!    below the floor, nor deeper than it was: where the full correction would, the leg takes
+//!    below the floor, nor deeper than it was, with planting on or off
+//!    ([`FootLockConfig::keep_above_floor`]; GEO-2's walks beside a raised beam had a toe pushed
+//!    7 cm under the floor while planting was off): where the full correction would, the leg takes
 //!    the largest fraction of it that does not (`floor_safe_fraction`), and neighbouring frames
 //!    ease into that fraction at most [`FLOOR_FRACTION_STEP`] per frame (each eased fraction is
 //!    checked again). (A lock lowering a stance ankle to its standing height used to push its
@@ -119,11 +121,15 @@ pub struct FootLockConfig {
     /// a held foot the hip pulls out of reach then follows it smoothly instead of snapping
     /// the knee straight.
     pub soft_reach_m: f64,
-    /// Plant contacts on the floor y = 0: lower a floating body, raise sinking frames, keep the
-    /// leg IK above the floor, and bring locked joints within `height_tolerance_m` of their
-    /// standing heights (default true). Switch off for motions on raised supports (a balance
-    /// beam): locks then hold only horizontally, and the body keeps its height.
+    /// Plant contacts on the floor y = 0: lower a floating body, raise sinking frames, and bring
+    /// locked joints within `height_tolerance_m` of their standing heights (default true).
+    /// Switch off for motions on raised supports (a balance beam): locks then hold only
+    /// horizontally, and the body keeps its height.
     pub plant_on_floor: bool,
+    /// Keep the leg IK out of the ground: no knee, ankle or toe lower than the floor y = 0 or
+    /// than it was (default true), with planting on or off. Switch off only where the ground
+    /// itself lies below y = 0 (a pit).
+    pub keep_above_floor: bool,
     /// A body floating less than this above the floor is not lowered, m (default 0.02): its
     /// stance feet come within `height_tolerance_m` of the floor through the leg IK.
     pub float_tolerance_m: f64,
@@ -146,6 +152,7 @@ impl Default for FootLockConfig {
             blend_speed_m_per_s: 0.5,
             soft_reach_m: 0.01,
             plant_on_floor: true,
+            keep_above_floor: true,
             float_tolerance_m: 0.02,
         }
     }
@@ -335,7 +342,7 @@ pub fn foot_lock(
             );
             (leg, solved)
         };
-        let guarded = |t: usize| moved(t) && config.plant_on_floor;
+        let guarded = |t: usize| moved(t) && config.keep_above_floor;
         let fractions: Vec<f64> =
             (0..out.len()).map(|t| if guarded(t) { floor_safe_fraction(|f| solve(t, f), 1.0) } else { 1.0 }).collect();
         // Easing lowers fractions, and a lower one need not keep the leg above the floor

@@ -433,6 +433,38 @@ fn off_the_floor_a_raised_walk_keeps_its_height() {
     }
 }
 
+/// Planting off (the program's scene holds a raised beam) still keeps the leg IK out of the
+/// ground: sliding walks on the floor y = 0 end with no joint lower than the floor or than it was
+/// (GEO-2's walks had a toe pushed 7 cm under the floor).
+#[test]
+fn with_planting_off_the_leg_ik_still_keeps_out_of_the_ground() {
+    let config = FootLockConfig { plant_on_floor: false, ..FootLockConfig::default() };
+    let mut failed = Vec::new();
+    for (name, poses) in walking_clips(SIX_SECONDS) {
+        for factor in [1.3, 1.6, 2.0] {
+            let sliding = stretched(&poses, factor);
+            let out = foot_lock(&sliding, None, &config).unwrap();
+            for (t, (before, after)) in sliding.iter().zip(&out.poses).enumerate() {
+                for j in 0..NUM_JOINTS {
+                    let floor = before[j].y.min(0.0) - 1e-3;
+                    if after[j].y < floor {
+                        failed.push(format!(
+                            "{name} ×{factor} frame {t} joint {j}: {:.3} -> {:.3}",
+                            before[j].y, after[j].y
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    assert!(
+        failed.is_empty(),
+        "{} joint-frames pushed into the ground, e.g. {:?}",
+        failed.len(),
+        &failed[..failed.len().min(5)]
+    );
+}
+
 #[test]
 fn a_sinking_walk_is_raised_and_no_joint_ends_below_the_floor() {
     let mut failed = Vec::new();

@@ -103,7 +103,8 @@ pub struct GenerationConfig {
     pub jitter_weight: f64,
     /// The contact-aware clean-up of every method's output (foot locking with leg IK; on by
     /// default). Its `plant_on_floor` is switched off for programs whose scene holds a raised
-    /// support (a balance beam, a ground away from y = 0).
+    /// support (a balance beam, a ground away from y = 0), and its `keep_above_floor` for those
+    /// whose ground lies below y = 0.
     #[serde(default)]
     pub foot_lock: FootLockConfig,
     /// The kinematic refinement of every method's output against the program's geometric
@@ -370,6 +371,7 @@ pub(crate) fn finish(
     ensure_finite(&refined, "the refinement's joint positions")?;
     let mut lock = config.foot_lock.clone();
     lock.plant_on_floor &= !has_raised_support(program);
+    lock.keep_above_floor &= !has_sunk_ground(program);
     let (joints, foot_lock) = clean_up(&refined, &lock)?;
     ensure_finite(&joints, "the foot clean-up's joint positions")?;
     Ok(Generated {
@@ -399,6 +401,12 @@ pub fn clean_up(joints: &Tensor, config: &FootLockConfig) -> Result<(Tensor, Vec
         return Ok((joints.clone(), reports));
     }
     Ok((poses_to_tensor(&cleaned, joints.dtype(), joints.device())?, reports))
+}
+
+/// Whether the scene's ground lies more than 1 cm below y = 0 (a pit), where legs may go below
+/// y = 0.
+fn has_sunk_ground(program: &TaskProgram) -> bool {
+    program.scene_primitives().iter().any(|p| matches!(p, Primitive::Ground(ground) if ground.height_m < -0.01))
 }
 
 /// Whether the scene holds a support more than 1 cm above or below the floor y = 0 (a raised
