@@ -39,7 +39,7 @@ fn main() -> Result<(), Box<dyn Error>> {
             })
             .collect();
         let path = out.join(format!("{}.png", source.name));
-        motion_strip(&rows, 8, &[], &format!("{}: {}", source.name, source.label), &path)?;
+        motion_strip(&rows, 8, &[], &[], &format!("{}: {}", source.name, source.label), &path)?;
         println!("{}", path.display());
     }
     Ok(())

@@ -192,6 +192,7 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         &strip,
         8,
         &[],
+        &[],
         "unconstrained samples of the shipped prior, after the foot clean-up",
         &args.out.join("samples.png"),
     )?;

@@ -272,7 +272,8 @@ pub fn run_program(
         .enumerate()
         .map(|(i, p)| StripRow { label: format!("{} sample {i} (seed {})", config.method, config.seed), poses: p })
         .collect();
-    motion_strip(&rows, 8, &program.scene_primitives(), &program.text, &folder.path().join("strip.png"))?;
+    let (scene, carried) = (program.scene_primitives(), program.carried_objects());
+    motion_strip(&rows, 8, &scene, &carried, &program.text, &folder.path().join("strip.png"))?;
     folder.write("program.json", (program.to_json_pretty()? + "\n").as_bytes())?;
     let labels = (0..poses.len()).map(|i| format!("{} sample {i} (seed {})", config.method, config.seed)).collect();
     let report_json = Some(serde_json::to_value(&report)?);

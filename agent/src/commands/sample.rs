@@ -105,7 +105,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         .enumerate()
         .map(|(i, p)| StripRow { label: format!("sample {i} (seed {})", args.seed), poses: p })
         .collect();
-    motion_strip(&rows, 8, &[], &args.prompt, &folder.path().join("strip.png"))?;
+    motion_strip(&rows, 8, &[], &[], &args.prompt, &folder.path().join("strip.png"))?;
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
     write_all(&folder, &args.prompt, FPS, &poses, labels, None, None, args.formats)?;
     let out = folder.commit()?;

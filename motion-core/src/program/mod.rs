@@ -148,6 +148,22 @@ impl TaskProgram {
         out
     }
 
+    /// The objects of every `carry` constraint, in program order (under `and`, `or` and `not`
+    /// too): what a picture of the task draws between the hands.
+    pub fn carried_objects(&self) -> Vec<Carry> {
+        fn visit(expr: &Expr, out: &mut Vec<Carry>) {
+            match expr {
+                Expr::Carry(carry) => out.push(carry.clone()),
+                Expr::And(args) | Expr::Or(args) => args.args.iter().for_each(|a| visit(a, out)),
+                Expr::Not(not) => visit(&not.arg, out),
+                _ => {}
+            }
+        }
+        let mut out = Vec::new();
+        self.constraints.iter().for_each(|c| visit(&c.expr, &mut out));
+        out
+    }
+
     /// Parses a program from JSON text (types only; see [`TaskProgram::validate`]). The error names
     /// the path of the first bad field, and for an unknown name lists the valid ones.
     /// A leading byte-order mark (which some editors write) is skipped, as RFC 8259 allows.

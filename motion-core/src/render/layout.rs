@@ -144,6 +144,11 @@ impl Layout {
     }
 
     /// Where the world point `v` shows in side view `r`, px.
+    /// A length in the world (m) in pixels.
+    pub(super) fn length_px(&self, metres: f64) -> f32 {
+        (metres * self.scale) as f32
+    }
+
     pub(super) fn side_px(&self, r: usize, v: DVec3) -> (f32, f32) {
         (self.px_z(v.z), self.ground(r) - (v.y * self.scale) as f32)
     }
