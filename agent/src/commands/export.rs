@@ -97,6 +97,7 @@ pub fn write_all(
         samples: labels.into_iter().zip(motions).map(|(label, p)| (label, p.as_slice())).collect(),
         scene: program.map(TaskProgram::scene_primitives).unwrap_or_default(),
         targets: program.map(position_targets).unwrap_or_default(),
+        carried: program.map(TaskProgram::carried_objects).unwrap_or_default(),
         report,
         bvh_unit,
     };

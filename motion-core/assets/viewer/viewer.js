@@ -4,7 +4,8 @@
 //
 // Data (written by motion-core/src/export/viewer.rs):
 //   { title, fps, joints: [22 names], parents: [22 parent indices, null for the pelvis],
-//     samples: [{ label, frames: [frame][22][x, y, z] }], scene: [SceneBox], report: TaskReport|null }
+//     samples: [{ label, frames: [frame][22][x, y, z] }], scene: [SceneBox],
+//     carried: [{ hands: [joint, joint], diameter_m }], report: TaskReport|null }
 // Axes are the project's and three.js's own: metres, y up, the character starts facing +z and
 // +x is its left, so positions go in unchanged.
 'use strict';
@@ -217,7 +218,18 @@
     group.add(label);
     scene.add(group);
     const positions = joints.map(() => new THREE.Vector3());
-    return { sample, index, group, jointMeshes, boneMeshes, label, positions, colour: mid };
+    // Objects carried between the hands: a translucent ball of the object's diameter.
+    const balls = (data.carried || []).map((object) => {
+      const mesh = new THREE.Mesh(
+        sphere,
+        new THREE.MeshStandardMaterial({ color: 0xe6961e, roughness: 0.6, transparent: true, opacity: 0.55 }),
+      );
+      mesh.scale.setScalar(object.diameter_m / 2);
+      mesh.name = 'carried object';
+      group.add(mesh);
+      return { mesh, hands: object.hands };
+    });
+    return { sample, index, group, jointMeshes, boneMeshes, balls, label, positions, colour: mid };
   });
 
   const direction = new THREE.Vector3();
@@ -239,6 +251,9 @@
       mesh.position.addVectors(from, to).multiplyScalar(0.5);
       mesh.scale.set(BONE_RADIUS_M, Math.max(length, 1e-6), BONE_RADIUS_M);
       if (length > 1e-9) mesh.quaternion.setFromUnitVectors(UP, direction.divideScalar(length));
+    });
+    figure.balls.forEach((ball) => {
+      ball.mesh.position.addVectors(figure.positions[ball.hands[0]], figure.positions[ball.hands[1]]).multiplyScalar(0.5);
     });
     figure.label.position.copy(figure.positions[HEAD]);
     // Stacked by sample, so figures that start together keep readable labels.

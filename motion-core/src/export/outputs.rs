@@ -21,7 +21,7 @@ use super::rotations::{RotationTrack, SolveFit};
 use super::scene::{scene_boxes, PositionTarget, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
 use super::{write_atomically, ExportError};
-use crate::program::Primitive;
+use crate::program::{Carry, Primitive};
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
 /// The joints whose forward-kinematics positions the manifest lists: the root, ends of the
@@ -50,6 +50,8 @@ pub struct ExportInput<'a> {
     pub scene: Vec<Primitive>,
     /// The task's position targets (drawn likewise).
     pub targets: Vec<PositionTarget>,
+    /// Objects the task carries between the hands (drawn in the viewer as balls).
+    pub carried: Vec<Carry>,
     /// The task's `report.json`, shown by the viewer; `None` for motions without a task.
     pub report: Option<serde_json::Value>,
     /// Length unit of the BVH files.
@@ -123,6 +125,7 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
             .map(|(label, poses)| ViewerSample { label: label.clone(), poses: poses.to_vec() })
             .collect(),
         scene: boxes.clone(),
+        carried: input.carried.clone(),
         report: input.report.clone(),
     };
     let mut samples = Vec::with_capacity(tracks.len());

@@ -13,6 +13,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::{write_atomically, ExportError, SceneBox};
+use crate::program::Carry;
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
 /// The page: markup and style, with the three slots below.
@@ -52,6 +53,9 @@ pub struct ViewerInput {
     pub samples: Vec<ViewerSample>,
     /// The scene's primitives as boxes ([`super::scene_boxes`]).
     pub scene: Vec<SceneBox>,
+    /// Objects carried between the hands, drawn as balls of their diameter at the hands'
+    /// midpoint in every sample.
+    pub carried: Vec<Carry>,
     /// The run's `report.json` ([`crate::evaluation::TaskReport`]) for the constraint table;
     /// `None` for motions without a task.
     pub report: Option<serde_json::Value>,
@@ -66,7 +70,16 @@ struct Payload<'a> {
     parents: [Option<usize>; NUM_JOINTS],
     samples: Vec<PayloadSample<'a>>,
     scene: &'a [SceneBox],
+    carried: Vec<PayloadCarried>,
     report: Option<&'a serde_json::Value>,
+}
+
+#[derive(Serialize)]
+struct PayloadCarried {
+    /// The two hands' joint indices.
+    hands: [usize; 2],
+    /// The ball's diameter, m.
+    diameter_m: f64,
 }
 
 #[derive(Serialize)]
@@ -120,6 +133,11 @@ fn payload_json(input: &ViewerInput) -> Result<String, ExportError> {
             .map(|s| PayloadSample { label: &s.label, frames: s.poses.iter().map(rounded).collect() })
             .collect(),
         scene: &input.scene,
+        carried: input
+            .carried
+            .iter()
+            .map(|c| PayloadCarried { hands: c.hands.map(Joint::index), diameter_m: c.diameter_m })
+            .collect(),
         report: input.report.as_ref(),
     };
     let json = serde_json::to_string(&payload).map_err(|e| ExportError::Shape(format!("viewer data: {e}")))?;
@@ -183,6 +201,13 @@ mod tests {
                 half_extents_m: [0.05, 1.0, 1.5],
                 rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
             }],
+            carried: vec![crate::program::Carry {
+                hands: [Joint::LeftWrist, Joint::RightWrist],
+                diameter_m: 0.3,
+                clearance_m: 0.05,
+                frames: Default::default(),
+                reduce: Default::default(),
+            }],
             report: Some(serde_json::json!({"constraints": [{"id": "c1", "pass": [true, false]}]})),
         }
     }
@@ -205,6 +230,7 @@ mod tests {
         assert_eq!(data["parents"][0], serde_json::Value::Null);
         assert_eq!(data["parents"][15], 12);
         assert_eq!(data["scene"][0]["role"], "obstacle");
+        assert_eq!(data["carried"][0], serde_json::json!({"hands": [20, 21], "diameter_m": 0.3}));
         assert_eq!(data["report"]["constraints"][0]["id"], "c1");
         assert!(html.contains(THREE_BUNDLE) && html.contains(VIEWER_JS));
         assert!(!html.contains("/*@"), "a slot left unfilled");
