@@ -13,6 +13,7 @@
 (function main() {
   const LEFT = 0x2850dc;
   const RIGHT = 0xdc3228;
+  const CARRIED = 0xe6961e;
   // Mid-line colours per sample (left and right limbs stay blue and red in every sample).
   const PALETTE = [0x3a3f47, 0x1e8449, 0x8e44ad, 0xd68910, 0x16a085, 0x7b241c];
   const SCENE_STYLE = {
@@ -222,7 +223,7 @@
     const balls = (data.carried || []).map((object) => {
       const mesh = new THREE.Mesh(
         sphere,
-        new THREE.MeshStandardMaterial({ color: 0xe6961e, roughness: 0.6, transparent: true, opacity: 0.55 }),
+        new THREE.MeshStandardMaterial({ color: CARRIED, roughness: 0.6, transparent: true, opacity: 0.55 }),
       );
       mesh.scale.setScalar(object.diameter_m / 2);
       mesh.name = 'carried object';
@@ -324,6 +325,7 @@
   figures.forEach((f) => legendRow(hex(f.colour), f.sample.label + ': mid-line and pelvis path'));
   legendRow(hex(LEFT), 'left limbs and left foot path');
   legendRow(hex(RIGHT), 'right limbs and right foot path');
+  if ((data.carried || []).length > 0) legendRow(hex(CARRIED), 'carried object (between the hands)');
   for (const role of ['obstacle', 'region', 'support', 'target']) {
     if (rolesPresent.has(role)) legendRow(hex(SCENE_STYLE[role].fill), SCENE_STYLE[role].label, role === 'region');
   }
