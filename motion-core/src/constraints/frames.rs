@@ -42,6 +42,12 @@ impl Frames {
         &self.kept
     }
 
+    /// The 0/1 mask `[B, F]` of the selected frames of an `n`-frame signal where `when` holds on
+    /// the current motion ([`condition_mask`]); `None` without a condition.
+    pub fn condition_mask(&self, joints: &Tensor, when: &Option<Condition>, n: usize) -> Result<Option<Tensor>> {
+        when.as_ref().map(|condition| self.select(&condition_mask(joints, condition, n)?)).transpose()
+    }
+
     /// Keeps the selected frames of `x` along axis 1.
     pub fn select(&self, x: &Tensor) -> Result<Tensor> {
         match &self.index {

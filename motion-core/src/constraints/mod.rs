@@ -42,7 +42,7 @@ use crate::program::{
     Reduce, SceneConstraint, SelfCollision, StayNearInitial, Steps, TaskProgram,
 };
 use crate::skeleton::{Joint, FPS};
-use frames::{condition_mask, reduce, Frames};
+use frames::{reduce, Frames};
 use geometry::{constant, joint, norm, select_axes, unit};
 
 /// Why a program cannot be compiled or evaluated.
@@ -310,7 +310,7 @@ impl CompiledProgram {
                 if is_obstacle(primitive) {
                     let points = frames.select(&body_points(joints, set, *surface)?)?;
                     let depth = primitive_error(&points, primitive, true)?.max(D::Minus1)?; // [B, F]
-                    let depth = match scene_mask(joints, frames, when)? {
+                    let depth = match frames.condition_mask(joints, when, joints.dim(1)?)? {
                         Some(mask) => (depth * mask)?,
                         None => depth,
                     };
@@ -549,15 +549,6 @@ fn worst_point_reduce(errors: &Tensor, mask: Option<&Tensor>, how: Reduce) -> Re
     }
 }
 
-/// The 0/1 mask `[B, F]` of a scene constraint's selected frames where its `when` holds; `None`
-/// without a condition.
-fn scene_mask(joints: &Tensor, frames: &Frames, when: &Option<Condition>) -> Result<Option<Tensor>> {
-    match when {
-        Some(condition) => Ok(Some(frames.select(&condition_mask(joints, condition, joints.dim(1)?)?)?)),
-        None => Ok(None),
-    }
-}
-
 fn body_points(joints: &Tensor, set: &Tensor, surface: bool) -> Result<Tensor> {
     let listed = joints.index_select(set, 2)?;
     if surface {
@@ -615,10 +606,7 @@ impl Node {
                     Comparison::GreaterThan(min) => (*min - q)?.relu()?,
                 }
                 .sum(D::Minus1)?; // [B, n]
-                let mask = match when {
-                    Some(condition) => Some(frames.select(&condition_mask(joints, condition, per_frame.dim(1)?)?)?),
-                    None => None,
-                };
+                let mask = frames.condition_mask(joints, when, per_frame.dim(1)?)?;
                 reduce(&frames.select(&per_frame)?, mask.as_ref(), *how)?
             }
             Node::And(args) => {
@@ -672,7 +660,7 @@ impl Node {
             }
             Node::Scene { joints: set, surface, primitive, frames, when, reduce: how } => {
                 let points = frames.select(&body_points(joints, set, *surface)?)?;
-                let mask = scene_mask(joints, frames, when)?;
+                let mask = frames.condition_mask(joints, when, joints.dim(1)?)?;
                 worst_point_reduce(&primitive_error(&points, primitive, false)?, mask.as_ref(), *how)?
             }
             Node::BoneDirection { joint: j, parent, direction, frames, reduce: how } => {

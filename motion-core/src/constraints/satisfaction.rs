@@ -7,13 +7,10 @@
 use candle_core::{Tensor, D};
 use serde::{Deserialize, Serialize};
 
-use super::frames::condition_mask;
 use super::geometry::{constant, joint, norm, select_axes};
 use super::scene::{is_obstacle, primitive_error};
 use super::signal::signal;
-use super::{
-    body_points, carry, com_outside_support, flight, scene_mask, Comparison, CompiledProgram, ConstraintError, Node,
-};
+use super::{body_points, carry, com_outside_support, flight, Comparison, CompiledProgram, ConstraintError, Node};
 use crate::program::{Primitive, Quantity, Reduce};
 
 /// Tolerance on distances, penetrations and positions, m (the bar for ProgMoGen's HSI
@@ -146,10 +143,7 @@ impl Node {
                     Comparison::LessThan(max) => (q - *max)?.relu()?.max(D::Minus1)?,
                     Comparison::GreaterThan(min) => (*min - q)?.relu()?.max(D::Minus1)?,
                 }; // [B, n]
-                let mask = match when {
-                    Some(condition) => Some(frames.select(&condition_mask(joints, condition, per_frame.dim(1)?)?)?),
-                    None => None,
-                };
+                let mask = frames.condition_mask(joints, when, per_frame.dim(1)?)?;
                 let value = over_frames(&frames.select(&per_frame)?, mask.as_ref(), *reduce == Reduce::Min)?;
                 let (unit, tolerance) = unit_of(quantity);
                 let relation = match comparison {
@@ -259,7 +253,7 @@ impl Node {
                     Primitive::BalanceBeam(_) => depth.sqrt()?, // its error is squared
                     _ => depth,
                 };
-                let mask = scene_mask(joints, frames, when)?;
+                let mask = frames.condition_mask(joints, when, joints.dim(1)?)?;
                 let value = over_frames(&depth, mask.as_ref(), *reduce == Reduce::Min)?;
                 let what = match primitive {
                     Primitive::InsideBox(_) => "distance outside the inside_box".to_owned(),
