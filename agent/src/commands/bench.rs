@@ -48,6 +48,10 @@ fn peak_rss_mib() -> f64 {
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
+    rayon::ThreadPoolBuilder::new().build()?.install(|| run_in_pool(args))
+}
+
+fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
     let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
     let cfg = prior.mdm.config();

@@ -12,7 +12,9 @@ use std::sync::Mutex;
 use candle_core::backend::BackendStorage;
 use candle_core::{bail, CpuStorage, CustomOp1, Error, Layout, Result, Shape, Storage, StorageRef, Tensor};
 
-use crate::nn::kernels::{self, contiguous_slice, dispatch_real, MatView, Real};
+use crate::nn::kernels::{
+    self, contiguous_slice, dispatch_real, par_each, row_chunks, rows_of, split_rows, MatView, Real, Rows,
+};
 
 /// The frozen weights of one layer (detached tensors: reading them never records a graph).
 #[derive(Debug, Clone)]
@@ -62,8 +64,9 @@ pub(crate) struct FusedEncoderLayer {
 struct Cache {
     /// `[batch·tokens, 3d]`, the fused q/k/v projection.
     qkv: CpuStorage,
-    /// Per batch element, `[heads, tokens, tokens]` softmax probabilities.
-    probs: Vec<CpuStorage>,
+    /// `[batch, tokens (query), heads, tokens (key)]` softmax probabilities (query-major, so
+    /// a block of query rows is one contiguous range).
+    probs: CpuStorage,
     /// `[batch·tokens, d]` normalised first residual, and its `1/std` per row.
     xhat1: CpuStorage,
     rstd1: CpuStorage,
@@ -73,35 +76,16 @@ struct Cache {
     rstd2: CpuStorage,
 }
 
-/// A weight matrix `[out, in]` in CPU memory.
-#[derive(Clone, Copy)]
-struct Mat<'a> {
-    storage: &'a CpuStorage,
-    layout: &'a Layout,
-}
-
-impl Mat<'_> {
-    /// The matrix itself as a one-batch view (for `dx = g·W`).
-    fn view(&self) -> Result<MatView> {
-        let (n, k) = match self.layout.dims() {
-            [n, k] => (*n, *k),
-            dims => bail!("weight must be 2-d, got {dims:?}"),
-        };
-        if self.layout.contiguous_offsets().is_none() {
-            bail!("fused layer weights must be contiguous");
-        }
-        Ok(MatView::contiguous(self.layout.start_offset(), 1, n, k))
-    }
-}
-
+/// The frozen weights of one layer as CPU slices, with their sizes.
 struct Params<'a, T> {
-    in_w: Mat<'a>,
+    /// `[3d, d]`, `[d, d]`, `[ff, d]`, `[d, ff]` row-major (`[out, in]`).
+    in_w: &'a [T],
     in_b: &'a [T],
-    out_w: Mat<'a>,
+    out_w: &'a [T],
     out_b: &'a [T],
-    l1_w: Mat<'a>,
+    l1_w: &'a [T],
     l1_b: &'a [T],
-    l2_w: Mat<'a>,
+    l2_w: &'a [T],
     l2_b: &'a [T],
     n1_w: &'a [T],
     n1_b: &'a [T],
@@ -109,45 +93,139 @@ struct Params<'a, T> {
     n2_b: &'a [T],
 }
 
-fn cpu<'a>(guard: &'a (StorageRef<'_>, &'a Layout)) -> Result<Mat<'a>> {
-    match &*guard.0 {
-        Storage::Cpu(storage) => Ok(Mat { storage, layout: guard.1 }),
-        _ => bail!("fused encoder layer: weights are not on the CPU"),
-    }
-}
-
 impl<'a, T: Real> Params<'a, T> {
-    fn new(g: &'a [(StorageRef<'_>, &'a Layout); 12]) -> Result<Self> {
-        let slice = |i: usize| -> Result<&'a [T]> {
-            let m = cpu(&g[i])?;
-            contiguous_slice::<T>(m.storage, m.layout)
+    fn new(g: &'a [(StorageRef<'_>, &'a Layout); 12], d: usize) -> Result<Self> {
+        let slice = |i: usize, len: usize| -> Result<&'a [T]> {
+            let data = match &*g[i].0 {
+                Storage::Cpu(storage) => contiguous_slice::<T>(storage, g[i].1)?,
+                _ => bail!("fused encoder layer: weights are not on the CPU"),
+            };
+            if data.len() != len {
+                bail!("fused encoder layer: weight {i} has {} elements, expected {len} for width {d}", data.len());
+            }
+            Ok(data)
+        };
+        let ff = match g[5].1.dims() {
+            [ff] => *ff,
+            dims => bail!("fused encoder layer: linear1 bias must be 1-d, got {dims:?}"),
         };
         Ok(Self {
-            in_w: cpu(&g[0])?,
-            in_b: slice(1)?,
-            out_w: cpu(&g[2])?,
-            out_b: slice(3)?,
-            l1_w: cpu(&g[4])?,
-            l1_b: slice(5)?,
-            l2_w: cpu(&g[6])?,
-            l2_b: slice(7)?,
-            n1_w: slice(8)?,
-            n1_b: slice(9)?,
-            n2_w: slice(10)?,
-            n2_b: slice(11)?,
+            in_w: slice(0, 3 * d * d)?,
+            in_b: slice(1, 3 * d)?,
+            out_w: slice(2, d * d)?,
+            out_b: slice(3, d)?,
+            l1_w: slice(4, ff * d)?,
+            l1_b: slice(5, ff)?,
+            l2_w: slice(6, d * ff)?,
+            l2_b: slice(7, d)?,
+            n1_w: slice(8, d)?,
+            n1_b: slice(9, d)?,
+            n2_w: slice(10, d)?,
+            n2_b: slice(11, d)?,
         })
+    }
+
+    fn ff(&self) -> usize {
+        self.l1_b.len()
     }
 }
 
-/// `y = x·Wᵀ + b` for contiguous `x [m, k]`.
-fn linear<T: Real>(x: &CpuStorage, m: usize, k: usize, w: Mat, b: &[T]) -> Result<Vec<T>> {
-    kernels::linear(x, MatView::contiguous(0, 1, m, k), w.storage, w.layout, Some(b))
+/// Fewest query rows in an attention block: smaller blocks cost more in gemm packing than
+/// they gain.
+const MIN_BLOCK_ROWS: usize = 16;
+
+/// A block of query (or key) rows `[start, start + rows.len)` of batch element `batch`.
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    batch: usize,
+    start: usize,
+    rows: Rows,
 }
 
-/// `dx = g·W` for contiguous `g [m, n]` and `W [n, k]`.
-fn linear_bwd<T: Real>(g: &CpuStorage, m: usize, w: Mat) -> Result<Vec<T>> {
-    let wv = w.view()?;
-    T::cpu_storage_data(kernels::matmul(g, MatView::contiguous(0, 1, m, wv.rows), w.storage, wv)?)
+/// Splits `batch × tokens` rows into attention blocks for the threads of the current rayon
+/// pool: one block per batch element when there are at least as many elements as threads,
+/// else each element cut into about `threads / batch` blocks of at least
+/// [`MIN_BLOCK_ROWS`] rows. The blocks cover every row once, in order. Per-row arithmetic
+/// does not depend on the split, so the result is the same for any thread count.
+fn attention_blocks(batch: usize, tokens: usize) -> Vec<Block> {
+    let threads = rayon::current_num_threads().max(1);
+    let per_element = threads.div_ceil(batch.max(1)).min(tokens / MIN_BLOCK_ROWS).max(1);
+    let mut out = Vec::with_capacity(batch * per_element);
+    for b in 0..batch {
+        for i in 0..per_element {
+            let start = i * tokens / per_element;
+            let len = (i + 1) * tokens / per_element - start;
+            out.push(Block { batch: b, start, rows: Rows { first: b * tokens + start, len } });
+        }
+    }
+    out
+}
+
+/// `dst [rows, n] = x [rows, k] · Wᵀ + bias` for a row-major `W [n, k]` (bias broadcast
+/// over rows, or `dst` kept and accumulated when `bias` is `None`).
+fn linear_rows<T: Real>(dst: &mut [T], x: &[T], rows: usize, k: usize, w: &[T], bias: Option<&[T]>) -> Result<()> {
+    let n = w.len() / k.max(1);
+    if let Some(bias) = bias {
+        for row in dst.chunks_exact_mut(n) {
+            row.copy_from_slice(bias);
+        }
+    }
+    let wt = MatView::contiguous(0, 1, n, k).t();
+    kernels::gemm_into(dst, MatView::contiguous(0, 1, rows, n), x, MatView::contiguous(0, 1, rows, k), w, wt, true)
+}
+
+/// `dst [rows, k] (+)= g [rows, n] · W` for a row-major `W [n, k]` (the input gradient of
+/// `x·Wᵀ`).
+fn linear_rows_bwd<T: Real>(dst: &mut [T], g: &[T], rows: usize, w: &[T], k: usize, accumulate: bool) -> Result<()> {
+    let n = w.len() / k.max(1);
+    kernels::gemm_into(
+        dst,
+        MatView::contiguous(0, 1, rows, k),
+        g,
+        MatView::contiguous(0, 1, rows, n),
+        w,
+        MatView::contiguous(0, 1, n, k),
+        accumulate,
+    )
+}
+
+/// Sizes of one layer call.
+#[derive(Clone, Copy)]
+struct Dims {
+    tokens: usize,
+    d: usize,
+    heads: usize,
+}
+
+impl Dims {
+    fn head_dim(&self) -> usize {
+        self.d / self.heads
+    }
+
+    /// Head `h` of part `part` (0 q, 1 k, 2 v) of element `b` in the `[·, 3d]` projection, as
+    /// a `[tokens, head_dim]` view.
+    fn qkv_head(&self, b: usize, part: usize, h: usize) -> MatView {
+        let offset = b * self.tokens * 3 * self.d + part * self.d + h * self.head_dim();
+        MatView { offset, batch: 1, rows: self.tokens, cols: self.head_dim(), strides: [0, 3 * self.d, 1] }
+    }
+
+    /// Head `h` of the probabilities of element `b` as a `[tokens (query), tokens (key)]` view.
+    fn prob_head(&self, b: usize, h: usize) -> MatView {
+        let s = self.tokens;
+        MatView { offset: b * s * self.heads * s + h * s, batch: 1, rows: s, cols: s, strides: [0, self.heads * s, 1] }
+    }
+
+    /// Head `h` of a block's own `[rows, heads, tokens]` probabilities (or score gradients).
+    fn block_prob_head(&self, rows: usize, h: usize) -> MatView {
+        let s = self.tokens;
+        MatView { offset: h * s, batch: 1, rows, cols: s, strides: [0, self.heads * s, 1] }
+    }
+
+    /// Head `h` of `rows` rows of a buffer `width` wide whose first head starts at element
+    /// `start` (a column of the first row, or further rows in).
+    fn block_head(&self, rows: usize, width: usize, start: usize, h: usize) -> MatView {
+        MatView { offset: start + h * self.head_dim(), batch: 1, rows, cols: self.head_dim(), strides: [0, width, 1] }
+    }
 }
 
 impl FusedEncoderLayer {
@@ -159,6 +237,17 @@ impl FusedEncoderLayer {
         self.cache.lock().map_err(|_| Error::Msg("fused encoder layer: cache lock poisoned".into()))
     }
 
+    fn dims(&self, d: usize, tokens: usize) -> Result<Dims> {
+        let heads = self.num_heads;
+        if heads == 0 || d % heads != 0 {
+            bail!("fused encoder layer: width {d} does not split into {heads} heads");
+        }
+        Ok(Dims { tokens, d, heads })
+    }
+
+    /// Forward in three parallel phases: the q/k/v projection over row chunks; attention
+    /// over blocks of query rows (each against all keys of its element); then the output
+    /// projection, both LayerNorms and the feed-forward block over row chunks.
     fn fwd<T: Real>(&self, x_storage: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
         let (b, s, d) = match l.dims() {
             [b, s, d] => (*b, *s, *d),
@@ -166,68 +255,73 @@ impl FusedEncoderLayer {
         };
         let x = contiguous_slice::<T>(x_storage, l)?;
         let guards = self.weights.each().map(|t| t.storage_and_layout());
-        let p = Params::<T>::new(&guards)?;
-        let (m, h) = (b * s, self.num_heads);
-        let hd = d / h;
-        let ff = p.l1_b.len();
-        if p.in_b.len() != 3 * d || d % h != 0 {
-            bail!("fused encoder layer: width {d} does not match in_proj {} / {h} heads", p.in_b.len());
-        }
-        let scale = T::from_f64(1.0 / (hd as f64).sqrt());
+        let p = Params::<T>::new(&guards, d)?;
+        let dims = self.dims(d, s)?;
+        let (m, h, ff) = (b * s, dims.heads, p.ff());
+        let scale = T::from_f64(1.0 / (dims.head_dim() as f64).sqrt());
         let zero = T::from_f64(0.0);
+        let (chunks, blocks) = (row_chunks(m), attention_blocks(b, s));
 
-        // Self-attention: one q/k/v projection, then per batch element all heads at once.
-        let x_rows = MatView::contiguous(l.start_offset(), 1, m, d);
-        let qkv = kernels::linear(x_storage, x_rows, p.in_w.storage, p.in_w.layout, Some(p.in_b))?;
-        let qkv = T::to_cpu_storage_owned(qkv);
+        let mut qkv = vec![zero; m * 3 * d];
+        let tasks: Vec<_> = chunks.iter().copied().zip(split_rows(&mut qkv, 3 * d, chunks.iter().copied())).collect();
+        par_each(tasks, |(r, out)| linear_rows(out, rows_of(x, d, r), r.len, d, p.in_w, Some(p.in_b)))?;
+
+        let mut probs = vec![zero; b * s * h * s];
         let mut ctx = vec![zero; m * d];
-        let mut probs = Vec::with_capacity(b);
-        for bi in 0..b {
-            let head = |part: usize| MatView {
-                offset: bi * s * 3 * d + part * d,
-                batch: h,
-                rows: s,
-                cols: hd,
-                strides: [hd, 3 * d, 1],
-            };
-            let mut scores = T::cpu_storage_data(kernels::matmul(&qkv, head(0), &qkv, head(1).t())?)?;
-            kernels::softmax_fwd(&mut scores, s, scale);
-            let prob = T::to_cpu_storage_owned(scores);
-            let out = kernels::matmul(&prob, MatView::contiguous(0, h, s, s), &qkv, head(2))?;
-            let out = T::cpu_storage_as_slice(&out)?;
-            for hi in 0..h {
-                for si in 0..s {
-                    let src = &out[(hi * s + si) * hd..][..hd];
-                    ctx[(bi * s + si) * d + hi * hd..][..hd].copy_from_slice(src);
-                }
+        let rows = blocks.iter().map(|blk| blk.rows);
+        let tasks: Vec<_> =
+            blocks.iter().zip(split_rows(&mut probs, h * s, rows.clone())).zip(split_rows(&mut ctx, d, rows)).collect();
+        let qkv_ref = &qkv;
+        par_each(tasks, |((blk, probs), ctx)| {
+            let n = blk.rows.len;
+            for hh in 0..h {
+                let q = MatView { offset: blk.rows.first * 3 * d + hh * dims.head_dim(), rows: n, ..dims.qkv_head(0, 0, hh) };
+                let k_t = dims.qkv_head(blk.batch, 1, hh).t();
+                kernels::gemm_into(probs, dims.block_prob_head(n, hh), qkv_ref, q, qkv_ref, k_t, false)?;
             }
-            probs.push(prob);
-        }
-        let ctx = T::to_cpu_storage_owned(ctx);
-        let mut r1 = linear(&ctx, m, d, p.out_w, p.out_b)?;
-        for (r, &xv) in r1.iter_mut().zip(x) {
-            *r += xv;
-        }
-        let mut h1 = vec![zero; m * d];
-        let (mut xhat1, mut rstd1) = (vec![zero; m * d], vec![zero; m]);
-        kernels::layer_norm_fwd(&r1, p.n1_w, p.n1_b, self.eps, &mut h1, Some((&mut xhat1, &mut rstd1)));
+            kernels::softmax_fwd(probs, s, scale);
+            for hh in 0..h {
+                let v = dims.qkv_head(blk.batch, 2, hh);
+                kernels::gemm_into(ctx, dims.block_head(n, d, 0, hh), probs, dims.block_prob_head(n, hh), qkv_ref, v, false)?;
+            }
+            Ok(())
+        })?;
 
-        // Feed-forward block.
-        let h1 = T::to_cpu_storage_owned(h1);
-        let pre = linear(&h1, m, d, p.l1_w, p.l1_b)?;
-        let mut act = vec![zero; m * ff];
-        kernels::gelu_fwd(&pre, &mut act);
-        let mut r2 = linear(&T::to_cpu_storage_owned(act), m, ff, p.l2_w, p.l2_b)?;
-        for (r, &hv) in r2.iter_mut().zip(T::cpu_storage_as_slice(&h1)?) {
-            *r += hv;
-        }
         let mut y = vec![zero; m * d];
+        let (mut xhat1, mut rstd1) = (vec![zero; m * d], vec![zero; m]);
+        let mut pre = vec![zero; m * ff];
         let (mut xhat2, mut rstd2) = (vec![zero; m * d], vec![zero; m]);
-        kernels::layer_norm_fwd(&r2, p.n2_w, p.n2_b, self.eps, &mut y, Some((&mut xhat2, &mut rstd2)));
+        let cs = || chunks.iter().copied();
+        let tasks: Vec<_> = cs()
+            .zip(split_rows(&mut y, d, cs()))
+            .zip(split_rows(&mut xhat1, d, cs()).into_iter().zip(split_rows(&mut rstd1, 1, cs())))
+            .zip(split_rows(&mut pre, ff, cs()))
+            .zip(split_rows(&mut xhat2, d, cs()).into_iter().zip(split_rows(&mut rstd2, 1, cs())))
+            .collect();
+        let ctx = &ctx;
+        par_each(tasks, |((((r, y), (xhat1, rstd1)), pre), (xhat2, rstd2))| {
+            let n = r.len;
+            // r1 = x + ctx·W_outᵀ + b_out, h1 = LN1(r1).
+            let mut r1: Vec<T> = rows_of(x, d, r).iter().zip(p.out_b.iter().cycle()).map(|(&xv, &bv)| xv + bv).collect();
+            linear_rows(&mut r1, rows_of(ctx, d, r), n, d, p.out_w, None)?;
+            let mut h1 = vec![zero; n * d];
+            kernels::layer_norm_fwd(&r1, p.n1_w, p.n1_b, self.eps, &mut h1, Some((xhat1, rstd1)));
+            // r2 = h1 + GELU(h1·W1ᵀ + b1)·W2ᵀ + b2, y = LN2(r2).
+            linear_rows(pre, &h1, n, d, p.l1_w, Some(p.l1_b))?;
+            let mut act = vec![zero; n * ff];
+            kernels::gelu_fwd(pre, &mut act);
+            let mut r2 = r1;
+            for ((r, &hv), &bv) in r2.iter_mut().zip(&h1).zip(p.l2_b.iter().cycle()) {
+                *r = hv + bv;
+            }
+            linear_rows(&mut r2, &act, n, ff, p.l2_w, None)?;
+            kernels::layer_norm_fwd(&r2, p.n2_w, p.n2_b, self.eps, y, Some((xhat2, rstd2)));
+            Ok(())
+        })?;
 
         *self.lock()? = Some(Cache {
-            qkv,
-            probs,
+            qkv: T::to_cpu_storage_owned(qkv),
+            probs: T::to_cpu_storage_owned(probs),
             xhat1: T::to_cpu_storage_owned(xhat1),
             rstd1: T::to_cpu_storage_owned(rstd1),
             pre_gelu: T::to_cpu_storage_owned(pre),
@@ -237,76 +331,93 @@ impl FusedEncoderLayer {
         Ok((T::to_cpu_storage_owned(y), l.shape().clone()))
     }
 
+    /// Input gradient in four parallel phases: the row-local chain from the output back to
+    /// `dO = dr1·W_out` over row chunks; per block of query rows `dS = softmax'(dO·Vᵀ)` and
+    /// `dQ = dS·K`; per block of key rows `dK = dSᵀ·Q` and `dV = Pᵀ·dO` (sums over every
+    /// query row of the element); then `dx = dqkv·W_in + dr1` over row chunks.
     fn bwd_impl<T: Real>(&self, arg: &Tensor, grad: &Tensor) -> Result<Tensor> {
         let (b, s, d) = arg.dims3()?;
         let guards = self.weights.each().map(|t| t.storage_and_layout());
-        let p = Params::<T>::new(&guards)?;
+        let p = Params::<T>::new(&guards, d)?;
+        let dims = self.dims(d, s)?;
         let cache = self.lock()?;
         let Some(c) = cache.as_ref() else {
             bail!("fused encoder layer: backward without a forward cache");
         };
-        let (m, h) = (b * s, self.num_heads);
-        let hd = d / h;
-        let scale = T::from_f64(1.0 / (hd as f64).sqrt());
-
-        // Second LayerNorm and the feed-forward block.
+        let (m, h, ff) = (b * s, dims.heads, p.ff());
+        let scale = T::from_f64(1.0 / (dims.head_dim() as f64).sqrt());
+        let zero = T::from_f64(0.0);
+        let (chunks, blocks) = (row_chunks(m), attention_blocks(b, s));
+        let qkv = T::cpu_storage_as_slice(&c.qkv)?;
+        let probs = T::cpu_storage_as_slice(&c.probs)?;
+        let (xhat1, rstd1) = (T::cpu_storage_as_slice(&c.xhat1)?, T::cpu_storage_as_slice(&c.rstd1)?);
+        let (xhat2, rstd2) = (T::cpu_storage_as_slice(&c.xhat2)?, T::cpu_storage_as_slice(&c.rstd2)?);
+        let pre = T::cpu_storage_as_slice(&c.pre_gelu)?;
         let grad = grad.contiguous()?;
-        let mut dr2 = kernels::with_slice::<T, _>(&grad, |g| Ok(g.to_vec()))?;
-        kernels::layer_norm_bwd(
-            &mut dr2,
-            T::cpu_storage_as_slice(&c.xhat2)?,
-            T::cpu_storage_as_slice(&c.rstd2)?,
-            p.n2_w,
-        );
-        let dr2 = T::to_cpu_storage_owned(dr2);
-        let mut dact = linear_bwd::<T>(&dr2, m, p.l2_w)?;
-        kernels::gelu_bwd(T::cpu_storage_as_slice(&c.pre_gelu)?, &mut dact);
-        let mut dr1 = linear_bwd::<T>(&T::to_cpu_storage_owned(dact), m, p.l1_w)?;
-        for (a, &g) in dr1.iter_mut().zip(T::cpu_storage_as_slice(&dr2)?) {
-            *a += g;
-        }
-        kernels::layer_norm_bwd(
-            &mut dr1,
-            T::cpu_storage_as_slice(&c.xhat1)?,
-            T::cpu_storage_as_slice(&c.rstd1)?,
-            p.n1_w,
-        );
-        let dr1 = T::to_cpu_storage_owned(dr1);
 
-        // Attention: dV = Pᵀ·dO, dP = dO·Vᵀ, dS = softmax'(dP), dQ = dS·K, dK = dSᵀ·Q.
-        let dctx = T::to_cpu_storage_owned(linear_bwd::<T>(&dr1, m, p.out_w)?);
-        let mut dqkv = vec![T::from_f64(0.0); m * 3 * d];
-        for bi in 0..b {
-            let head = |part: usize| MatView {
-                offset: bi * s * 3 * d + part * d,
-                batch: h,
-                rows: s,
-                cols: hd,
-                strides: [hd, 3 * d, 1],
-            };
-            let d_out = MatView { offset: bi * s * d, batch: h, rows: s, cols: hd, strides: [hd, d, 1] };
-            let prob = &c.probs[bi];
-            let pv = MatView::contiguous(0, h, s, s);
-            let dv = kernels::matmul(prob, pv.t(), &dctx, d_out)?;
-            let mut dp = T::cpu_storage_data(kernels::matmul(&dctx, d_out, &c.qkv, head(2).t())?)?;
-            kernels::softmax_bwd(T::cpu_storage_as_slice(prob)?, &mut dp, s, scale);
-            let ds = T::to_cpu_storage_owned(dp);
-            let dq = kernels::matmul(&ds, pv, &c.qkv, head(1))?;
-            let dk = kernels::matmul(&ds, pv.t(), &c.qkv, head(0))?;
-            for (part, st) in [(0, &dq), (1, &dk), (2, &dv)] {
-                let src = T::cpu_storage_as_slice(st)?;
-                for hi in 0..h {
-                    for si in 0..s {
-                        let from = &src[(hi * s + si) * hd..][..hd];
-                        dqkv[(bi * s + si) * 3 * d + part * d + hi * hd..][..hd].copy_from_slice(from);
-                    }
-                }
+        // Second LayerNorm, the feed-forward block, the first LayerNorm and W_out.
+        let mut dr1 = vec![zero; m * d];
+        let mut dctx = vec![zero; m * d];
+        let cs = || chunks.iter().copied();
+        kernels::with_slice::<T, _>(&grad, |g| {
+            let tasks: Vec<_> = cs().zip(split_rows(&mut dr1, d, cs())).zip(split_rows(&mut dctx, d, cs())).collect();
+            par_each(tasks, |((r, dr1), dctx)| {
+                let n = r.len;
+                let mut dr2 = rows_of(g, d, r).to_vec();
+                kernels::layer_norm_bwd(&mut dr2, rows_of(xhat2, d, r), rows_of(rstd2, 1, r), p.n2_w);
+                let mut dact = vec![zero; n * ff];
+                linear_rows_bwd(&mut dact, &dr2, n, p.l2_w, ff, false)?;
+                kernels::gelu_bwd(rows_of(pre, ff, r), &mut dact);
+                dr1.copy_from_slice(&dr2);
+                linear_rows_bwd(dr1, &dact, n, p.l1_w, d, true)?;
+                kernels::layer_norm_bwd(dr1, rows_of(xhat1, d, r), rows_of(rstd1, 1, r), p.n1_w);
+                linear_rows_bwd(dctx, dr1, n, p.out_w, d, false)
+            })
+        })?;
+
+        // Per block of query rows: dP = dO·Vᵀ, dS = softmax'(dP), dQ = dS·K.
+        let mut ds = vec![zero; b * s * h * s];
+        let mut dqkv = vec![zero; m * 3 * d];
+        let rows = || blocks.iter().map(|blk| blk.rows);
+        let tasks: Vec<_> =
+            blocks.iter().zip(split_rows(&mut ds, h * s, rows())).zip(split_rows(&mut dqkv, 3 * d, rows())).collect();
+        let dctx = &dctx;
+        par_each(tasks, |((blk, ds), dqkv)| {
+            let n = blk.rows.len;
+            let d_out = rows_of(dctx, d, blk.rows);
+            for hh in 0..h {
+                let v_t = dims.qkv_head(blk.batch, 2, hh).t();
+                kernels::gemm_into(ds, dims.block_prob_head(n, hh), d_out, dims.block_head(n, d, 0, hh), qkv, v_t, false)?;
             }
-        }
-        let mut dx = linear_bwd::<T>(&T::to_cpu_storage_owned(dqkv), m, p.in_w)?;
-        for (a, &g) in dx.iter_mut().zip(T::cpu_storage_as_slice(&dr1)?) {
-            *a += g;
-        }
+            kernels::softmax_bwd(rows_of(probs, h * s, blk.rows), ds, s, scale);
+            for hh in 0..h {
+                let k = dims.qkv_head(blk.batch, 1, hh);
+                kernels::gemm_into(dqkv, dims.block_head(n, 3 * d, 0, hh), ds, dims.block_prob_head(n, hh), qkv, k, false)?;
+            }
+            Ok(())
+        })?;
+
+        // Per block of key rows: dK = dSᵀ·Q, dV = Pᵀ·dO over all query rows of the element.
+        let ds = &ds;
+        let tasks: Vec<_> = blocks.iter().zip(split_rows(&mut dqkv, 3 * d, rows())).collect();
+        par_each(tasks, |(blk, dqkv)| {
+            let n = blk.rows.len;
+            for hh in 0..h {
+                // The block's key rows of the transposed [query, key] matrices.
+                let key_rows = |v: MatView| MatView { offset: v.offset + blk.start, rows: n, ..v.t() };
+                let prob_t = key_rows(dims.prob_head(blk.batch, hh));
+                let q = dims.qkv_head(blk.batch, 0, hh);
+                kernels::gemm_into(dqkv, dims.block_head(n, 3 * d, d, hh), ds, prob_t, qkv, q, false)?;
+                let d_out = dims.block_head(s, d, blk.batch * s * d, hh);
+                kernels::gemm_into(dqkv, dims.block_head(n, 3 * d, 2 * d, hh), probs, prob_t, dctx, d_out, false)?;
+            }
+            Ok(())
+        })?;
+
+        // dx = dqkv·W_in + dr1.
+        let mut dx = dr1;
+        let (dqkv, tasks): (&[T], Vec<_>) = (&dqkv, cs().zip(split_rows(&mut dx, d, cs())).collect());
+        par_each(tasks, |(r, dx)| linear_rows_bwd(dx, rows_of(dqkv, 3 * d, r), r.len, p.in_w, d, true))?;
         Tensor::from_vec(dx, arg.shape(), arg.device())
     }
 }

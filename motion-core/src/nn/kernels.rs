@@ -1,9 +1,9 @@
 //! CPU kernels shared by the custom ops and the fused encoder layer: plain loops over
 //! contiguous rows of f32/f64, and matrix products through candle's CPU backend (its `gemm`
-//! call), so this crate needs no `unsafe`.
+//! call) or, where the caller parallelises over row blocks itself, [`gemm_into`]: the one
+//! place in this crate with `unsafe`, a bounds-checked call of the `gemm` crate.
 
-use candle_core::backend::BackendStorage;
-use candle_core::{bail, CpuStorage, Layout, Result, Shape, Storage, Tensor, WithDType};
+use candle_core::{bail, CpuStorage, Layout, Result, Storage, Tensor, WithDType};
 
 /// The float types the custom ops run on: f32 for work, f64 for gradient tests.
 pub(crate) trait Real: WithDType {
@@ -209,15 +209,6 @@ pub(crate) fn with_slice<T: WithDType, R>(t: &Tensor, f: impl FnOnce(&[T]) -> Re
     }
 }
 
-/// Calls `f` with the CPU storage and layout of `t`.
-pub(crate) fn with_storage<R>(t: &Tensor, f: impl FnOnce(&CpuStorage, &Layout) -> Result<R>) -> Result<R> {
-    let (storage, layout) = t.storage_and_layout();
-    match &*storage {
-        Storage::Cpu(cs) => f(cs, layout),
-        _ => bail!("custom op: tensor is not on the CPU (only a CPU kernel is implemented)"),
-    }
-}
-
 /// A strided view of `batch` matrices `[rows, cols]` inside a flat buffer.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct MatView {
@@ -252,57 +243,171 @@ impl MatView {
             + 1
     }
 
-    fn layout(&self) -> Layout {
-        Layout::new(Shape::from((self.batch, self.rows, self.cols)), self.strides.to_vec(), self.offset)
-    }
 }
 
-/// Batched product `C[i] = A[i]·B[i]`, returned as contiguous `[batch, a.rows, b.cols]`.
+/// `C = A·B`, or `C += A·B` when `accumulate`, for single matrices (`batch` 1) held in
+/// slices, with `C` written through the strided view `cv` of `dst`. The product runs on the
+/// calling thread only (the `gemm` crate without its own threading): the fused layer
+/// splits its rows into blocks and runs the blocks on the rayon pool, which keeps both
+/// cores busy where one small product per thread pair cost more than it saved.
 ///
-/// A batch stride of 0 in `b` reuses one matrix for every batch.
-pub(crate) fn matmul(a: &CpuStorage, av: MatView, b: &CpuStorage, bv: MatView) -> Result<CpuStorage> {
-    if av.cols != bv.rows || av.batch != bv.batch {
-        bail!("matmul views do not match: {av:?} · {bv:?}");
+/// Errors when the shapes disagree or a view reaches past its slice; then nothing is
+/// written.
+pub(crate) fn gemm_into<T: Real>(
+    dst: &mut [T],
+    cv: MatView,
+    a: &[T],
+    av: MatView,
+    b: &[T],
+    bv: MatView,
+    accumulate: bool,
+) -> Result<()> {
+    if av.batch != 1 || bv.batch != 1 || cv.batch != 1 {
+        bail!("gemm_into multiplies single matrices, got batches {} · {} → {}", av.batch, bv.batch, cv.batch);
     }
-    // candle's gemm call trusts the layouts; never hand it a view past the buffer.
-    let len =
-        |s: &CpuStorage| -> Result<usize> { dispatch_real!(s.dtype(), T => Ok(T::cpu_storage_as_slice(s)?.len())) };
-    if av.end() > len(a)? || bv.end() > len(b)? {
-        bail!("matmul view outside its buffer: {av:?} · {bv:?}");
+    if av.cols != bv.rows || cv.rows != av.rows || cv.cols != bv.cols {
+        bail!("gemm_into shapes do not match: {av:?} · {bv:?} → {cv:?}");
     }
-    a.matmul(b, (av.batch, av.rows, bv.cols, av.cols), &av.layout(), &bv.layout())
-}
-
-/// `y = x·Wᵀ (+ b)` for `x` given as a strided view `[batch, m, k]` and `W` as `[n, k]`
-/// (PyTorch's Linear layout, read transposed in place). Returns contiguous `[batch·m, n]`.
-pub(crate) fn linear<T: WithDType>(
-    x: &CpuStorage,
-    xv: MatView,
-    w: &CpuStorage,
-    w_layout: &Layout,
-    bias: Option<&[T]>,
-) -> Result<Vec<T>> {
-    let (n, k) = match w_layout.dims() {
-        [n, k] => (*n, *k),
-        dims => bail!("linear weight must be [out, in], got {dims:?}"),
-    };
-    if w_layout.contiguous_offsets().is_none() {
-        bail!("linear weight must be contiguous");
+    if av.end() > a.len() || bv.end() > b.len() || cv.end() > dst.len() {
+        bail!(
+            "gemm_into view outside its buffer: {av:?} in {}, {bv:?} in {}, {cv:?} in {}",
+            a.len(),
+            b.len(),
+            dst.len()
+        );
     }
-    let wv = MatView { offset: w_layout.start_offset(), batch: xv.batch, rows: n, cols: k, strides: [0, k, 1] };
-    let y = matmul(x, xv, w, wv.t())?;
-    let mut y = T::cpu_storage_data(y)?;
-    if let Some(bias) = bias {
-        if bias.len() != n {
-            bail!("linear bias has {} entries for {n} outputs", bias.len());
-        }
-        for row in y.chunks_exact_mut(n) {
-            for (v, b) in row.iter_mut().zip(bias) {
-                *v += *b;
+    let (m, n, k) = (av.rows, bv.cols, av.cols);
+    if m == 0 || n == 0 {
+        return Ok(());
+    }
+    let zero = T::from_f64(0.0);
+    if k == 0 {
+        if !accumulate {
+            for i in 0..m {
+                for j in 0..n {
+                    dst[cv.offset + i * cv.strides[1] + j * cv.strides[2]] = zero;
+                }
             }
         }
+        return Ok(());
     }
+    let stride = |s: usize| s as isize;
+    // SAFETY: every element the call reads or writes is `offset + i·row_stride +
+    // j·col_stride` of its view with `i < rows`, `j < cols`: at most `end() − 1`, which the
+    // checks above keep inside `a`, `b` and `dst`. `dst` is borrowed mutably and `a`, `b`
+    // shared, so they cannot alias. `Parallelism::None` keeps the call on this thread.
+    #[allow(unsafe_code)]
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr().add(cv.offset),
+            stride(cv.strides[2]),
+            stride(cv.strides[1]),
+            accumulate,
+            a.as_ptr().add(av.offset),
+            stride(av.strides[2]),
+            stride(av.strides[1]),
+            b.as_ptr().add(bv.offset),
+            stride(bv.strides[2]),
+            stride(bv.strides[1]),
+            T::from_f64(1.0),
+            T::from_f64(1.0),
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
+    }
+    Ok(())
+}
+
+/// A range of rows of a row-major buffer.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Rows {
+    pub first: usize,
+    pub len: usize,
+}
+
+/// Splits `m` rows into one contiguous range per thread of the current rayon pool.
+pub(crate) fn row_chunks(m: usize) -> Vec<Rows> {
+    let chunks = rayon::current_num_threads().clamp(1, m.max(1));
+    (0..chunks).map(|i| Rows { first: i * m / chunks, len: (i + 1) * m / chunks - i * m / chunks }).collect()
+}
+
+/// Cuts a row-major buffer of `width` columns into consecutive row ranges from its start.
+pub(crate) fn split_rows<'a, T>(
+    mut buf: &'a mut [T],
+    width: usize,
+    ranges: impl IntoIterator<Item = Rows>,
+) -> Vec<&'a mut [T]> {
+    ranges
+        .into_iter()
+        .map(|r| {
+            let mid = (r.len * width).min(buf.len());
+            let (head, tail) = std::mem::take(&mut buf).split_at_mut(mid);
+            buf = tail;
+            head
+        })
+        .collect()
+}
+
+/// The rows of `r` in a row-major buffer of `width` columns.
+pub(crate) fn rows_of<T>(buf: &[T], width: usize, r: Rows) -> &[T] {
+    &buf[r.first * width..(r.first + r.len) * width]
+}
+
+/// Runs `f` on every item on the current rayon pool, returning the first error.
+pub(crate) fn par_each<I: Send>(items: Vec<I>, f: impl Fn(I) -> Result<()> + Sync + Send) -> Result<()> {
+    use rayon::prelude::*;
+    items.into_par_iter().try_for_each(f)
+}
+
+/// `y = x·Wᵀ (+ b)` for `x` given as a strided view `[batch, m, k]` whose rows are
+/// contiguous and `W` as a row-major `[n, k]` (PyTorch's Linear layout, read transposed in
+/// place). Returns contiguous `[batch·m, n]`, computed in parallel row chunks.
+pub(crate) fn linear<T: Real>(x: &[T], xv: MatView, w: &[T], n: usize, bias: Option<&[T]>) -> Result<Vec<T>> {
+    let k = xv.cols;
+    if w.len() != n * k || xv.strides[2] != 1 || xv.strides[1] != k {
+        bail!("linear: weight of {} elements for [{n}, {k}], or input rows not contiguous: {xv:?}", w.len());
+    }
+    if bias.is_some_and(|b| b.len() != n) {
+        bail!("linear bias does not have {n} entries");
+    }
+    let m = xv.rows;
+    let mut y = vec![T::from_f64(0.0); xv.batch * m * n];
+    let tasks: Vec<_> = (0..xv.batch)
+        .flat_map(|b| row_chunks(m).into_iter().map(move |r| (b, r)))
+        .zip(split_rows(&mut y, n, (0..xv.batch).flat_map(|_| row_chunks(m))))
+        .collect();
+    let wt = MatView::contiguous(0, 1, n, k).t();
+    par_each(tasks, |((b, r), out)| {
+        if let Some(bias) = bias {
+            for row in out.chunks_exact_mut(n) {
+                row.copy_from_slice(bias);
+            }
+        }
+        let rows = MatView { offset: xv.offset + b * xv.strides[0] + r.first * k, batch: 1, rows: r.len, ..xv };
+        gemm_into(out, MatView::contiguous(0, 1, r.len, n), x, rows, w, wt, bias.is_some())
+    })?;
     Ok(y)
+}
+
+/// `dx [m, k] = g [m, n] · W` for contiguous `g` and a row-major `W [n, k]` (the input
+/// gradient of [`linear`]), in parallel row chunks.
+pub(crate) fn linear_bwd<T: Real>(g: &[T], w: &[T], n: usize, k: usize) -> Result<Vec<T>> {
+    if w.len() != n * k || g.len() % n.max(1) != 0 {
+        bail!("linear backward: weight of {} elements for [{n}, {k}], gradient of {}", w.len(), g.len());
+    }
+    let m = g.len() / n.max(1);
+    let mut dx = vec![T::from_f64(0.0); m * k];
+    let tasks: Vec<_> = row_chunks(m).into_iter().zip(split_rows(&mut dx, k, row_chunks(m))).collect();
+    par_each(tasks, |(r, out)| {
+        let gv = MatView::contiguous(r.first * n, 1, r.len, n);
+        gemm_into(out, MatView::contiguous(0, 1, r.len, k), g, gv, w, MatView::contiguous(0, 1, n, k), false)
+    })?;
+    Ok(dx)
 }
 
 /// LayerNorm forward over rows of length `gamma.len()`:

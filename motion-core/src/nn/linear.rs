@@ -1,8 +1,8 @@
 //! Affine layer `y = x·Wᵀ + b` with PyTorch's `[out, in]` weight layout.
 
-use candle_core::{bail, CpuStorage, CustomOp1, Layout, Result, Shape, Tensor, WithDType};
+use candle_core::{bail, CpuStorage, CustomOp1, Layout, Result, Shape, Tensor};
 
-use super::kernels::{self, dispatch_real, with_slice, with_storage, MatView};
+use super::kernels::{self, dispatch_real, with_slice, MatView, Real};
 use super::ops::has_cpu_kernel;
 
 /// `nn.Linear`: weight `[out, in]`, optional bias `[out]`.
@@ -95,20 +95,28 @@ struct FrozenLinearOp {
 }
 
 impl FrozenLinearOp {
-    fn fwd<T: WithDType>(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+    fn fwd<T: Real>(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
         let (n, k) = self.weight.dims2()?;
         let Some(xv) = row_view(l, k) else {
             bail!("frozen linear: input {:?} with strides {:?} is not row-contiguous", l.dims(), l.stride());
         };
-        let y = with_storage(&self.weight, |ws, wl| match &self.bias {
-            Some(b) => with_slice::<T, _>(b, |bias| kernels::linear::<T>(s, xv, ws, wl, Some(bias))),
-            None => kernels::linear::<T>(s, xv, ws, wl, None),
+        let x = T::cpu_storage_as_slice(s)?;
+        let y = with_slice::<T, _>(&self.weight, |w| match &self.bias {
+            Some(b) => with_slice::<T, _>(b, |bias| kernels::linear(x, xv, w, n, Some(bias))),
+            None => kernels::linear(x, xv, w, n, None),
         })?;
         let mut dims = l.dims().to_vec();
         if let Some(last) = dims.last_mut() {
             *last = n;
         }
         Ok((T::to_cpu_storage_owned(y), Shape::from(dims)))
+    }
+
+    fn bwd_impl<T: Real>(&self, arg: &Tensor, grad: &Tensor) -> Result<Tensor> {
+        let (n, k) = self.weight.dims2()?;
+        let grad = grad.contiguous()?;
+        let dx = with_slice::<T, _>(&grad, |g| with_slice::<T, _>(&self.weight, |w| kernels::linear_bwd(g, w, n, k)))?;
+        Tensor::from_vec(dx, arg.shape(), arg.device())
     }
 }
 
@@ -123,10 +131,10 @@ impl CustomOp1 for FrozenLinearOp {
     }
 
     fn bwd(&self, arg: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
-        let (n, _) = self.weight.dims2()?;
-        let rows = grad.elem_count() / n.max(1);
-        let dx = grad.reshape((rows, n))?.matmul(&self.weight)?;
-        Ok(Some(dx.reshape(arg.shape())?))
+        if !has_cpu_kernel(grad) {
+            return Ok(Some(grad.matmul(&self.weight)?));
+        }
+        dispatch_real!(arg.dtype(), T => Ok(Some(self.bwd_impl::<T>(arg, grad)?)))
     }
 }
 
