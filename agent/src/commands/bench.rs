@@ -1,6 +1,6 @@
 //! `mogen bench prior`: speed of the shipped prior on this machine.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -9,7 +9,11 @@ use clap::Args;
 use motion_core::diffusion::noise::gaussian;
 use motion_core::diffusion::{DdimSampler, Denoiser, Guidance, NoiseSchedule};
 use motion_core::prior::Prior;
+use motion_core::export::write_atomically;
+use motion_core::npy::npy_bytes;
 use motion_core::representation::FEATURE_DIM;
+use motion_core::training::AdamW;
+use serde::Serialize;
 
 use crate::paths;
 
@@ -30,6 +34,16 @@ pub struct BenchArgs {
     /// Timed repetitions (after one warm-up); the median is printed.
     #[arg(long, default_value_t = 10)]
     reps: usize,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Print one JSON object per batch size instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Also write one batch-1 step (z, joints, loss, gradient as .npy) into this folder, for
+    /// the PyTorch mirror's parity check (`benches/pytorch/`).
+    #[arg(long)]
+    dump: Option<PathBuf>,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -48,27 +62,43 @@ fn peak_rss_mib() -> f64 {
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
-    rayon::ThreadPoolBuilder::new().build()?.install(|| run_in_pool(args))
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(args.threads.unwrap_or(0)).build()?;
+    pool.install(|| run_in_pool(args))
+}
+
+/// Median timings of one batch size (seconds), printed as a table row or a JSON line.
+#[derive(Debug, Serialize)]
+struct Row {
+    batch: usize,
+    threads: usize,
+    forward_s: f64,
+    sample_s: f64,
+    dno_step_s: f64,
+    peak_rss_mib: f64,
 }
 
 fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
     let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
     let cfg = prior.mdm.config();
-    println!(
-        "prior: d={} ff={} layers={} heads={} ({} parameters); {} frames; threads: RAYON_NUM_THREADS={} CANDLE_NUM_THREADS={}",
-        cfg.latent_dim,
-        cfg.ff_size,
-        cfg.num_layers,
-        cfg.num_heads,
-        cfg.parameter_count(),
-        args.frames,
-        std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into()),
-        std::env::var("CANDLE_NUM_THREADS").unwrap_or_else(|_| "unset".into()),
-    );
     let sampler = DdimSampler::new(&NoiseSchedule::mdm(), args.ddim_steps)?;
-    println!("| batch | denoiser forward (s) | ddim{k} sample, no graph (s) | DNO step: ddim{k} unrolled fwd+bwd to the noise (s) | 500 DNO steps (s) | peak RSS (MiB) |", k = args.ddim_steps);
-    println!("|---|---|---|---|---|---|");
+    if let Some(dir) = &args.dump {
+        dump_step(&prior, &sampler, args.frames, dir)?;
+    }
+    if !args.json {
+        println!(
+            "prior: d={} ff={} layers={} heads={} ({} parameters); {} frames; {} threads",
+            cfg.latent_dim,
+            cfg.ff_size,
+            cfg.num_layers,
+            cfg.num_heads,
+            cfg.parameter_count(),
+            args.frames,
+            rayon::current_num_threads(),
+        );
+        println!("| batch | denoiser forward (s) | ddim{k} sample, no graph (s) | DNO step: ddim{k} unrolled, joints, loss, backward to the noise, Adam (s) | 500 DNO steps (s) | peak RSS (MiB) |", k = args.ddim_steps);
+        println!("|---|---|---|---|---|---|");
+    }
     for &b in &args.batches {
         // The DNO loop runs unconditionally (empty prompt), as DNO does.
         let text = prior.encode_text(&vec![""; b], &device)?;
@@ -93,14 +123,71 @@ fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
             Ok(())
         })?;
         let z = Var::from_tensor(&x)?;
+        let mut adam = AdamW::new(vec![z.clone()], 0.0)?;
         let step = time(&mut || {
-            let out = sampler.sample_unrolled(&prior.mdm, z.as_tensor(), &text, Guidance::none())?;
-            let loss = prior.to_joints(&out)?.narrow(3, 1, 1)?.mean_all()?;
-            let grads = loss.backward()?;
-            anyhow::ensure!(grads.get(z.as_tensor()).is_some(), "no gradient reached the noise");
+            let (_, grads) = step_loss(&prior, &sampler, &z, &text)?;
+            adam.step(&grads, DNO_LR)?;
             Ok(())
         })?;
-        println!("| {b} | {forward:.4} | {sample:.3} | {step:.3} | {:.0} | {:.0} |", step * 500.0, peak_rss_mib());
+        let row = Row {
+            batch: b,
+            threads: rayon::current_num_threads(),
+            forward_s: forward,
+            sample_s: sample,
+            dno_step_s: step,
+            peak_rss_mib: peak_rss_mib(),
+        };
+        if args.json {
+            println!("{}", serde_json::to_string(&row)?);
+        } else {
+            println!(
+                "| {b} | {forward:.4} | {sample:.3} | {step:.3} | {:.0} | {:.0} |",
+                step * 500.0,
+                row.peak_rss_mib
+            );
+        }
+    }
+    Ok(())
+}
+
+/// DNO's learning rate (the Adam step of the timed loop).
+const DNO_LR: f64 = 0.05;
+
+/// The timed DNO step's loss: DDIM unrolled from the noise `z`, joints on the rest skeleton,
+/// and the mean joint height (m) standing in for a task's constraint loss; its gradients.
+fn step_loss(
+    prior: &Prior,
+    sampler: &DdimSampler,
+    z: &Var,
+    text: &Tensor,
+) -> anyhow::Result<(Tensor, candle_core::backprop::GradStore)> {
+    let out = sampler.sample_unrolled(&prior.mdm, z.as_tensor(), text, Guidance::none())?;
+    let loss = prior.to_joints(&out)?.narrow(3, 1, 1)?.mean_all()?;
+    let grads = loss.backward()?;
+    anyhow::ensure!(grads.get(z.as_tensor()).is_some(), "no gradient reached the noise");
+    Ok((loss, grads))
+}
+
+/// Writes one batch-1 step for a mirror to check its maths against: the noise `z.npy`
+/// `[1, frames, 263]`, the unrolled sample's joints `joints.npy` `[1, frames, 22, 3]`, the
+/// loss `loss.npy` `[1]` and its gradient `grad.npy` with respect to `z`.
+fn dump_step(prior: &Prior, sampler: &DdimSampler, frames: usize, dir: &Path) -> anyhow::Result<()> {
+    let device = candle_core::Device::Cpu;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let text = prior.encode_text(&[""], &device)?;
+    let z = Var::from_tensor(&gaussian((1, frames, FEATURE_DIM), 7, &device)?)?;
+    let out = sampler.sample(&prior.mdm, z.as_tensor(), &text, Guidance::none())?;
+    let (loss, grads) = step_loss(prior, sampler, &z, &text)?;
+    let grad = grads.get(z.as_tensor()).context("no gradient reached the noise")?;
+    for (name, tensor) in [
+        ("z", z.as_tensor().clone()),
+        ("joints", prior.to_joints(&out)?),
+        ("loss", loss.reshape(1)?),
+        ("grad", grad.clone()),
+    ] {
+        let bytes = npy_bytes(&tensor).map_err(anyhow::Error::msg)?;
+        let path = dir.join(format!("{name}.npy"));
+        write_atomically(&path, &bytes).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
 }

@@ -5,7 +5,7 @@ use candle_core::{Result, Shape, Tensor};
 use candle_nn::{Init, VarBuilder};
 use rand::RngCore;
 
-use super::fused_layer::{FusedEncoderLayer, LayerWeights};
+use super::fused_stack::{FusedEncoderStack, LayerWeights};
 use super::MdmConfig;
 use crate::nn::{self, LayerNorm, Linear, LAYER_NORM_EPS};
 
@@ -122,15 +122,6 @@ impl EncoderLayer {
         self.out_proj.forward(&ctx)
     }
 
-    /// Frozen-weight path, `[batch, tokens, d] → [batch, tokens, d]`: one fused custom op on
-    /// the CPU (input gradient only), the primitive path without dropout elsewhere.
-    pub fn forward_frozen(&self, h: &Tensor) -> Result<Tensor> {
-        if !nn::ops::has_cpu_kernel(h) {
-            return self.forward(h, &mut Dropout { p: 0.0, rng: None });
-        }
-        h.contiguous()?.apply_op1(FusedEncoderLayer::new(self.frozen_weights()?, self.num_heads, self.norm1.eps()))
-    }
-
     fn frozen_weights(&self) -> Result<LayerWeights> {
         let bias = |l: &Linear| -> Result<Tensor> {
             l.bias().map(Tensor::detach).ok_or_else(|| candle_core::Error::Msg("encoder linear without bias".into()))
@@ -150,4 +141,22 @@ impl EncoderLayer {
             norm2_bias: self.norm2.bias().detach(),
         })
     }
+}
+
+/// Frozen-weight path of a stack of layers, `[batch, tokens, d] → [batch, tokens, d]`: one
+/// fused custom op on the CPU (input gradient only, [`FusedEncoderStack`]), the primitive
+/// path without dropout elsewhere. Errors on an empty stack.
+pub(crate) fn frozen_stack(layers: &[EncoderLayer], h: &Tensor) -> Result<Tensor> {
+    let Some(first) = layers.first() else {
+        candle_core::bail!("an encoder stack needs at least one layer");
+    };
+    if !nn::ops::has_cpu_kernel(h) {
+        let mut h = h.clone();
+        for layer in layers {
+            h = layer.forward(&h, &mut Dropout { p: 0.0, rng: None })?;
+        }
+        return Ok(h);
+    }
+    let weights = layers.iter().map(EncoderLayer::frozen_weights).collect::<Result<Vec<_>>>()?;
+    h.contiguous()?.apply_op1(FusedEncoderStack::new(weights, first.num_heads, first.norm1.eps()))
 }

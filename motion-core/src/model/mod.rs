@@ -10,7 +10,7 @@
 
 pub mod bench;
 mod config;
-mod fused_layer;
+mod fused_stack;
 mod init;
 mod layer;
 #[cfg(test)]
@@ -171,10 +171,8 @@ impl Mdm {
         let (te0, te2) = &self.time_embed;
         let t_emb = te2.forward_frozen(&te0.forward_frozen(&self.pe.index_select(timesteps, 0)?)?.silu()?)?;
         let cond = (t_emb + self.embed_text.forward_frozen(text)?)?;
-        let mut h = self.tokens(&cond, &self.input_process.forward_frozen(x_t)?, frames)?;
-        for layer in &self.layers {
-            h = layer.forward_frozen(&h)?;
-        }
+        let h = self.tokens(&cond, &self.input_process.forward_frozen(x_t)?, frames)?;
+        let h = layer::frozen_stack(&self.layers, &h)?;
         self.to_x0(self.output_process.forward_frozen(&h.narrow(1, 1, frames)?)?, x_t, timesteps)
     }
 

@@ -190,14 +190,50 @@ fn frozen_gradient_equals_primitive_gradient(dev: &Device) -> Result<()> {
     Ok(())
 }
 
-fn fused_layer_gradient_matches_finite_differences(dev: &Device) -> Result<()> {
-    // Sharper check of the fused op alone: one layer, larger width, f64.
-    let cfg = MdmConfig { latent_dim: 12, ff_size: 20, num_layers: 1, num_heads: 3, ..tiny_config() };
+fn fused_stack_gradient_matches_finite_differences(dev: &Device) -> Result<()> {
+    // Sharper check of the fused op alone: two layers, larger width, f64.
+    let cfg = MdmConfig { latent_dim: 12, ff_size: 20, num_layers: 2, num_heads: 3, ..tiny_config() };
     let model = Mdm::random(cfg.clone(), DType::F64, dev, 9)?;
-    let layer = &model.layers[0];
     let h = randn(&[2, 4, 12], 54, dev)?;
     let w = randn(&[2, 4, 12], 55, dev)?;
-    finite_difference_check(&h, |h| layer.forward_frozen(h)?.mul(&w)?.sum_all(), 1e-6, 1e-7)
+    finite_difference_check(&h, |h| layer::frozen_stack(&model.layers, h)?.mul(&w)?.sum_all(), 1e-6, 1e-7)
+}
+
+/// Output and input gradient of the fused stack on 1, 2 and 3 worker threads, for one
+/// element (split into row chunks and attention blocks) and for four (one task per element
+/// on 2 threads, row phases on 3): the same numbers up to rounding every time (the gemm
+/// kernels' blocking depends on the number of rows, so the last bits may differ).
+fn fused_stack_is_the_same_on_any_thread_count(dev: &Device) -> Result<()> {
+    let cfg = MdmConfig { latent_dim: 12, ff_size: 20, num_layers: 2, num_heads: 3, ..tiny_config() };
+    let model = Mdm::random(cfg.clone(), DType::F64, dev, 10)?;
+    for batch in [1, 4] {
+        let h = randn(&[batch, 40, 12], 56, dev)?;
+        let w = randn(&[batch, 40, 12], 57, dev)?;
+        let run = |threads: usize| -> Result<(Vec<f64>, Vec<f64>)> {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .map_err(|e| candle_core::Error::Msg(e.to_string()))?;
+            pool.install(|| {
+                let var = candle_core::Var::from_tensor(&h)?;
+                let y = layer::frozen_stack(&model.layers, var.as_tensor())?;
+                let grads = y.mul(&w)?.sum_all()?.backward()?;
+                let g = grads.get(var.as_tensor()).ok_or_else(|| candle_core::Error::Msg("no gradient".into()))?;
+                Ok((y.flatten_all()?.to_vec1()?, g.flatten_all()?.to_vec1()?))
+            })
+        };
+        let max_diff = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        let one = run(1)?;
+        for threads in [2, 3] {
+            let (y, g) = run(threads)?;
+            assert!(max_diff(&y, &one.0) < 1e-12 && max_diff(&g, &one.1) < 1e-12, "batch {batch}, {threads} threads");
+        }
+        // And the same as the primitive path.
+        let primitive = model.layers.iter().try_fold(h.clone(), |h, l| l.forward(&h, &mut Dropout { p: 0.0, rng: None }))?;
+        let diff = max_diff(&primitive.flatten_all()?.to_vec1::<f64>()?, &one.0);
+        assert!(diff < 1e-12, "batch {batch}: {diff}");
+    }
+    Ok(())
 }
 
 fn training_mode_has_seeded_dropout_and_weight_gradients(dev: &Device) -> Result<()> {
@@ -275,7 +311,8 @@ mod cpu {
         frozen_and_primitive_paths_agree,
         gradients_match_finite_differences,
         frozen_gradient_equals_primitive_gradient,
-        fused_layer_gradient_matches_finite_differences,
+        fused_stack_gradient_matches_finite_differences,
+        fused_stack_is_the_same_on_any_thread_count,
         training_mode_has_seeded_dropout_and_weight_gradients,
         velocity_prediction_scales_input_and_output,
         bad_inputs_are_errors,

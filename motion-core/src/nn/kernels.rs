@@ -330,9 +330,9 @@ pub(crate) struct Rows {
     pub len: usize,
 }
 
-/// Splits `m` rows into one contiguous range per thread of the current rayon pool.
-pub(crate) fn row_chunks(m: usize) -> Vec<Rows> {
-    let chunks = rayon::current_num_threads().clamp(1, m.max(1));
+/// Splits `m` rows into `parts` contiguous ranges (fewer when there are fewer rows).
+pub(crate) fn row_chunks(m: usize, parts: usize) -> Vec<Rows> {
+    let chunks = parts.clamp(1, m.max(1));
     (0..chunks).map(|i| Rows { first: i * m / chunks, len: (i + 1) * m / chunks - i * m / chunks }).collect()
 }
 
@@ -378,8 +378,8 @@ pub(crate) fn linear<T: Real>(x: &[T], xv: MatView, w: &[T], n: usize, bias: Opt
     let m = xv.rows;
     let mut y = vec![T::from_f64(0.0); xv.batch * m * n];
     let tasks: Vec<_> = (0..xv.batch)
-        .flat_map(|b| row_chunks(m).into_iter().map(move |r| (b, r)))
-        .zip(split_rows(&mut y, n, (0..xv.batch).flat_map(|_| row_chunks(m))))
+        .flat_map(|b| row_chunks(m, rayon::current_num_threads()).into_iter().map(move |r| (b, r)))
+        .zip(split_rows(&mut y, n, (0..xv.batch).flat_map(|_| row_chunks(m, rayon::current_num_threads()))))
         .collect();
     let wt = MatView::contiguous(0, 1, n, k).t();
     par_each(tasks, |((b, r), out)| {
@@ -402,7 +402,7 @@ pub(crate) fn linear_bwd<T: Real>(g: &[T], w: &[T], n: usize, k: usize) -> Resul
     }
     let m = g.len() / n.max(1);
     let mut dx = vec![T::from_f64(0.0); m * k];
-    let tasks: Vec<_> = row_chunks(m).into_iter().zip(split_rows(&mut dx, k, row_chunks(m))).collect();
+    let tasks: Vec<_> = row_chunks(m, rayon::current_num_threads()).into_iter().zip(split_rows(&mut dx, k, row_chunks(m, rayon::current_num_threads()))).collect();
     par_each(tasks, |(r, out)| {
         let gv = MatView::contiguous(r.first * n, 1, r.len, n);
         gemm_into(out, MatView::contiguous(0, 1, r.len, k), g, gv, w, MatView::contiguous(0, 1, n, k), false)

@@ -1,11 +1,19 @@
-//! One frozen post-LN encoder layer as a single custom op with a hand-written backward.
+//! The frozen post-LN encoder stack as a single custom op with a hand-written backward.
 //!
-//! In the DNO loop every layer of every unrolled denoiser pass is a graph node, and candle's
-//! backward allocates a zero tensor plus a sum for each gradient edge. Fusing the layer
-//! (attention, both residual LayerNorms and the GELU feed-forward block) leaves one node per
-//! layer, keeps exactly the activations the input gradient needs (q/k/v, attention
-//! probabilities, normalised residuals, pre-activation) and never forms weight gradients.
-//! The per-layer maths are the kernels of [`crate::nn`], shared with the single-op versions.
+//! In the DNO loop every layer of every unrolled denoiser pass would be a graph node, and
+//! candle's backward allocates a zero tensor plus a sum for each gradient edge. Fusing the
+//! stack (per layer: attention, both residual LayerNorms and the GELU feed-forward block)
+//! leaves one node per denoiser pass, keeps exactly the activations the input gradient needs
+//! (q/k/v, attention probabilities, normalised residuals, pre-activation) and never forms
+//! weight gradients. The per-layer maths are the kernels of [`crate::nn`], shared with the
+//! single-op versions.
+//!
+//! **Threads.** The work runs on the current rayon pool in one of two ways, picked per call
+//! by [`Plan`]: with at least as many batch elements as threads, every element goes through
+//! the whole stack as one task (no synchronisation between layers: a worker that waits for
+//! its partner at every phase sleeps, and waking it costs more than a small phase); with
+//! fewer, every layer runs in phases over row chunks and attention blocks of the batch. The
+//! arithmetic of a row does not depend on the split, so the result is the same either way.
 
 use std::sync::Mutex;
 
@@ -15,6 +23,51 @@ use candle_core::{bail, CpuStorage, CustomOp1, Error, Layout, Result, Shape, Sto
 use crate::nn::kernels::{
     self, contiguous_slice, dispatch_real, par_each, row_chunks, rows_of, split_rows, MatView, Real, Rows,
 };
+
+/// How one call shares its work among `threads` rayon workers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Plan {
+    /// Each batch element through the whole stack as one task, each task single-threaded.
+    Elements,
+    /// One group of all elements, every layer split into phases over rows for `threads`.
+    Rows { threads: usize },
+}
+
+impl Plan {
+    fn new(batch: usize) -> Self {
+        let threads = rayon::current_num_threads().max(1);
+        if threads > 1 && (batch % threads == 0 || batch >= 2 * threads) {
+            Plan::Elements
+        } else {
+            Plan::Rows { threads }
+        }
+    }
+
+    /// `(first element, elements)` of each group.
+    fn groups(self, batch: usize) -> Vec<(usize, usize)> {
+        match self {
+            Plan::Elements => (0..batch).map(|b| (b, 1)).collect(),
+            Plan::Rows { .. } => vec![(0, batch)],
+        }
+    }
+
+    /// Threads inside one group.
+    fn threads(self) -> usize {
+        match self {
+            Plan::Elements => 1,
+            Plan::Rows { threads } => threads,
+        }
+    }
+}
+
+/// Runs `f` on every item: on the rayon pool when `threads > 1`, else on this thread in order.
+fn run<I: Send>(threads: usize, items: Vec<I>, f: impl Fn(I) -> Result<()> + Sync + Send) -> Result<()> {
+    if threads > 1 {
+        par_each(items, f)
+    } else {
+        items.into_iter().try_for_each(f)
+    }
+}
 
 /// The frozen weights of one layer (detached tensors: reading them never records a graph).
 #[derive(Debug, Clone)]
@@ -52,15 +105,24 @@ impl LayerWeights {
     }
 }
 
-/// `h [batch, tokens, d] → LN2(h1 + FF(h1))` with `h1 = LN1(h + MHA(h))`.
-pub(crate) struct FusedEncoderLayer {
-    weights: LayerWeights,
+/// `h [batch, tokens, d] → h` through every layer, each `h ← LN2(h1 + FF(h1))` with
+/// `h1 = LN1(h + MHA(h))`.
+pub(crate) struct FusedEncoderStack {
+    layers: Vec<LayerWeights>,
     num_heads: usize,
     eps: f64,
-    cache: Mutex<Option<Cache>>,
+    cache: Mutex<Option<Vec<Group>>>,
 }
 
-/// Activations kept from the forward pass for the input gradient.
+/// The batch elements `[first, first + count)` and their activations in every layer.
+struct Group {
+    first: usize,
+    count: usize,
+    layers: Vec<Cache>,
+}
+
+/// Activations of one layer kept from the forward pass for the input gradient (over the
+/// rows of one group).
 struct Cache {
     /// `[batch·tokens, 3d]`, the fused q/k/v projection.
     qkv: CpuStorage,
@@ -142,13 +204,11 @@ struct Block {
     rows: Rows,
 }
 
-/// Splits `batch × tokens` rows into attention blocks for the threads of the current rayon
-/// pool: one block per batch element when there are at least as many elements as threads,
+/// Splits `batch × tokens` rows into attention blocks for `threads`: one block per batch element when there are at least as many elements as threads,
 /// else each element cut into about `threads / batch` blocks of at least
 /// [`MIN_BLOCK_ROWS`] rows. The blocks cover every row once, in order. Per-row arithmetic
 /// does not depend on the split, so the result is the same for any thread count.
-fn attention_blocks(batch: usize, tokens: usize) -> Vec<Block> {
-    let threads = rayon::current_num_threads().max(1);
+fn attention_blocks(batch: usize, tokens: usize, threads: usize) -> Vec<Block> {
     let per_element = threads.div_ceil(batch.max(1)).min(tokens / MIN_BLOCK_ROWS).max(1);
     let mut out = Vec::with_capacity(batch * per_element);
     for b in 0..batch {
@@ -228,43 +288,116 @@ impl Dims {
     }
 }
 
-impl FusedEncoderLayer {
-    pub(crate) fn new(weights: LayerWeights, num_heads: usize, eps: f64) -> Self {
-        Self { weights, num_heads, eps, cache: Mutex::new(None) }
+impl FusedEncoderStack {
+    pub(crate) fn new(layers: Vec<LayerWeights>, num_heads: usize, eps: f64) -> Self {
+        Self { layers, num_heads, eps, cache: Mutex::new(None) }
     }
 
-    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Option<Cache>>> {
-        self.cache.lock().map_err(|_| Error::Msg("fused encoder layer: cache lock poisoned".into()))
+    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Option<Vec<Group>>>> {
+        self.cache.lock().map_err(|_| Error::Msg("fused encoder stack: cache lock poisoned".into()))
     }
 
     fn dims(&self, d: usize, tokens: usize) -> Result<Dims> {
         let heads = self.num_heads;
         if heads == 0 || d % heads != 0 {
-            bail!("fused encoder layer: width {d} does not split into {heads} heads");
+            bail!("fused encoder stack: width {d} does not split into {heads} heads");
         }
         Ok(Dims { tokens, d, heads })
     }
 
-    /// Forward in three parallel phases: the q/k/v projection over row chunks; attention
-    /// over blocks of query rows (each against all keys of its element); then the output
-    /// projection, both LayerNorms and the feed-forward block over row chunks.
+    /// Every layer's weights as CPU slices (the guards keep the storages readable).
+    fn with_params<T: Real, R>(&self, d: usize, f: impl FnOnce(&[Params<T>]) -> Result<R>) -> Result<R> {
+        let guards: Vec<_> = self.layers.iter().map(|w| w.each().map(|t| t.storage_and_layout())).collect();
+        let params = guards.iter().map(|g| Params::<T>::new(g, d)).collect::<Result<Vec<_>>>()?;
+        f(&params)
+    }
+
     fn fwd<T: Real>(&self, x_storage: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
         let (b, s, d) = match l.dims() {
             [b, s, d] => (*b, *s, *d),
-            dims => bail!("fused encoder layer expects [batch, tokens, d], got {dims:?}"),
+            dims => bail!("fused encoder stack expects [batch, tokens, d], got {dims:?}"),
         };
         let x = contiguous_slice::<T>(x_storage, l)?;
-        let guards = self.weights.each().map(|t| t.storage_and_layout());
-        let p = Params::<T>::new(&guards, d)?;
         let dims = self.dims(d, s)?;
+        let plan = Plan::new(b);
+        let width = s * d;
+        let (y, groups) = self.with_params::<T, _>(d, |params| {
+            let forward = |(first, count): (usize, usize)| -> Result<(Vec<T>, Group)> {
+                let mut h = x[first * width..(first + count) * width].to_vec();
+                let mut layers = Vec::with_capacity(params.len());
+                for p in params {
+                    let (next, cache) = self.layer_fwd(p, dims, &h, count, plan.threads())?;
+                    h = next;
+                    layers.push(cache);
+                }
+                Ok((h, Group { first, count, layers }))
+            };
+            let outputs: Vec<(Vec<T>, Group)> = match plan {
+                Plan::Elements => {
+                    use rayon::prelude::*;
+                    plan.groups(b).into_par_iter().map(forward).collect::<Result<_>>()?
+                }
+                Plan::Rows { .. } => plan.groups(b).into_iter().map(forward).collect::<Result<_>>()?,
+            };
+            let mut y = Vec::with_capacity(b * width);
+            let mut groups = Vec::with_capacity(outputs.len());
+            for (h, group) in outputs {
+                y.extend_from_slice(&h);
+                groups.push(group);
+            }
+            Ok((y, groups))
+        })?;
+        *self.lock()? = Some(groups);
+        Ok((T::to_cpu_storage_owned(y), l.shape().clone()))
+    }
+
+    fn bwd_impl<T: Real>(&self, arg: &Tensor, grad: &Tensor) -> Result<Tensor> {
+        let (b, s, d) = arg.dims3()?;
+        let dims = self.dims(d, s)?;
+        let cache = self.lock()?;
+        let Some(groups) = cache.as_ref() else {
+            bail!("fused encoder stack: backward without a forward cache");
+        };
+        let threads = if groups.len() > 1 { 1 } else { rayon::current_num_threads().max(1) };
+        let width = s * d;
+        let grad = grad.contiguous()?;
+        let dx = kernels::with_slice::<T, _>(&grad, |g| {
+            self.with_params::<T, _>(d, |params| {
+                let backward = |group: &Group| -> Result<Vec<T>> {
+                    let mut dh = g[group.first * width..(group.first + group.count) * width].to_vec();
+                    for (p, c) in params.iter().zip(&group.layers).rev() {
+                        dh = self.layer_bwd(p, dims, c, &dh, group.count, threads)?;
+                    }
+                    Ok(dh)
+                };
+                let parts: Vec<Vec<T>> = if groups.len() > 1 {
+                    use rayon::prelude::*;
+                    groups.par_iter().map(backward).collect::<Result<_>>()?
+                } else {
+                    groups.iter().map(backward).collect::<Result<_>>()?
+                };
+                Ok(parts.concat())
+            })
+        })?;
+        if dx.len() != b * width {
+            bail!("fused encoder stack: gradient of {} elements for [{b}, {s}, {d}]", dx.len());
+        }
+        Tensor::from_vec(dx, arg.shape(), arg.device())
+    }
+
+    /// One layer's forward over `b` elements in three phases (in parallel when `threads > 1`): the q/k/v projection over row chunks; attention
+    /// over blocks of query rows (each against all keys of its element); then the output
+    /// projection, both LayerNorms and the feed-forward block over row chunks.
+    fn layer_fwd<T: Real>(&self, p: &Params<T>, dims: Dims, x: &[T], b: usize, threads: usize) -> Result<(Vec<T>, Cache)> {
+        let (s, d) = (dims.tokens, dims.d);
         let (m, h, ff) = (b * s, dims.heads, p.ff());
         let scale = T::from_f64(1.0 / (dims.head_dim() as f64).sqrt());
         let zero = T::from_f64(0.0);
-        let (chunks, blocks) = (row_chunks(m), attention_blocks(b, s));
+        let (chunks, blocks) = (row_chunks(m, threads), attention_blocks(b, s, threads));
 
         let mut qkv = vec![zero; m * 3 * d];
         let tasks: Vec<_> = chunks.iter().copied().zip(split_rows(&mut qkv, 3 * d, chunks.iter().copied())).collect();
-        par_each(tasks, |(r, out)| linear_rows(out, rows_of(x, d, r), r.len, d, p.in_w, Some(p.in_b)))?;
+        run(threads, tasks, |(r, out)| linear_rows(out, rows_of(x, d, r), r.len, d, p.in_w, Some(p.in_b)))?;
 
         let mut probs = vec![zero; b * s * h * s];
         let mut ctx = vec![zero; m * d];
@@ -272,7 +405,7 @@ impl FusedEncoderLayer {
         let tasks: Vec<_> =
             blocks.iter().zip(split_rows(&mut probs, h * s, rows.clone())).zip(split_rows(&mut ctx, d, rows)).collect();
         let qkv_ref = &qkv;
-        par_each(tasks, |((blk, probs), ctx)| {
+        run(threads, tasks, |((blk, probs), ctx)| {
             let n = blk.rows.len;
             for hh in 0..h {
                 let q = MatView { offset: blk.rows.first * 3 * d + hh * dims.head_dim(), rows: n, ..dims.qkv_head(0, 0, hh) };
@@ -299,7 +432,7 @@ impl FusedEncoderLayer {
             .zip(split_rows(&mut xhat2, d, cs()).into_iter().zip(split_rows(&mut rstd2, 1, cs())))
             .collect();
         let ctx = &ctx;
-        par_each(tasks, |((((r, y), (xhat1, rstd1)), pre), (xhat2, rstd2))| {
+        run(threads, tasks, |((((r, y), (xhat1, rstd1)), pre), (xhat2, rstd2))| {
             let n = r.len;
             // r1 = x + ctx·W_outᵀ + b_out, h1 = LN1(r1).
             let mut r1: Vec<T> = rows_of(x, d, r).iter().zip(p.out_b.iter().cycle()).map(|(&xv, &bv)| xv + bv).collect();
@@ -319,7 +452,7 @@ impl FusedEncoderLayer {
             Ok(())
         })?;
 
-        *self.lock()? = Some(Cache {
+        let cache = Cache {
             qkv: T::to_cpu_storage_owned(qkv),
             probs: T::to_cpu_storage_owned(probs),
             xhat1: T::to_cpu_storage_owned(xhat1),
@@ -327,41 +460,34 @@ impl FusedEncoderLayer {
             pre_gelu: T::to_cpu_storage_owned(pre),
             xhat2: T::to_cpu_storage_owned(xhat2),
             rstd2: T::to_cpu_storage_owned(rstd2),
-        });
-        Ok((T::to_cpu_storage_owned(y), l.shape().clone()))
+        };
+        Ok((y, cache))
     }
 
-    /// Input gradient in four parallel phases: the row-local chain from the output back to
+    /// One layer's input gradient over `b` elements in four phases (in parallel when
+    /// `threads > 1`): the row-local chain from the output back to
     /// `dO = dr1·W_out` over row chunks; per block of query rows `dS = softmax'(dO·Vᵀ)` and
     /// `dQ = dS·K`; per block of key rows `dK = dSᵀ·Q` and `dV = Pᵀ·dO` (sums over every
     /// query row of the element); then `dx = dqkv·W_in + dr1` over row chunks.
-    fn bwd_impl<T: Real>(&self, arg: &Tensor, grad: &Tensor) -> Result<Tensor> {
-        let (b, s, d) = arg.dims3()?;
-        let guards = self.weights.each().map(|t| t.storage_and_layout());
-        let p = Params::<T>::new(&guards, d)?;
-        let dims = self.dims(d, s)?;
-        let cache = self.lock()?;
-        let Some(c) = cache.as_ref() else {
-            bail!("fused encoder layer: backward without a forward cache");
-        };
+    fn layer_bwd<T: Real>(&self, p: &Params<T>, dims: Dims, c: &Cache, g: &[T], b: usize, threads: usize) -> Result<Vec<T>> {
+        let (s, d) = (dims.tokens, dims.d);
         let (m, h, ff) = (b * s, dims.heads, p.ff());
         let scale = T::from_f64(1.0 / (dims.head_dim() as f64).sqrt());
         let zero = T::from_f64(0.0);
-        let (chunks, blocks) = (row_chunks(m), attention_blocks(b, s));
+        let (chunks, blocks) = (row_chunks(m, threads), attention_blocks(b, s, threads));
         let qkv = T::cpu_storage_as_slice(&c.qkv)?;
         let probs = T::cpu_storage_as_slice(&c.probs)?;
         let (xhat1, rstd1) = (T::cpu_storage_as_slice(&c.xhat1)?, T::cpu_storage_as_slice(&c.rstd1)?);
         let (xhat2, rstd2) = (T::cpu_storage_as_slice(&c.xhat2)?, T::cpu_storage_as_slice(&c.rstd2)?);
         let pre = T::cpu_storage_as_slice(&c.pre_gelu)?;
-        let grad = grad.contiguous()?;
 
         // Second LayerNorm, the feed-forward block, the first LayerNorm and W_out.
         let mut dr1 = vec![zero; m * d];
         let mut dctx = vec![zero; m * d];
         let cs = || chunks.iter().copied();
-        kernels::with_slice::<T, _>(&grad, |g| {
+        {
             let tasks: Vec<_> = cs().zip(split_rows(&mut dr1, d, cs())).zip(split_rows(&mut dctx, d, cs())).collect();
-            par_each(tasks, |((r, dr1), dctx)| {
+            run(threads, tasks, |((r, dr1), dctx)| {
                 let n = r.len;
                 let mut dr2 = rows_of(g, d, r).to_vec();
                 kernels::layer_norm_bwd(&mut dr2, rows_of(xhat2, d, r), rows_of(rstd2, 1, r), p.n2_w);
@@ -372,8 +498,8 @@ impl FusedEncoderLayer {
                 linear_rows_bwd(dr1, &dact, n, p.l1_w, d, true)?;
                 kernels::layer_norm_bwd(dr1, rows_of(xhat1, d, r), rows_of(rstd1, 1, r), p.n1_w);
                 linear_rows_bwd(dctx, dr1, n, p.out_w, d, false)
-            })
-        })?;
+            })?;
+        }
 
         // Per block of query rows: dP = dO·Vᵀ, dS = softmax'(dP), dQ = dS·K.
         let mut ds = vec![zero; b * s * h * s];
@@ -382,7 +508,7 @@ impl FusedEncoderLayer {
         let tasks: Vec<_> =
             blocks.iter().zip(split_rows(&mut ds, h * s, rows())).zip(split_rows(&mut dqkv, 3 * d, rows())).collect();
         let dctx = &dctx;
-        par_each(tasks, |((blk, ds), dqkv)| {
+        run(threads, tasks, |((blk, ds), dqkv)| {
             let n = blk.rows.len;
             let d_out = rows_of(dctx, d, blk.rows);
             for hh in 0..h {
@@ -400,7 +526,7 @@ impl FusedEncoderLayer {
         // Per block of key rows: dK = dSᵀ·Q, dV = Pᵀ·dO over all query rows of the element.
         let ds = &ds;
         let tasks: Vec<_> = blocks.iter().zip(split_rows(&mut dqkv, 3 * d, rows())).collect();
-        par_each(tasks, |(blk, dqkv)| {
+        run(threads, tasks, |(blk, dqkv)| {
             let n = blk.rows.len;
             for hh in 0..h {
                 // The block's key rows of the transposed [query, key] matrices.
@@ -417,14 +543,14 @@ impl FusedEncoderLayer {
         // dx = dqkv·W_in + dr1.
         let mut dx = dr1;
         let (dqkv, tasks): (&[T], Vec<_>) = (&dqkv, cs().zip(split_rows(&mut dx, d, cs())).collect());
-        par_each(tasks, |(r, dx)| linear_rows_bwd(dx, rows_of(dqkv, 3 * d, r), r.len, p.in_w, d, true))?;
-        Tensor::from_vec(dx, arg.shape(), arg.device())
+        run(threads, tasks, |(r, dx)| linear_rows_bwd(dx, rows_of(dqkv, 3 * d, r), r.len, p.in_w, d, true))?;
+        Ok(dx)
     }
 }
 
-impl CustomOp1 for FusedEncoderLayer {
+impl CustomOp1 for FusedEncoderStack {
     fn name(&self) -> &'static str {
-        "motion-fused-encoder-layer"
+        "motion-fused-encoder-stack"
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {

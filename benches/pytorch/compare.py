@@ -1,0 +1,81 @@
+"""Times mogen's DNO step against the PyTorch mirror, interleaved, and prints a markdown table.
+
+    python compare.py --mogen target/release/mogen --prior fixtures/model/prior.safetensors
+
+Each round runs `mogen bench prior --json` (2 threads, and 1 thread for the scaling column)
+and `dno_step.py` (2 threads) back to back, reversing the order every round; ratios are taken
+per round and the medians printed, so a load change on the machine hits both sides alike.
+The parity check runs first: the table is only printed when both compute the same step.
+"""
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def run_json(cmd):
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    return {r["batch"]: r for r in (json.loads(line) for line in out.splitlines() if line.startswith("{"))}
+
+
+def step_gflop(batch, d=128, ff=256, layers=4, frames=100, feats=263, k=10):
+    """Analytic GFLOP of one step (K passes forward, input gradient only backward): linear
+    layers count twice (forward, dX), attention three times (forward, both operands)."""
+    s = frames + 1
+    lin = 2 * batch * s * layers * d * (4 * d + 2 * ff) + 4 * batch * frames * feats * d
+    attn = 4 * batch * s * s * d * layers
+    return k * (2 * lin + 3 * attn) / 1e9
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--mogen", required=True)
+    ap.add_argument("--prior", required=True)
+    ap.add_argument("--python", default=sys.executable)
+    ap.add_argument("--batches", default="1,2,8")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--reps", type=int, default=10)
+    args = ap.parse_args()
+    mirror = [args.python, os.path.join(HERE, "dno_step.py"), "--prior", args.prior]
+    with tempfile.TemporaryDirectory() as dump:
+        subprocess.run([args.mogen, "bench", "prior", "--prior", args.prior, "--batches", "1", "--reps", "1", "--dump", dump],
+                       check=True, capture_output=True)
+        subprocess.run(mirror + ["--check", dump], check=True)
+    common = ["--batches", args.batches, "--reps", str(args.reps)]
+    ours = [args.mogen, "bench", "prior", "--prior", args.prior, "--json"] + common
+    theirs = mirror + ["--threads", "2"] + common
+    batches = [int(b) for b in args.batches.split(",")]
+    rows = {b: {"ours": [], "one": [], "torch": [], "ratio": [], "rss": 0.0, "torch_rss": 0.0} for b in batches}
+    for r in range(args.rounds):
+        order = [("ours", ours + ["--threads", "2"]), ("one", ours + ["--threads", "1"]), ("torch", theirs)]
+        results = {name: run_json(cmd) for name, cmd in (order if r % 2 == 0 else order[::-1])}
+        for b in batches:
+            row = rows[b]
+            for name in ("ours", "one", "torch"):
+                row[name].append(results[name][b]["dno_step_s"])
+            row["ratio"].append(results["ours"][b]["dno_step_s"] / results["torch"][b]["dno_step_s"])
+            row["rss"] = max(row["rss"], results["ours"][b]["peak_rss_mib"])
+            row["torch_rss"] = max(row["torch_rss"], results["torch"][b]["peak_rss_mib"])
+        print(f"round {r + 1}/{args.rounds} done", file=sys.stderr, flush=True)
+    load = os.getloadavg()
+    print(f"Medians of {args.rounds} interleaved rounds ({args.reps} steps each after a warm-up); "
+          f"load average at the end {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}.\n")
+    print("| batch | GFLOP/step | mogen, 2 threads (s) | PyTorch, 2 threads (s) | ratio (per-round range) | mogen GFLOP/s | PyTorch GFLOP/s | mogen, 1 thread (s) | 1 → 2 threads | peak RSS MiB mogen / PyTorch |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for b in batches:
+        row = rows[b]
+        ours_s, torch_s, one_s = (statistics.median(row[n]) for n in ("ours", "torch", "one"))
+        gf = step_gflop(b)
+        print(f"| {b} | {gf:.1f} | {ours_s:.4f} | {torch_s:.4f} | {statistics.median(row['ratio']):.2f} "
+              f"({min(row['ratio']):.2f}–{max(row['ratio']):.2f}) | {gf / ours_s:.0f} | {gf / torch_s:.0f} | "
+              f"{one_s:.4f} | {one_s / ours_s:.2f}× | {row['rss']:.0f} / {row['torch_rss']:.0f} |")
+
+
+if __name__ == "__main__":
+    main()
