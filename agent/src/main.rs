@@ -112,7 +112,14 @@ fn main() -> ExitCode {
     }
 }
 
+/// Runs the command on a rayon pool with one worker per core (rayon's default), so the
+/// numeric kernels' parallel phases start on a worker instead of handing every phase over
+/// from the main thread and waking a worker for it.
 fn run() -> anyhow::Result<()> {
+    rayon::ThreadPoolBuilder::new().build()?.install(run_command)
+}
+
+fn run_command() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)

@@ -62,8 +62,11 @@ fn peak_rss_mib() -> f64 {
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(args.threads.unwrap_or(0)).build()?;
-    pool.install(|| run_in_pool(args))
+    match args.threads {
+        // A pool of its own for another thread count (the command's worker waits meanwhile).
+        Some(threads) => rayon::ThreadPoolBuilder::new().num_threads(threads).build()?.install(|| run_in_pool(args)),
+        None => run_in_pool(args),
+    }
 }
 
 /// Median timings of one batch size (seconds), printed as a table row or a JSON line.

@@ -214,8 +214,7 @@ pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
         config.guidance = args.guidance;
         config.dno.steps = args.steps;
         let start = Instant::now();
-        let pool = rayon::ThreadPoolBuilder::new().build()?;
-        let generated = pool.install(|| generate(&prior, &program, &compiled, &config, &device, |_| {}))?;
+        let generated = generate(&prior, &program, &compiled, &config, &device, |_| {})?;
         let total = start.elapsed().as_secs_f64();
         let first: f64 = generated.loss_history.iter().filter_map(|h| h.first()).sum::<f64>() / batch as f64;
         let last: f64 = generated.loss_history.iter().filter_map(|h| h.last()).sum::<f64>() / batch as f64;

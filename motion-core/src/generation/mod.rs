@@ -367,7 +367,7 @@ pub(crate) fn finish(
     let raw_joints = prior.to_joints(&features)?;
     ensure_finite(&raw_joints, &format!("{}'s joint positions", config.method))?;
     let refine_config = RefineConfig { enabled: config.refines(), ..config.refine.clone() };
-    let (refined, refine) = refine(&raw_joints, compiled, Some(&initial_joints), &refine_config)?;
+    let (refined, refine) = refine_in_parallel(&raw_joints, compiled, &initial_joints, &refine_config)?;
     ensure_finite(&refined, "the refinement's joint positions")?;
     let mut lock = config.foot_lock.clone();
     lock.plant_on_floor &= !has_raised_support(program);
@@ -386,17 +386,45 @@ pub(crate) fn finish(
     })
 }
 
-/// [`foot_lock`] on every sample of `joints` `[B, T, 22, 3]`: the cleaned joints (same shape,
-/// dtype and device) and each sample's report.
-pub fn clean_up(joints: &Tensor, config: &FootLockConfig) -> Result<(Tensor, Vec<FootLockReport>), GenerationError> {
-    let motions = tensor_to_poses(joints)?;
-    let mut cleaned = Vec::with_capacity(motions.len());
-    let mut reports = Vec::with_capacity(motions.len());
-    for (sample, poses) in motions.iter().enumerate() {
-        let locked = foot_lock(poses, None, config).map_err(|source| GenerationError::FootLock { sample, source })?;
-        cleaned.push(locked.poses);
-        reports.push(locked.report);
+/// [`refine`] with the batch cut into one contiguous group per rayon worker, the groups
+/// refined in parallel. Every sample's refinement is its own (its loss, its Adam moments,
+/// its keep-or-drop verdict); the rest skeleton each group measures is the prior's, the
+/// same for every sample.
+fn refine_in_parallel(
+    joints: &Tensor,
+    compiled: &CompiledProgram,
+    initial: &Tensor,
+    config: &RefineConfig,
+) -> Result<(Tensor, Vec<RefineReport>), GenerationError> {
+    use rayon::prelude::*;
+    let batch = joints.dim(0)?;
+    let groups = rayon::current_num_threads().clamp(1, batch.max(1));
+    if groups == 1 || initial.dim(0)? != batch {
+        return Ok(refine(joints, compiled, Some(initial), config)?);
     }
+    let parts = (0..groups)
+        .into_par_iter()
+        .map(|g| {
+            let (first, end) = (g * batch / groups, (g + 1) * batch / groups);
+            let (joints, initial) = (joints.narrow(0, first, end - first)?, initial.narrow(0, first, end - first)?);
+            refine(&joints, compiled, Some(&initial), config)
+        })
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let (tensors, reports): (Vec<Tensor>, Vec<Vec<RefineReport>>) = parts.into_iter().unzip();
+    Ok((Tensor::cat(&tensors, 0)?, reports.concat()))
+}
+
+/// [`foot_lock`] on every sample of `joints` `[B, T, 22, 3]` (samples in parallel): the
+/// cleaned joints (same shape, dtype and device) and each sample's report.
+pub fn clean_up(joints: &Tensor, config: &FootLockConfig) -> Result<(Tensor, Vec<FootLockReport>), GenerationError> {
+    use rayon::prelude::*;
+    let motions = tensor_to_poses(joints)?;
+    let locked = motions
+        .par_iter()
+        .enumerate()
+        .map(|(sample, poses)| foot_lock(poses, None, config).map_err(|source| GenerationError::FootLock { sample, source }))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (cleaned, reports): (Vec<_>, Vec<_>) = locked.into_iter().map(|l| (l.poses, l.report)).unzip();
     if !config.enabled {
         return Ok((joints.clone(), reports));
     }

@@ -24,11 +24,13 @@ use crate::nn::kernels::{
     self, contiguous_slice, dispatch_real, par_each, row_chunks, rows_of, split_rows, MatView, Real, Rows,
 };
 
-/// How one call shares its work among `threads` rayon workers.
+/// How one call shares its work among the rayon workers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Plan {
-    /// Each batch element through the whole stack as one task, each task single-threaded.
-    Elements,
+    /// Groups of whole batch elements through the whole stack, one single-threaded task per
+    /// group: `threads` equal groups when the batch divides evenly (larger products, the
+    /// weights packed once per group), else one element per group.
+    Elements { threads: usize },
     /// One group of all elements, every layer split into phases over rows for `threads`.
     Rows { threads: usize },
 }
@@ -37,7 +39,7 @@ impl Plan {
     fn new(batch: usize) -> Self {
         let threads = rayon::current_num_threads().max(1);
         if threads > 1 && (batch % threads == 0 || batch >= 2 * threads) {
-            Plan::Elements
+            Plan::Elements { threads }
         } else {
             Plan::Rows { threads }
         }
@@ -46,7 +48,11 @@ impl Plan {
     /// `(first element, elements)` of each group.
     fn groups(self, batch: usize) -> Vec<(usize, usize)> {
         match self {
-            Plan::Elements => (0..batch).map(|b| (b, 1)).collect(),
+            Plan::Elements { threads } if batch % threads == 0 => {
+                let size = batch / threads;
+                (0..threads).map(|g| (g * size, size)).collect()
+            }
+            Plan::Elements { .. } => (0..batch).map(|b| (b, 1)).collect(),
             Plan::Rows { .. } => vec![(0, batch)],
         }
     }
@@ -54,7 +60,7 @@ impl Plan {
     /// Threads inside one group.
     fn threads(self) -> usize {
         match self {
-            Plan::Elements => 1,
+            Plan::Elements { .. } => 1,
             Plan::Rows { threads } => threads,
         }
     }
@@ -333,7 +339,7 @@ impl FusedEncoderStack {
                 Ok((h, Group { first, count, layers }))
             };
             let outputs: Vec<(Vec<T>, Group)> = match plan {
-                Plan::Elements => {
+                Plan::Elements { .. } => {
                     use rayon::prelude::*;
                     plan.groups(b).into_par_iter().map(forward).collect::<Result<_>>()?
                 }
