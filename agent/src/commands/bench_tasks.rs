@@ -200,12 +200,12 @@ pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
     let program = load_program(&args.task)?;
     let compiled = CompiledProgram::compile(&program, &device)?;
     println!(
-        "DNO {} steps on {} ({} frames), guidance {}; RAYON_NUM_THREADS={}",
+        "DNO {} steps on {} ({} frames), guidance {}; {} threads; the time includes the refinement and the foot clean-up",
         args.steps,
         args.task.display(),
         program.frames,
         args.guidance,
-        std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into())
+        rayon::current_num_threads()
     );
     println!("| batch | total (s) | per step (s) | constraint error before → after |\n|---|---|---|---|");
     for &batch in &args.batches {

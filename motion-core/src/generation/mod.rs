@@ -422,7 +422,9 @@ pub fn clean_up(joints: &Tensor, config: &FootLockConfig) -> Result<(Tensor, Vec
     let locked = motions
         .par_iter()
         .enumerate()
-        .map(|(sample, poses)| foot_lock(poses, None, config).map_err(|source| GenerationError::FootLock { sample, source }))
+        .map(|(sample, poses)| {
+            foot_lock(poses, None, config).map_err(|source| GenerationError::FootLock { sample, source })
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let (cleaned, reports): (Vec<_>, Vec<_>) = locked.into_iter().map(|l| (l.poses, l.report)).unzip();
     if !config.enabled {

@@ -394,7 +394,14 @@ impl FusedEncoderStack {
     /// One layer's forward over `b` elements in three phases (in parallel when `threads > 1`): the q/k/v projection over row chunks; attention
     /// over blocks of query rows (each against all keys of its element); then the output
     /// projection, both LayerNorms and the feed-forward block over row chunks.
-    fn layer_fwd<T: Real>(&self, p: &Params<T>, dims: Dims, x: &[T], b: usize, threads: usize) -> Result<(Vec<T>, Cache)> {
+    fn layer_fwd<T: Real>(
+        &self,
+        p: &Params<T>,
+        dims: Dims,
+        x: &[T],
+        b: usize,
+        threads: usize,
+    ) -> Result<(Vec<T>, Cache)> {
         let (s, d) = (dims.tokens, dims.d);
         let (m, h, ff) = (b * s, dims.heads, p.ff());
         let scale = T::from_f64(1.0 / (dims.head_dim() as f64).sqrt());
@@ -414,14 +421,26 @@ impl FusedEncoderStack {
         run(threads, tasks, |((blk, probs), ctx)| {
             let n = blk.rows.len;
             for hh in 0..h {
-                let q = MatView { offset: blk.rows.first * 3 * d + hh * dims.head_dim(), rows: n, ..dims.qkv_head(0, 0, hh) };
+                let q = MatView {
+                    offset: blk.rows.first * 3 * d + hh * dims.head_dim(),
+                    rows: n,
+                    ..dims.qkv_head(0, 0, hh)
+                };
                 let k_t = dims.qkv_head(blk.batch, 1, hh).t();
                 kernels::gemm_into(probs, dims.block_prob_head(n, hh), qkv_ref, q, qkv_ref, k_t, false)?;
             }
             kernels::softmax_fwd(probs, s, scale);
             for hh in 0..h {
                 let v = dims.qkv_head(blk.batch, 2, hh);
-                kernels::gemm_into(ctx, dims.block_head(n, d, 0, hh), probs, dims.block_prob_head(n, hh), qkv_ref, v, false)?;
+                kernels::gemm_into(
+                    ctx,
+                    dims.block_head(n, d, 0, hh),
+                    probs,
+                    dims.block_prob_head(n, hh),
+                    qkv_ref,
+                    v,
+                    false,
+                )?;
             }
             Ok(())
         })?;
@@ -441,7 +460,8 @@ impl FusedEncoderStack {
         run(threads, tasks, |((((r, y), (xhat1, rstd1)), pre), (xhat2, rstd2))| {
             let n = r.len;
             // r1 = x + ctx·W_outᵀ + b_out, h1 = LN1(r1).
-            let mut r1: Vec<T> = rows_of(x, d, r).iter().zip(p.out_b.iter().cycle()).map(|(&xv, &bv)| xv + bv).collect();
+            let mut r1: Vec<T> =
+                rows_of(x, d, r).iter().zip(p.out_b.iter().cycle()).map(|(&xv, &bv)| xv + bv).collect();
             linear_rows(&mut r1, rows_of(ctx, d, r), n, d, p.out_w, None)?;
             let mut h1 = vec![zero; n * d];
             kernels::layer_norm_fwd(&r1, p.n1_w, p.n1_b, self.eps, &mut h1, Some((xhat1, rstd1)));
@@ -475,7 +495,15 @@ impl FusedEncoderStack {
     /// `dO = dr1·W_out` over row chunks; per block of query rows `dS = softmax'(dO·Vᵀ)` and
     /// `dQ = dS·K`; per block of key rows `dK = dSᵀ·Q` and `dV = Pᵀ·dO` (sums over every
     /// query row of the element); then `dx = dqkv·W_in + dr1` over row chunks.
-    fn layer_bwd<T: Real>(&self, p: &Params<T>, dims: Dims, c: &Cache, g: &[T], b: usize, threads: usize) -> Result<Vec<T>> {
+    fn layer_bwd<T: Real>(
+        &self,
+        p: &Params<T>,
+        dims: Dims,
+        c: &Cache,
+        g: &[T],
+        b: usize,
+        threads: usize,
+    ) -> Result<Vec<T>> {
         let (s, d) = (dims.tokens, dims.d);
         let (m, h, ff) = (b * s, dims.heads, p.ff());
         let scale = T::from_f64(1.0 / (dims.head_dim() as f64).sqrt());
@@ -519,12 +547,28 @@ impl FusedEncoderStack {
             let d_out = rows_of(dctx, d, blk.rows);
             for hh in 0..h {
                 let v_t = dims.qkv_head(blk.batch, 2, hh).t();
-                kernels::gemm_into(ds, dims.block_prob_head(n, hh), d_out, dims.block_head(n, d, 0, hh), qkv, v_t, false)?;
+                kernels::gemm_into(
+                    ds,
+                    dims.block_prob_head(n, hh),
+                    d_out,
+                    dims.block_head(n, d, 0, hh),
+                    qkv,
+                    v_t,
+                    false,
+                )?;
             }
             kernels::softmax_bwd(rows_of(probs, h * s, blk.rows), ds, s, scale);
             for hh in 0..h {
                 let k = dims.qkv_head(blk.batch, 1, hh);
-                kernels::gemm_into(dqkv, dims.block_head(n, 3 * d, 0, hh), ds, dims.block_prob_head(n, hh), qkv, k, false)?;
+                kernels::gemm_into(
+                    dqkv,
+                    dims.block_head(n, 3 * d, 0, hh),
+                    ds,
+                    dims.block_prob_head(n, hh),
+                    qkv,
+                    k,
+                    false,
+                )?;
             }
             Ok(())
         })?;

@@ -229,7 +229,8 @@ fn fused_stack_is_the_same_on_any_thread_count(dev: &Device) -> Result<()> {
             assert!(max_diff(&y, &one.0) < 1e-12 && max_diff(&g, &one.1) < 1e-12, "batch {batch}, {threads} threads");
         }
         // And the same as the primitive path.
-        let primitive = model.layers.iter().try_fold(h.clone(), |h, l| l.forward(&h, &mut Dropout { p: 0.0, rng: None }))?;
+        let primitive =
+            model.layers.iter().try_fold(h.clone(), |h, l| l.forward(&h, &mut Dropout { p: 0.0, rng: None }))?;
         let diff = max_diff(&primitive.flatten_all()?.to_vec1::<f64>()?, &one.0);
         assert!(diff < 1e-12, "batch {batch}: {diff}");
     }

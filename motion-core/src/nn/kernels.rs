@@ -242,7 +242,6 @@ impl MatView {
             + (self.cols - 1) * self.strides[2]
             + 1
     }
-
 }
 
 /// `C = A·B`, or `C += A·B` when `accumulate`, for single matrices (`batch` 1) held in
@@ -337,11 +336,7 @@ pub(crate) fn row_chunks(m: usize, parts: usize) -> Vec<Rows> {
 }
 
 /// Cuts a row-major buffer of `width` columns into consecutive row ranges from its start.
-pub(crate) fn split_rows<'a, T>(
-    mut buf: &'a mut [T],
-    width: usize,
-    ranges: impl IntoIterator<Item = Rows>,
-) -> Vec<&'a mut [T]> {
+pub(crate) fn split_rows<T>(mut buf: &mut [T], width: usize, ranges: impl IntoIterator<Item = Rows>) -> Vec<&mut [T]> {
     ranges
         .into_iter()
         .map(|r| {
@@ -402,7 +397,10 @@ pub(crate) fn linear_bwd<T: Real>(g: &[T], w: &[T], n: usize, k: usize) -> Resul
     }
     let m = g.len() / n.max(1);
     let mut dx = vec![T::from_f64(0.0); m * k];
-    let tasks: Vec<_> = row_chunks(m, rayon::current_num_threads()).into_iter().zip(split_rows(&mut dx, k, row_chunks(m, rayon::current_num_threads()))).collect();
+    let tasks: Vec<_> = row_chunks(m, rayon::current_num_threads())
+        .into_iter()
+        .zip(split_rows(&mut dx, k, row_chunks(m, rayon::current_num_threads())))
+        .collect();
     par_each(tasks, |(r, out)| {
         let gv = MatView::contiguous(r.first * n, 1, r.len, n);
         gemm_into(out, MatView::contiguous(0, 1, r.len, k), g, gv, w, MatView::contiguous(0, 1, n, k), false)
