@@ -95,7 +95,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     // Each shard runs on a core of rayon's pool. Candle's own element-wise worker pool
     // (CANDLE_NUM_THREADS − 1 spinning threads, created on first use) would compete with the
     // shards for the same cores: 0.64 s per step against 0.28 s without it (2 cores, d = 128).
-    // Nothing has touched a tensor or spawned a thread yet, so the variable is read in time.
+    // Nothing has touched a tensor yet (only the command's idle rayon workers exist), so the
+    // variable is read in time and by no other thread meanwhile.
     if args.shards > 1 && std::env::var_os("CANDLE_NUM_THREADS").is_none() {
         std::env::set_var("CANDLE_NUM_THREADS", "1");
     }
