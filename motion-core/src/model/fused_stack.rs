@@ -111,10 +111,172 @@ impl LayerWeights {
     }
 }
 
+/// The denoiser's ends around the stack: MDM's `input_process` (features → width), the
+/// condition token prepended to the frames, the positional encoding added to every token and
+/// `output_process` (width → features) over the frame tokens. With them one op covers a whole
+/// denoiser pass, `x [batch, frames, F] → [batch, frames, F]`; the condition and the encoding
+/// are constants of the pass (no gradient flows to them).
+#[derive(Debug, Clone)]
+pub(crate) struct Ends {
+    /// `[d, F]` and `[d]`.
+    pub input_weight: Tensor,
+    pub input_bias: Tensor,
+    /// `[F, d]` and `[F]`.
+    pub output_weight: Tensor,
+    pub output_bias: Tensor,
+    /// `[batch, d]`: the timestep and text embedding of each element.
+    pub cond: Tensor,
+    /// `[frames + 1, d]`.
+    pub pe: Tensor,
+}
+
+impl Ends {
+    fn each(&self) -> [&Tensor; 6] {
+        [&self.input_weight, &self.input_bias, &self.output_weight, &self.output_bias, &self.cond, &self.pe]
+    }
+}
+
+/// [`Ends`] as CPU slices.
+struct EndSlices<'a, T> {
+    w_in: &'a [T],
+    b_in: &'a [T],
+    w_out: &'a [T],
+    b_out: &'a [T],
+    cond: &'a [T],
+    pe: &'a [T],
+    /// Features per frame `F`.
+    feats: usize,
+}
+
+impl<'a, T: Real> EndSlices<'a, T> {
+    fn new(g: &'a [(StorageRef<'_>, &'a Layout); 6], d: usize) -> Result<Self> {
+        let slice = |i: usize| -> Result<&'a [T]> {
+            match &*g[i].0 {
+                Storage::Cpu(storage) => contiguous_slice::<T>(storage, g[i].1),
+                _ => bail!("fused denoiser: weights are not on the CPU"),
+            }
+        };
+        let feats = slice(3)?.len();
+        let ends = Self {
+            w_in: slice(0)?,
+            b_in: slice(1)?,
+            w_out: slice(2)?,
+            b_out: slice(3)?,
+            cond: slice(4)?,
+            pe: slice(5)?,
+            feats,
+        };
+        if ends.w_in.len() != d * feats
+            || ends.b_in.len() != d
+            || ends.w_out.len() != feats * d
+            || ends.cond.len() % d.max(1) != 0
+        {
+            bail!("fused denoiser: input/output projections do not match width {d} and {feats} features");
+        }
+        Ok(ends)
+    }
+
+    /// Tokens `[count·(frames + 1), d]` of elements `first..first + count` of `x`
+    /// `[batch, frames, F]`: the condition token, then `x·W_inᵀ + b_in`, each plus its
+    /// positional encoding.
+    fn tokens(&self, x: &[T], first: usize, count: usize, frames: usize, d: usize, threads: usize) -> Result<Vec<T>> {
+        let (f, s) = (self.feats, frames + 1);
+        if self.pe.len() < s * d || self.cond.len() < (first + count) * d {
+            bail!("fused denoiser: positional encoding or condition too short for {frames} frames");
+        }
+        let mut h = vec![T::from_f64(0.0); count * s * d];
+        let mut tasks = Vec::new();
+        for (i, element) in h.chunks_mut(s * d).enumerate() {
+            let (token, rest) = element.split_at_mut(d);
+            let cond = &self.cond[(first + i) * d..][..d];
+            for ((t, &c), &p) in token.iter_mut().zip(cond).zip(&self.pe[..d]) {
+                *t = c + p;
+            }
+            let chunks = row_chunks(frames, threads);
+            tasks.extend(
+                chunks
+                    .iter()
+                    .copied()
+                    .zip(split_rows(rest, d, chunks.iter().copied()))
+                    .map(move |(r, out)| (i, r, out)),
+            );
+        }
+        run(threads, tasks, |(i, r, out)| {
+            for (t, row) in out.chunks_exact_mut(d).enumerate() {
+                let pe = &self.pe[(1 + r.first + t) * d..][..d];
+                for ((o, &b), &p) in row.iter_mut().zip(self.b_in).zip(pe) {
+                    *o = b + p;
+                }
+            }
+            let rows = &x[((first + i) * frames + r.first) * f..][..r.len * f];
+            linear_rows(out, rows, r.len, f, self.w_in, None)
+        })?;
+        Ok(h)
+    }
+
+    /// `[count·frames, F]`: `h·W_outᵀ + b_out` over the frame tokens of `h` `[count·(frames + 1), d]`.
+    fn project_out(&self, h: &[T], count: usize, frames: usize, d: usize, threads: usize) -> Result<Vec<T>> {
+        let (f, s) = (self.feats, frames + 1);
+        let mut out = vec![T::from_f64(0.0); count * frames * f];
+        let chunks = row_chunks(frames, threads);
+        let tasks: Vec<_> = out
+            .chunks_mut(frames * f)
+            .enumerate()
+            .flat_map(|(i, element)| {
+                chunks.iter().copied().zip(split_rows(element, f, chunks.iter().copied())).map(move |(r, o)| (i, r, o))
+            })
+            .collect();
+        run(threads, tasks, |(i, r, o)| {
+            let rows = &h[(i * s + 1 + r.first) * d..][..r.len * d];
+            linear_rows(o, rows, r.len, d, self.w_out, Some(self.b_out))
+        })
+        .map(|()| out)
+    }
+
+    /// The gradient of [`Self::project_out`]: `[count·(frames + 1), d]` with zero rows for the
+    /// condition tokens.
+    fn project_out_bwd(&self, g: &[T], count: usize, frames: usize, d: usize, threads: usize) -> Result<Vec<T>> {
+        let (f, s) = (self.feats, frames + 1);
+        let mut dh = vec![T::from_f64(0.0); count * s * d];
+        let chunks = row_chunks(frames, threads);
+        let tasks: Vec<_> = dh
+            .chunks_mut(s * d)
+            .enumerate()
+            .flat_map(|(i, element)| {
+                let rest = &mut element[d..];
+                chunks.iter().copied().zip(split_rows(rest, d, chunks.iter().copied())).map(move |(r, o)| (i, r, o))
+            })
+            .collect();
+        run(threads, tasks, |(i, r, o)| {
+            linear_rows_bwd(o, &g[(i * frames + r.first) * f..][..r.len * f], r.len, self.w_out, d, false)
+        })
+        .map(|()| dh)
+    }
+
+    /// The gradient of [`Self::tokens`] with respect to `x`: `[count·frames, F]`.
+    fn tokens_bwd(&self, dh: &[T], count: usize, frames: usize, d: usize, threads: usize) -> Result<Vec<T>> {
+        let (f, s) = (self.feats, frames + 1);
+        let mut dx = vec![T::from_f64(0.0); count * frames * f];
+        let chunks = row_chunks(frames, threads);
+        let tasks: Vec<_> = dx
+            .chunks_mut(frames * f)
+            .enumerate()
+            .flat_map(|(i, element)| {
+                chunks.iter().copied().zip(split_rows(element, f, chunks.iter().copied())).map(move |(r, o)| (i, r, o))
+            })
+            .collect();
+        run(threads, tasks, |(i, r, o)| {
+            linear_rows_bwd(o, &dh[(i * s + 1 + r.first) * d..][..r.len * d], r.len, self.w_in, f, false)
+        })
+        .map(|()| dx)
+    }
+}
+
 /// `h [batch, tokens, d] → h` through every layer, each `h ← LN2(h1 + FF(h1))` with
 /// `h1 = LN1(h + MHA(h))`.
 pub(crate) struct FusedEncoderStack {
     layers: Vec<LayerWeights>,
+    ends: Option<Ends>,
     num_heads: usize,
     eps: f64,
     cache: Mutex<Option<Vec<Group>>>,
@@ -295,8 +457,8 @@ impl Dims {
 }
 
 impl FusedEncoderStack {
-    pub(crate) fn new(layers: Vec<LayerWeights>, num_heads: usize, eps: f64) -> Self {
-        Self { layers, num_heads, eps, cache: Mutex::new(None) }
+    pub(crate) fn new(layers: Vec<LayerWeights>, ends: Option<Ends>, num_heads: usize, eps: f64) -> Self {
+        Self { layers, ends, num_heads, eps, cache: Mutex::new(None) }
     }
 
     fn lock(&self) -> Result<std::sync::MutexGuard<'_, Option<Vec<Group>>>> {
@@ -311,32 +473,62 @@ impl FusedEncoderStack {
         Ok(Dims { tokens, d, heads })
     }
 
-    /// Every layer's weights as CPU slices (the guards keep the storages readable).
-    fn with_params<T: Real, R>(&self, d: usize, f: impl FnOnce(&[Params<T>]) -> Result<R>) -> Result<R> {
+    /// Every layer's weights and the ends as CPU slices (the guards keep the storages readable).
+    fn with_params<T: Real, R>(
+        &self,
+        d: usize,
+        f: impl FnOnce(&[Params<T>], Option<&EndSlices<T>>) -> Result<R>,
+    ) -> Result<R> {
         let guards: Vec<_> = self.layers.iter().map(|w| w.each().map(|t| t.storage_and_layout())).collect();
         let params = guards.iter().map(|g| Params::<T>::new(g, d)).collect::<Result<Vec<_>>>()?;
-        f(&params)
+        let end_guards = self.ends.as_ref().map(|e| e.each().map(|t| t.storage_and_layout()));
+        let ends = end_guards.as_ref().map(|g| EndSlices::<T>::new(g, d)).transpose()?;
+        f(&params, ends.as_ref())
+    }
+
+    /// Width `d` of the stack (from the first layer's LayerNorm).
+    fn width(&self) -> Result<usize> {
+        match self.layers.first() {
+            Some(w) => Ok(w.norm1_bias.dims1()?),
+            None => bail!("fused encoder stack without layers"),
+        }
     }
 
     fn fwd<T: Real>(&self, x_storage: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (b, s, d) = match l.dims() {
-            [b, s, d] => (*b, *s, *d),
-            dims => bail!("fused encoder stack expects [batch, tokens, d], got {dims:?}"),
+        let (b, rows, cols) = match l.dims() {
+            [b, rows, cols] => (*b, *rows, *cols),
+            dims => bail!("fused encoder stack expects [batch, tokens, width], got {dims:?}"),
         };
         let x = contiguous_slice::<T>(x_storage, l)?;
+        let d = self.width()?;
+        // With the ends the input is [batch, frames, F] and the stack sees frames + 1 tokens.
+        let s = if self.ends.is_some() { rows + 1 } else { rows };
         let dims = self.dims(d, s)?;
         let plan = Plan::new(b);
-        let width = s * d;
-        let (y, groups) = self.with_params::<T, _>(d, |params| {
+        let in_width = rows * cols;
+        let (y, groups) = self.with_params::<T, _>(d, |params, ends| {
+            if ends.is_none() && cols != d {
+                bail!("fused encoder stack: input width {cols}, layers {d}");
+            }
+            if ends.is_some_and(|e| e.feats != cols) {
+                bail!("fused denoiser: input has {cols} features per frame");
+            }
             let forward = |(first, count): (usize, usize)| -> Result<(Vec<T>, Group)> {
-                let mut h = x[first * width..(first + count) * width].to_vec();
+                let mut h = match ends {
+                    Some(e) => e.tokens(x, first, count, rows, d, plan.threads())?,
+                    None => x[first * in_width..(first + count) * in_width].to_vec(),
+                };
                 let mut layers = Vec::with_capacity(params.len());
                 for p in params {
                     let (next, cache) = self.layer_fwd(p, dims, &h, count, plan.threads())?;
                     h = next;
                     layers.push(cache);
                 }
-                Ok((h, Group { first, count, layers }))
+                let out = match ends {
+                    Some(e) => e.project_out(&h, count, rows, d, plan.threads())?,
+                    None => h,
+                };
+                Ok((out, Group { first, count, layers }))
             };
             let outputs: Vec<(Vec<T>, Group)> = match plan {
                 Plan::Elements { .. } => {
@@ -345,7 +537,7 @@ impl FusedEncoderStack {
                 }
                 Plan::Rows { .. } => plan.groups(b).into_iter().map(forward).collect::<Result<_>>()?,
             };
-            let mut y = Vec::with_capacity(b * width);
+            let mut y = Vec::with_capacity(b * in_width);
             let mut groups = Vec::with_capacity(outputs.len());
             for (h, group) in outputs {
                 y.extend_from_slice(&h);
@@ -358,23 +550,32 @@ impl FusedEncoderStack {
     }
 
     fn bwd_impl<T: Real>(&self, arg: &Tensor, grad: &Tensor) -> Result<Tensor> {
-        let (b, s, d) = arg.dims3()?;
+        let (b, rows, cols) = arg.dims3()?;
+        let d = self.width()?;
+        let s = if self.ends.is_some() { rows + 1 } else { rows };
         let dims = self.dims(d, s)?;
         let cache = self.lock()?;
         let Some(groups) = cache.as_ref() else {
             bail!("fused encoder stack: backward without a forward cache");
         };
         let threads = if groups.len() > 1 { 1 } else { rayon::current_num_threads().max(1) };
-        let width = s * d;
+        let in_width = rows * cols;
         let grad = grad.contiguous()?;
         let dx = kernels::with_slice::<T, _>(&grad, |g| {
-            self.with_params::<T, _>(d, |params| {
+            self.with_params::<T, _>(d, |params, ends| {
                 let backward = |group: &Group| -> Result<Vec<T>> {
-                    let mut dh = g[group.first * width..(group.first + group.count) * width].to_vec();
+                    let g = &g[group.first * in_width..(group.first + group.count) * in_width];
+                    let mut dh = match ends {
+                        Some(e) => e.project_out_bwd(g, group.count, rows, d, threads)?,
+                        None => g.to_vec(),
+                    };
                     for (p, c) in params.iter().zip(&group.layers).rev() {
                         dh = self.layer_bwd(p, dims, c, &dh, group.count, threads)?;
                     }
-                    Ok(dh)
+                    match ends {
+                        Some(e) => e.tokens_bwd(&dh, group.count, rows, d, threads),
+                        None => Ok(dh),
+                    }
                 };
                 let parts: Vec<Vec<T>> = if groups.len() > 1 {
                     use rayon::prelude::*;
@@ -385,8 +586,8 @@ impl FusedEncoderStack {
                 Ok(parts.concat())
             })
         })?;
-        if dx.len() != b * width {
-            bail!("fused encoder stack: gradient of {} elements for [{b}, {s}, {d}]", dx.len());
+        if dx.len() != b * in_width {
+            bail!("fused encoder stack: gradient of {} elements for [{b}, {rows}, {cols}]", dx.len());
         }
         Tensor::from_vec(dx, arg.shape(), arg.device())
     }

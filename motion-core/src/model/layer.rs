@@ -5,6 +5,7 @@ use candle_core::{Result, Shape, Tensor};
 use candle_nn::{Init, VarBuilder};
 use rand::RngCore;
 
+pub(crate) use super::fused_stack::Ends;
 use super::fused_stack::{FusedEncoderStack, LayerWeights};
 use super::MdmConfig;
 use crate::nn::{self, LayerNorm, Linear, LAYER_NORM_EPS};
@@ -143,14 +144,19 @@ impl EncoderLayer {
     }
 }
 
-/// Frozen-weight path of a stack of layers, `[batch, tokens, d] → [batch, tokens, d]`: one
-/// fused custom op on the CPU (input gradient only, [`FusedEncoderStack`]), the primitive
-/// path without dropout elsewhere. Errors on an empty stack.
-pub(crate) fn frozen_stack(layers: &[EncoderLayer], h: &Tensor) -> Result<Tensor> {
+/// Frozen-weight path of a stack of layers, `[batch, tokens, d] → [batch, tokens, d]`, or with
+/// `ends` a whole denoiser pass `[batch, frames, F] → [batch, frames, F]` (see [`Ends`]): one
+/// fused custom op on the CPU (input gradient only, [`FusedEncoderStack`]). Elsewhere the
+/// layers' primitive path without dropout (callers handle the ends there). Errors on an empty
+/// stack.
+pub(crate) fn frozen_stack(layers: &[EncoderLayer], h: &Tensor, ends: Option<Ends>) -> Result<Tensor> {
     let Some(first) = layers.first() else {
         candle_core::bail!("an encoder stack needs at least one layer");
     };
     if !nn::ops::has_cpu_kernel(h) {
+        if ends.is_some() {
+            candle_core::bail!("the fused denoiser runs on the CPU only");
+        }
         let mut h = h.clone();
         for layer in layers {
             h = layer.forward(&h, &mut Dropout { p: 0.0, rng: None })?;
@@ -158,5 +164,5 @@ pub(crate) fn frozen_stack(layers: &[EncoderLayer], h: &Tensor) -> Result<Tensor
         return Ok(h);
     }
     let weights = layers.iter().map(EncoderLayer::frozen_weights).collect::<Result<Vec<_>>>()?;
-    h.contiguous()?.apply_op1(FusedEncoderStack::new(weights, first.num_heads, first.norm1.eps()))
+    h.contiguous()?.apply_op1(FusedEncoderStack::new(weights, ends, first.num_heads, first.norm1.eps()))
 }

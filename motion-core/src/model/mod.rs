@@ -166,18 +166,32 @@ impl Mdm {
     }
 
     /// The frozen-weight path behind [`Denoiser::predict_x0`].
+    /// The frozen path: on the CPU one fused op from the features to the output projection
+    /// (the condition token computed here is a constant of the pass, so gradients flow to
+    /// `x_t` only); elsewhere the primitive path.
     fn forward_frozen(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<Tensor> {
         let frames = self.check_inputs(x_t, timesteps, text)?;
+        if !crate::nn::ops::has_cpu_kernel(x_t) {
+            return self.forward_eval(x_t, timesteps, text);
+        }
         let (te0, te2) = &self.time_embed;
         let t_emb = te2.forward_frozen(&te0.forward_frozen(&self.pe.index_select(timesteps, 0)?)?.silu()?)?;
-        let cond = (t_emb + self.embed_text.forward_frozen(text)?)?;
-        let h = self.tokens(&cond, &self.input_process.forward_frozen(x_t)?, frames)?;
-        let h = layer::frozen_stack(&self.layers, &h)?;
-        self.to_x0(self.output_process.forward_frozen(&h.narrow(1, 1, frames)?)?, x_t, timesteps)
+        let cond = (t_emb + self.embed_text.forward_frozen(text)?)?.detach();
+        let bias = |l: &Linear| -> Result<Tensor> {
+            l.bias().map(Tensor::detach).ok_or_else(|| candle_core::Error::Msg("denoiser linear without bias".into()))
+        };
+        let ends = layer::Ends {
+            input_weight: self.input_process.weight().detach(),
+            input_bias: bias(&self.input_process)?,
+            output_weight: self.output_process.weight().detach(),
+            output_bias: bias(&self.output_process)?,
+            cond: cond.contiguous()?,
+            pe: self.pe.narrow(0, 0, frames + 1)?.contiguous()?.detach(),
+        };
+        let out = layer::frozen_stack(&self.layers, x_t, Some(ends))?;
+        self.to_x0(out, x_t, timesteps)
     }
 
-    /// x̂0 from the output head's `out` `[batch, frames, 263]` (see [`Prediction`]); gradients
-    /// flow to both `out` and `x_t`.
     fn to_x0(&self, out: Tensor, x_t: &Tensor, timesteps: &Tensor) -> Result<Tensor> {
         let Some(schedule) = &self.velocity_schedule else { return Ok(out) };
         let signal = schedule.per_sample(timesteps, x_t, f64::sqrt)?;
