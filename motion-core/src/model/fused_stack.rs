@@ -1,19 +1,22 @@
-//! The frozen post-LN encoder stack as a single custom op with a hand-written backward.
+//! The frozen post-LN encoder stack, and with its [`Ends`] a whole denoiser pass, as a single
+//! custom op with a hand-written backward.
 //!
 //! In the DNO loop every layer of every unrolled denoiser pass would be a graph node, and
 //! candle's backward allocates a zero tensor plus a sum for each gradient edge. Fusing the
-//! stack (per layer: attention, both residual LayerNorms and the GELU feed-forward block)
-//! leaves one node per denoiser pass, keeps exactly the activations the input gradient needs
-//! (q/k/v, attention probabilities, normalised residuals, pre-activation) and never forms
-//! weight gradients. The per-layer maths are the kernels of [`crate::nn`], shared with the
-//! single-op versions.
+//! pass (the input projection, the condition token and positional encoding, per layer
+//! attention, both residual LayerNorms and the GELU feed-forward block, then the output
+//! projection) leaves one node per pass, keeps exactly the activations the input gradient
+//! needs (q/k/v, attention probabilities, normalised residuals, pre-activation) and never
+//! forms weight gradients. The per-layer maths are the kernels of [`crate::nn`], shared with
+//! the single-op versions.
 //!
 //! **Threads.** The work runs on the current rayon pool in one of two ways, picked per call
-//! by [`Plan`]: with at least as many batch elements as threads, every element goes through
-//! the whole stack as one task (no synchronisation between layers: a worker that waits for
-//! its partner at every phase sleeps, and waking it costs more than a small phase); with
-//! fewer, every layer runs in phases over row chunks and attention blocks of the batch. The
-//! arithmetic of a row does not depend on the split, so the result is the same either way.
+//! by [`Plan`]: with at least as many batch elements as threads, groups of elements go
+//! through the whole pass as one task each (no synchronisation between layers: a worker that
+//! waits for its partner at every phase sleeps, and waking it costs more than a small phase);
+//! with fewer, every layer runs in phases over row chunks and attention blocks of the batch.
+//! The arithmetic of a row does not depend on the split beyond rounding (the gemm kernels'
+//! blocking depends on the number of rows), so the result is the same either way.
 
 use std::sync::Mutex;
 
@@ -27,7 +30,7 @@ use crate::nn::kernels::{
 /// How one call shares its work among the rayon workers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Plan {
-    /// Groups of whole batch elements through the whole stack, one single-threaded task per
+    /// Groups of whole batch elements through the whole pass, one single-threaded task per
     /// group: `threads` equal groups when the batch divides evenly (larger products, the
     /// weights packed once per group), else one element per group.
     Elements { threads: usize },
