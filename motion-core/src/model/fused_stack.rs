@@ -151,6 +151,28 @@ struct EndSlices<'a, T> {
     feats: usize,
 }
 
+/// Tasks over the frame rows of `buf`, which holds elements of `element_rows` rows each
+/// (`width` wide) whose `frames` frame rows start at row `skip`: `(element, frame chunk, its
+/// rows)`, the frames of each element cut into `threads` chunks.
+fn frame_tasks<T>(
+    buf: &mut [T],
+    element_rows: usize,
+    skip: usize,
+    width: usize,
+    frames: usize,
+    threads: usize,
+) -> Vec<(usize, Rows, &mut [T])> {
+    let chunks = row_chunks(frames, threads);
+    buf.chunks_mut((element_rows * width).max(1))
+        .enumerate()
+        .flat_map(|(i, element)| {
+            let start = (skip * width).min(element.len());
+            let rest = &mut element[start..];
+            chunks.iter().copied().zip(split_rows(rest, width, chunks.iter().copied())).map(move |(r, o)| (i, r, o))
+        })
+        .collect()
+}
+
 impl<'a, T: Real> EndSlices<'a, T> {
     fn new(g: &'a [(StorageRef<'_>, &'a Layout); 6], d: usize) -> Result<Self> {
         let slice = |i: usize| -> Result<&'a [T]> {
@@ -188,22 +210,13 @@ impl<'a, T: Real> EndSlices<'a, T> {
             bail!("fused denoiser: positional encoding or condition too short for {frames} frames");
         }
         let mut h = vec![T::from_f64(0.0); count * s * d];
-        let mut tasks = Vec::new();
-        for (i, element) in h.chunks_mut(s * d).enumerate() {
-            let (token, rest) = element.split_at_mut(d);
+        for (i, token) in h.chunks_mut(s * d).enumerate() {
             let cond = &self.cond[(first + i) * d..][..d];
-            for ((t, &c), &p) in token.iter_mut().zip(cond).zip(&self.pe[..d]) {
+            for ((t, &c), &p) in token[..d].iter_mut().zip(cond).zip(&self.pe[..d]) {
                 *t = c + p;
             }
-            let chunks = row_chunks(frames, threads);
-            tasks.extend(
-                chunks
-                    .iter()
-                    .copied()
-                    .zip(split_rows(rest, d, chunks.iter().copied()))
-                    .map(move |(r, out)| (i, r, out)),
-            );
         }
+        let tasks = frame_tasks(&mut h, s, 1, d, frames, threads);
         run(threads, tasks, |(i, r, out)| {
             for (t, row) in out.chunks_exact_mut(d).enumerate() {
                 let pe = &self.pe[(1 + r.first + t) * d..][..d];
@@ -221,14 +234,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
     fn project_out(&self, h: &[T], count: usize, frames: usize, d: usize, threads: usize) -> Result<Vec<T>> {
         let (f, s) = (self.feats, frames + 1);
         let mut out = vec![T::from_f64(0.0); count * frames * f];
-        let chunks = row_chunks(frames, threads);
-        let tasks: Vec<_> = out
-            .chunks_mut(frames * f)
-            .enumerate()
-            .flat_map(|(i, element)| {
-                chunks.iter().copied().zip(split_rows(element, f, chunks.iter().copied())).map(move |(r, o)| (i, r, o))
-            })
-            .collect();
+        let tasks = frame_tasks(&mut out, frames, 0, f, frames, threads);
         run(threads, tasks, |(i, r, o)| {
             let rows = &h[(i * s + 1 + r.first) * d..][..r.len * d];
             linear_rows(o, rows, r.len, d, self.w_out, Some(self.b_out))
@@ -241,15 +247,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
     fn project_out_bwd(&self, g: &[T], count: usize, frames: usize, d: usize, threads: usize) -> Result<Vec<T>> {
         let (f, s) = (self.feats, frames + 1);
         let mut dh = vec![T::from_f64(0.0); count * s * d];
-        let chunks = row_chunks(frames, threads);
-        let tasks: Vec<_> = dh
-            .chunks_mut(s * d)
-            .enumerate()
-            .flat_map(|(i, element)| {
-                let rest = &mut element[d..];
-                chunks.iter().copied().zip(split_rows(rest, d, chunks.iter().copied())).map(move |(r, o)| (i, r, o))
-            })
-            .collect();
+        let tasks = frame_tasks(&mut dh, s, 1, d, frames, threads);
         run(threads, tasks, |(i, r, o)| {
             linear_rows_bwd(o, &g[(i * frames + r.first) * f..][..r.len * f], r.len, self.w_out, d, false)
         })
@@ -260,14 +258,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
     fn tokens_bwd(&self, dh: &[T], count: usize, frames: usize, d: usize, threads: usize) -> Result<Vec<T>> {
         let (f, s) = (self.feats, frames + 1);
         let mut dx = vec![T::from_f64(0.0); count * frames * f];
-        let chunks = row_chunks(frames, threads);
-        let tasks: Vec<_> = dx
-            .chunks_mut(frames * f)
-            .enumerate()
-            .flat_map(|(i, element)| {
-                chunks.iter().copied().zip(split_rows(element, f, chunks.iter().copied())).map(move |(r, o)| (i, r, o))
-            })
-            .collect();
+        let tasks = frame_tasks(&mut dx, frames, 0, f, frames, threads);
         run(threads, tasks, |(i, r, o)| {
             linear_rows_bwd(o, &dh[(i * s + 1 + r.first) * d..][..r.len * d], r.len, self.w_in, f, false)
         })
