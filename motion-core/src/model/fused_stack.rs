@@ -24,7 +24,8 @@ use candle_core::backend::BackendStorage;
 use candle_core::{bail, CpuStorage, CustomOp1, Error, Layout, Result, Shape, Storage, StorageRef, Tensor};
 
 use crate::nn::kernels::{
-    self, contiguous_slice, dispatch_real, par_each, row_chunks, rows_of, split_rows, MatView, Real, Rows,
+    self, contiguous_slice, dispatch_real, linear_rows, linear_rows_bwd, par_each, row_chunks, rows_of, split_rows,
+    MatView, Real, Rows,
 };
 
 /// How one call shares its work among the rayon workers.
@@ -273,7 +274,14 @@ pub(crate) struct FusedEncoderStack {
     ends: Option<Ends>,
     num_heads: usize,
     eps: f64,
-    cache: Mutex<Option<Vec<Group>>>,
+    cache: Mutex<Option<Saved>>,
+}
+
+/// What the forward pass keeps for the backward: how it split the work, and each group's
+/// activations.
+struct Saved {
+    plan: Plan,
+    groups: Vec<Group>,
 }
 
 /// The batch elements `[first, first + count)` and their activations in every layer.
@@ -383,34 +391,6 @@ fn attention_blocks(batch: usize, tokens: usize, threads: usize) -> Vec<Block> {
     out
 }
 
-/// `dst [rows, n] = x [rows, k] · Wᵀ + bias` for a row-major `W [n, k]` (bias broadcast
-/// over rows, or `dst` kept and accumulated when `bias` is `None`).
-fn linear_rows<T: Real>(dst: &mut [T], x: &[T], rows: usize, k: usize, w: &[T], bias: Option<&[T]>) -> Result<()> {
-    let n = w.len() / k.max(1);
-    if let Some(bias) = bias {
-        for row in dst.chunks_exact_mut(n) {
-            row.copy_from_slice(bias);
-        }
-    }
-    let wt = MatView::contiguous(0, 1, n, k).t();
-    kernels::gemm_into(dst, MatView::contiguous(0, 1, rows, n), x, MatView::contiguous(0, 1, rows, k), w, wt, true)
-}
-
-/// `dst [rows, k] (+)= g [rows, n] · W` for a row-major `W [n, k]` (the input gradient of
-/// `x·Wᵀ`).
-fn linear_rows_bwd<T: Real>(dst: &mut [T], g: &[T], rows: usize, w: &[T], k: usize, accumulate: bool) -> Result<()> {
-    let n = w.len() / k.max(1);
-    kernels::gemm_into(
-        dst,
-        MatView::contiguous(0, 1, rows, k),
-        g,
-        MatView::contiguous(0, 1, rows, n),
-        w,
-        MatView::contiguous(0, 1, n, k),
-        accumulate,
-    )
-}
-
 /// Sizes of one layer call.
 #[derive(Clone, Copy)]
 struct Dims {
@@ -455,7 +435,7 @@ impl FusedEncoderStack {
         Self { layers, ends, num_heads, eps, cache: Mutex::new(None) }
     }
 
-    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Option<Vec<Group>>>> {
+    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Option<Saved>>> {
         self.cache.lock().map_err(|_| Error::Msg("fused encoder stack: cache lock poisoned".into()))
     }
 
@@ -539,7 +519,7 @@ impl FusedEncoderStack {
             }
             Ok((y, groups))
         })?;
-        *self.lock()? = Some(groups);
+        *self.lock()? = Some(Saved { plan, groups });
         Ok((T::to_cpu_storage_owned(y), l.shape().clone()))
     }
 
@@ -549,10 +529,10 @@ impl FusedEncoderStack {
         let s = if self.ends.is_some() { rows + 1 } else { rows };
         let dims = self.dims(d, s)?;
         let cache = self.lock()?;
-        let Some(groups) = cache.as_ref() else {
+        let Some(Saved { plan, groups }) = cache.as_ref() else {
             bail!("fused encoder stack: backward without a forward cache");
         };
-        let threads = if groups.len() > 1 { 1 } else { rayon::current_num_threads().max(1) };
+        let threads = plan.threads();
         let in_width = rows * cols;
         let grad = grad.contiguous()?;
         let dx = kernels::with_slice::<T, _>(&grad, |g| {
@@ -571,11 +551,12 @@ impl FusedEncoderStack {
                         None => Ok(dh),
                     }
                 };
-                let parts: Vec<Vec<T>> = if groups.len() > 1 {
-                    use rayon::prelude::*;
-                    groups.par_iter().map(backward).collect::<Result<_>>()?
-                } else {
-                    groups.iter().map(backward).collect::<Result<_>>()?
+                let parts: Vec<Vec<T>> = match plan {
+                    Plan::Elements { .. } => {
+                        use rayon::prelude::*;
+                        groups.par_iter().map(backward).collect::<Result<_>>()?
+                    }
+                    Plan::Rows { .. } => groups.iter().map(backward).collect::<Result<_>>()?,
                 };
                 Ok(parts.concat())
             })

@@ -359,6 +359,48 @@ pub(crate) fn par_each<I: Send>(items: Vec<I>, f: impl Fn(I) -> Result<()> + Syn
     items.into_par_iter().try_for_each(f)
 }
 
+/// `dst [rows, n] = x [rows, k] · Wᵀ + bias` for a row-major `W [n, k]` (bias broadcast
+/// over rows, or `dst` kept and accumulated when `bias` is `None`).
+pub(crate) fn linear_rows<T: Real>(
+    dst: &mut [T],
+    x: &[T],
+    rows: usize,
+    k: usize,
+    w: &[T],
+    bias: Option<&[T]>,
+) -> Result<()> {
+    let n = w.len() / k.max(1);
+    if let Some(bias) = bias {
+        for row in dst.chunks_exact_mut(n) {
+            row.copy_from_slice(bias);
+        }
+    }
+    let wt = MatView::contiguous(0, 1, n, k).t();
+    gemm_into(dst, MatView::contiguous(0, 1, rows, n), x, MatView::contiguous(0, 1, rows, k), w, wt, true)
+}
+
+/// `dst [rows, k] (+)= g [rows, n] · W` for a row-major `W [n, k]` (the input gradient of
+/// `x·Wᵀ`).
+pub(crate) fn linear_rows_bwd<T: Real>(
+    dst: &mut [T],
+    g: &[T],
+    rows: usize,
+    w: &[T],
+    k: usize,
+    accumulate: bool,
+) -> Result<()> {
+    let n = w.len() / k.max(1);
+    gemm_into(
+        dst,
+        MatView::contiguous(0, 1, rows, k),
+        g,
+        MatView::contiguous(0, 1, rows, n),
+        w,
+        MatView::contiguous(0, 1, n, k),
+        accumulate,
+    )
+}
+
 /// `y = x·Wᵀ (+ b)` for `x` given as a strided view `[batch, m, k]` whose rows are
 /// contiguous and `W` as a row-major `[n, k]` (PyTorch's Linear layout, read transposed in
 /// place). Returns contiguous `[batch·m, n]`, computed in parallel row chunks.
@@ -376,15 +418,12 @@ pub(crate) fn linear<T: Real>(x: &[T], xv: MatView, w: &[T], n: usize, bias: Opt
         .flat_map(|b| row_chunks(m, rayon::current_num_threads()).into_iter().map(move |r| (b, r)))
         .zip(split_rows(&mut y, n, (0..xv.batch).flat_map(|_| row_chunks(m, rayon::current_num_threads()))))
         .collect();
-    let wt = MatView::contiguous(0, 1, n, k).t();
     par_each(tasks, |((b, r), out)| {
-        if let Some(bias) = bias {
-            for row in out.chunks_exact_mut(n) {
-                row.copy_from_slice(bias);
-            }
-        }
-        let rows = MatView { offset: xv.offset + b * xv.strides[0] + r.first * k, batch: 1, rows: r.len, ..xv };
-        gemm_into(out, MatView::contiguous(0, 1, r.len, n), x, rows, w, wt, bias.is_some())
+        let first = xv.offset + b * xv.strides[0] + r.first * k;
+        let Some(rows) = x.get(first..first + r.len * k) else {
+            bail!("linear: input view {xv:?} reaches past its {} elements", x.len());
+        };
+        linear_rows(out, rows, r.len, k, w, bias)
     })?;
     Ok(y)
 }
@@ -401,10 +440,7 @@ pub(crate) fn linear_bwd<T: Real>(g: &[T], w: &[T], n: usize, k: usize) -> Resul
         .into_iter()
         .zip(split_rows(&mut dx, k, row_chunks(m, rayon::current_num_threads())))
         .collect();
-    par_each(tasks, |(r, out)| {
-        let gv = MatView::contiguous(r.first * n, 1, r.len, n);
-        gemm_into(out, MatView::contiguous(0, 1, r.len, k), g, gv, w, MatView::contiguous(0, 1, n, k), false)
-    })?;
+    par_each(tasks, |(r, out)| linear_rows_bwd(out, rows_of(g, n, r), r.len, w, k, false))?;
     Ok(dx)
 }
 
