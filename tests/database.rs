@@ -5,7 +5,7 @@
 
 use e2e_tests::fixtures;
 use motion_core::database::catalog::Catalog;
-use motion_core::database::{DatabaseConfig, MotionDatabase};
+use motion_core::database::{DatabaseConfig, DatabaseSource, MotionDatabase};
 
 fn small_config() -> DatabaseConfig {
     DatabaseConfig { speeds: vec![1.0], loop_seconds: 4.0, ..DatabaseConfig::default() }
@@ -26,6 +26,11 @@ fn database_builds_saves_and_loads_with_seconds_per_label() {
     db.save(&path).unwrap();
     let back = MotionDatabase::load(&path).unwrap();
     assert_eq!(back.sequences(), db.sequences());
+    // RG-DNO's sources: the saved file, and the catalog built in memory, give the same windows.
+    let (from_file, _) = DatabaseSource::File(path.clone()).open().unwrap();
+    let catalog = DatabaseSource::Catalog { path: fixtures().join("mocap/catalog.json"), config: small_config() };
+    let (built, _) = catalog.open().unwrap();
+    assert_eq!((from_file.windows(), built.windows()), (db.windows(), db.windows()));
     assert_eq!(back.windows(), db.windows());
     let w = db.windows()[7];
     assert_eq!(back.window_slice(&w, 3, 10), db.window_slice(&w, 3, 10));
@@ -48,4 +53,7 @@ fn bad_catalogs_are_named() {
     std::fs::write(&path, r#"{"clips": [{"file": "missing.txt", "format": "deepmimic", "label": "walk"}]}"#).unwrap();
     let err = Catalog::read(&path).unwrap().load().err().unwrap().to_string();
     assert!(err.contains("missing.txt"), "{err}");
+    // Opened as RG-DNO's source, the error names the catalog and the clip.
+    let err = DatabaseSource::catalog(&path).open().err().unwrap().to_string();
+    assert!(err.contains("catalog.json") && err.contains("missing.txt"), "{err}");
 }

@@ -134,7 +134,7 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     })
     .unwrap();
     use motion_core::rgdno::Stage::*;
-    assert_eq!(stages, vec![Inversion, RandomBranch, RetrievedBranch, Masks, SoftBlend, FinalRound]);
+    assert_eq!(stages, vec![Inversion, Branches, Masks, SoftBlend, FinalRound]);
     assert_eq!(generated.joints.dims(), &[2, 40, 22, 3]);
     let values = generated.joints.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     assert!(values.iter().all(|v| v.is_finite()));
@@ -145,6 +145,20 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     assert!(report.masks.iter().all(|m| m.candidate.kind == MaskKind::Temporal && m.candidate.bits < 4));
     assert!(report.inversion_error_m.is_finite() && report.soft_blend_objective.iter().all(|v| v.is_finite()));
     assert_eq!(generated.loss_history[0].len(), 3);
+    assert_eq!(report.restart, vec![0, 0]);
+
+    // Restarts N_S: restart 0 is the run above, so each sample keeps a final F_C at most its
+    // one-restart value, from the restart that reached the lower one.
+    config.dno.restarts = 2;
+    let mut rounds = Vec::new();
+    let (_, restarted) = generate_rg_dno(&prior, task, &config, &rg, &device, |p| rounds.push(p.round)).unwrap();
+    assert_eq!(rounds.iter().max(), Some(&1));
+    for b in 0..2 {
+        assert!(restarted.final_objective[b] <= report.final_objective[b], "sample {b}");
+        let better = restarted.final_objective[b] < report.final_objective[b];
+        assert_eq!(restarted.restart[b], usize::from(better), "sample {b}");
+    }
+    config.dno.restarts = 1;
 
     // Settings the stages cannot run with are errors naming the field, never a panic.
     for (bad, field) in [

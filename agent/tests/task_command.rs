@@ -77,11 +77,23 @@ fn a_task_file_gives_the_program_and_parse_by_hand() {
 }
 
 #[test]
-fn without_dry_run_the_task_becomes_motions() {
+fn without_dry_run_the_task_becomes_motions_with_rg_dno() {
     let out = tempfile::tempdir().unwrap();
     let task = "take exactly 6 steps to cover 4 m while raising both hands";
-    let output =
-        mogen(&[task, "--show-program", "--steps", "3", "--guidance", "1", "--out", out.path().to_str().unwrap()]);
+    // RG-DNO by default, its stages cut to a few steps and 4 temporal masks for the test.
+    let tiny = r#"{"segments": 2, "mask_kinds": ["temporal"]}"#;
+    let output = mogen(&[
+        task,
+        "--show-program",
+        "--steps",
+        "3",
+        "--guidance",
+        "1",
+        "--rg-dno",
+        tiny,
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
     assert!(output.status.success(), "{}", text(&output.stderr));
     let written = std::fs::read_to_string(out.path().join("program.json")).unwrap();
     assert!(written.contains("\"target_count\": 6") && written.contains("relational_parse"), "{written}");
@@ -90,7 +102,45 @@ fn without_dry_run_the_task_becomes_motions() {
     }
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.path().join("report.json")).unwrap()).unwrap();
-    assert_eq!(report["config"]["method"], "dno");
+    assert_eq!(report["config"]["method"], "rg-dno");
     assert_eq!(report["steps"]["target"], 6, "the step count is measured against the program's count");
-    assert!(text(&output.stdout).contains("dno: constraint error"));
+    // The report names the retrieved clip and the chosen mask; the database was built in memory.
+    let rg = &report["rg_dno"];
+    assert!(rg["retrieved"][0]["source"]["label"].is_string(), "{rg}");
+    assert_eq!(rg["masks"][0]["candidate"]["kind"], "temporal", "{rg}");
+    assert_eq!(rg["config"]["final_steps"], 3, "--steps scales the stages: {rg}");
+    let (stdout, stderr) = (text(&output.stdout), text(&output.stderr));
+    assert!(stdout.contains("rg-dno: constraint error") && stdout.contains("retrieved "), "{stdout}");
+    assert!(stderr.contains("retrieval corpus: ") && stderr.contains("built in memory"), "{stderr}");
+}
+
+#[test]
+fn a_task_without_relational_parse_falls_back_to_dno_and_says_why() {
+    let out = tempfile::tempdir().unwrap();
+    let mut program: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(fixtures().join("tasks").join("rgdno_task1_narrow_gap.json")).unwrap(),
+    )
+    .unwrap();
+    program.as_object_mut().unwrap().remove("relational_parse");
+    let file = out.path().join("no_parse.json");
+    std::fs::write(&file, program.to_string()).unwrap();
+    let folder = out.path().join("out");
+    let output = mogen(&[
+        "--program",
+        file.to_str().unwrap(),
+        "--steps",
+        "2",
+        "--guidance",
+        "1",
+        "--out",
+        folder.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = (text(&output.stdout), text(&output.stderr));
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("RG-DNO falls back to DNO: the program has no relational parse"), "{stderr}");
+    assert!(stdout.contains("dno: constraint error") && stdout.contains("RG-DNO fell back to DNO"), "{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["config"]["method"], "dno");
+    assert!(report["fallback"].as_str().unwrap().contains("no relational parse"));
 }

@@ -19,6 +19,7 @@ pub mod model;
 pub mod motion;
 pub mod nn;
 pub mod npy;
+pub mod pipeline;
 pub mod prior;
 pub mod program;
 pub mod quality;

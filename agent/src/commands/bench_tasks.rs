@@ -73,12 +73,10 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
                 continue;
             }
             eprintln!("{task} / {method}");
-            let config = args.generation.config(method);
             let report = run_program(
                 &prior,
                 &program,
-                &config,
-                &args.generation.rg_source(),
+                &args.generation.settings(method),
                 OutputFolder::create(&args.out.join(&task).join(method.name()))?,
                 args.generation.formats,
             )?;

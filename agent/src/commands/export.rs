@@ -6,12 +6,9 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use motion_core::export::bvh::BvhUnit;
-use motion_core::export::{
-    position_targets, read_joints_npy, write_outputs, ExportInput, ExportManifest, OutputFolder,
-};
-use motion_core::program::TaskProgram;
-use motion_core::render::{motion_gif, GifOptions, StripRow};
-use motion_core::skeleton::{Pose, FPS};
+use motion_core::export::{read_joints_npy, ExportManifest, OutputFolder};
+use motion_core::pipeline::{write_exports, ExportOptions};
+use motion_core::skeleton::FPS;
 
 use super::run::load_program;
 
@@ -47,6 +44,14 @@ pub struct ExportFormats {
     pub centimetres: bool,
 }
 
+impl ExportFormats {
+    /// The library's export choices.
+    pub fn options(self) -> ExportOptions {
+        let bvh_unit = if self.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
+        ExportOptions { gif: self.gif, bvh_unit }
+    }
+}
+
 pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     let (joints, folder) = if args.input.is_dir() {
         (args.input.join("joints.npy"), args.input.clone())
@@ -68,41 +73,19 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     let title = program.as_ref().map_or_else(|| joints.display().to_string(), |p| p.text.clone());
     let out = OutputFolder::create(&args.out.unwrap_or(folder))?;
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
-    write_all(&out, &title, args.fps, &motions, labels, program.as_ref(), report, args.formats)?;
+    let manifest =
+        write_exports(&out, &title, args.fps, &motions, labels, program.as_ref(), report, args.formats.options())
+            .with_context(|| format!("exporting into {}", out.target().display()))?;
+    print_exports(&out, &manifest, args.formats);
     // The folder's other files (the run's npy, report, strip) stay.
     out.keep_existing()?;
     out.commit()?;
     Ok(())
 }
 
-/// Writes the BVH and GLB of every motion, the viewer page, `export.json` and, when asked,
-/// `motion.gif` into `out` (to be committed by the caller), and prints what was written with the
-/// rotation solve's fit.
-/// `labels` name the motions; `program`'s scene and position targets are drawn.
-#[allow(clippy::too_many_arguments)]
-pub fn write_all(
-    out: &OutputFolder,
-    title: &str,
-    fps: f64,
-    motions: &[Vec<Pose>],
-    labels: Vec<String>,
-    program: Option<&TaskProgram>,
-    report: Option<serde_json::Value>,
-    formats: ExportFormats,
-) -> anyhow::Result<ExportManifest> {
-    let bvh_unit = if formats.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
-    let input = ExportInput {
-        title: title.to_owned(),
-        fps,
-        samples: labels.into_iter().zip(motions).map(|(label, p)| (label, p.as_slice())).collect(),
-        scene: program.map(TaskProgram::scene_primitives).unwrap_or_default(),
-        targets: program.map(position_targets).unwrap_or_default(),
-        carried: program.map(TaskProgram::carried_objects).unwrap_or_default(),
-        report,
-        bvh_unit,
-    };
-    let manifest =
-        write_outputs(out.path(), &input).with_context(|| format!("exporting into {}", out.target().display()))?;
+/// Prints what [`motion_core::pipeline::write_exports`] wrote into `out`, with the rotation
+/// solve's fit.
+pub fn print_exports(out: &OutputFolder, manifest: &ExportManifest, formats: ExportFormats) {
     let worst = manifest.samples.iter().map(|s| s.fit_max_m).fold(0.0, f64::max);
     eprintln!(
         "wrote {}/{{sample_*/motion.bvh,sample_*/motion.glb,viewer.html,export.json}} ({} samples; rigid-skeleton \
@@ -112,10 +95,6 @@ pub fn write_all(
         worst * 1000.0
     );
     if formats.gif {
-        let rows: Vec<StripRow<'_>> =
-            input.samples.iter().map(|(label, poses)| StripRow { label: label.clone(), poses }).collect();
-        motion_gif(&rows, &input.scene, title, &GifOptions::default(), &out.path().join("motion.gif"))?;
         eprintln!("wrote {}", out.target().join("motion.gif").display());
     }
-    Ok(manifest)
 }

@@ -6,19 +6,18 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use motion_core::constraints::CompiledProgram;
-use motion_core::database::MotionDatabase;
 use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalCorpus, RetrievalQuery};
 
-use super::run::load_program;
-use crate::paths;
+use super::run::{database_source, load_program};
 
 #[derive(Debug, Args)]
 pub struct RetrieveArgs {
     /// Constraint program with a relational parse (JSON).
     program: PathBuf,
-    /// Motion database (`mogen data build`).
-    #[arg(long, default_value_os_t = paths::default_database())]
-    database: PathBuf,
+    /// Motion database file (`mogen data build`); default: the shipped catalog's clips, built in
+    /// memory.
+    #[arg(long, value_name = "FILE")]
+    database: Option<PathBuf>,
     /// Retrieved motions printed, best first.
     #[arg(long, default_value_t = 10)]
     top: usize,
@@ -38,7 +37,8 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     let most_difficult = program.relational_parse.as_ref().map(|p| p.most_difficult.clone()).unwrap_or_default();
     let device = candle_core::Device::Cpu;
     let compiled = CompiledProgram::compile(&program, &device)?.subset(&groups.retrieval);
-    let db = MotionDatabase::load(&args.database).with_context(|| format!("reading {}", args.database.display()))?;
+    let source = database_source(args.database.as_deref());
+    let (db, _) = source.open().with_context(|| format!("opening the database ({source})"))?;
     let config = RetrievalConfig { related_weight: args.related_weight, top_k: args.top, ..RetrievalConfig::default() };
     let clock = std::time::Instant::now();
     let corpus = RetrievalCorpus::build(&db, compiled.frames(), &config, &device)?;

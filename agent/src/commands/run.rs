@@ -5,20 +5,16 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use motion_core::constraints::CompiledProgram;
-use motion_core::database::MotionDatabase;
-use motion_core::evaluation::{report, TaskReport};
+use motion_core::database::DatabaseSource;
+use motion_core::evaluation::TaskReport;
 use motion_core::export::OutputFolder;
-use motion_core::generation::{generate, GenerationConfig, Method};
+use motion_core::generation::{GenerationConfig, Method};
+use motion_core::pipeline::{run_task, write_task, Event, TaskSettings};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
-use motion_core::quality::tensor_to_poses;
-use motion_core::render::{motion_strip, StripRow};
-use motion_core::rgdno::retrieval::RetrievalCorpus;
-use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
-use motion_core::skeleton::FPS;
+use motion_core::rgdno::RgDnoConfig;
 
-use super::export::{write_all, ExportFormats};
+use super::export::{print_exports, ExportFormats};
 use super::flags;
 use crate::paths;
 
@@ -60,10 +56,11 @@ pub struct GenerationArgs {
     /// Seed of the start noise (same seed, same machine: same motion).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Optimisation steps (DNO default 500; IK default 100).
+    /// Optimisation steps (DNO default 500; IK default 100; RG-DNO: every stage scaled by
+    /// steps/500 from 50 + 50 inversion polish, 100 for the branches and the blend, 400 final).
     #[arg(long, value_parser = flags::steps)]
     pub steps: Option<usize>,
-    /// DNO random restarts; the best per sample is kept.
+    /// Random restarts N_S of DNO and RG-DNO; the best per sample is kept.
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
     /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).
@@ -99,9 +96,11 @@ pub struct GenerationArgs {
     pub prior: PathBuf,
     #[command(flatten)]
     pub formats: ExportFormats,
-    /// Motion database that RG-DNO retrieves from (`mogen data build`).
-    #[arg(long, default_value_os_t = paths::default_database())]
-    pub database: PathBuf,
+    /// Motion database file that RG-DNO retrieves from (`mogen data build`); default: the
+    /// shipped catalog's clips with every augmentation, built in memory when RG-DNO runs (about
+    /// 0.5 s).
+    #[arg(long, value_name = "FILE")]
+    pub database: Option<PathBuf>,
     /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
     /// first_lr, segments, mask_kinds, mask_batch, reward, final_steps, final_lr; missing fields
     /// keep the paper's defaults), e.g. '{"retrieval": {"related_weight": 0.01}}'.
@@ -109,26 +108,30 @@ pub struct GenerationArgs {
     pub rg_dno: Box<RgDnoConfig>,
 }
 
+/// The database file given on the command line, else the shipped catalog built in memory.
+pub fn database_source(file: Option<&Path>) -> DatabaseSource {
+    match file {
+        Some(file) => DatabaseSource::File(file.to_path_buf()),
+        None => DatabaseSource::catalog(paths::default_catalog()),
+    }
+}
+
 fn parse_rg_dno_config(text: &str) -> Result<Box<RgDnoConfig>, String> {
     serde_json::from_str(text).map_err(|e| format!("not an RG-DNO config: {e}"))
 }
 
-/// Where RG-DNO retrieves from and with which settings.
-#[derive(Debug, Clone)]
-pub struct RgDnoSource {
-    /// The motion database file.
-    pub database: PathBuf,
-    /// The settings.
-    pub config: RgDnoConfig,
-}
-
 impl GenerationArgs {
-    /// The database and settings of RG-DNO.
-    pub fn rg_source(&self) -> RgDnoSource {
-        RgDnoSource { database: self.database.clone(), config: (*self.rg_dno).clone() }
+    /// Everything a run of `method` needs: the generation settings, RG-DNO's stages (scaled to
+    /// `--steps` when given) and its database.
+    pub fn settings(&self, method: Method) -> TaskSettings {
+        let rg_dno = match self.steps {
+            Some(steps) => self.rg_dno.scaled_to(steps),
+            None => (*self.rg_dno).clone(),
+        };
+        TaskSettings { generation: self.config(method), rg_dno, database: database_source(self.database.as_deref()) }
     }
 
-    /// The run settings for `method`.
+    /// The generation settings for `method`.
     pub fn config(&self, method: Method) -> GenerationConfig {
         let mut config = GenerationConfig::new(method);
         config.samples = self.samples;
@@ -182,8 +185,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
     let prior = Prior::load(&args.generation.prior, &device)
         .with_context(|| format!("loading the prior {}", args.generation.prior.display()))?;
-    let config = args.generation.config(args.method.into());
-    let report = run_program(&prior, &program, &config, &args.generation.rg_source(), folder, args.generation.formats)?;
+    let settings = args.generation.settings(args.method.into());
+    let report = run_program(&prior, &program, &settings, folder, args.generation.formats)?;
     print_summary(&report);
     Ok(())
 }
@@ -194,19 +197,16 @@ pub fn load_program(path: &Path) -> anyhow::Result<TaskProgram> {
     Ok(agent::plan::plan_from_file(path)?.program)
 }
 
-/// Generates motions for `program` and writes features.npy, joints.npy, report.json, strip.png,
-/// program.json and the exports into `folder`, all at once when everything is made (a failure
-/// leaves the folder as it was), with progress on stderr. RG-DNO retrieves from `rg_source`.
+/// Runs `program` with `settings` ([`motion_core::pipeline`]) and writes every output into
+/// `folder`, all at once when everything is made (a failure leaves the folder as it was), with
+/// progress on stderr: a bar on a terminal, plain lines otherwise.
 pub fn run_program(
     prior: &Prior,
     program: &TaskProgram,
-    config: &GenerationConfig,
-    rg_source: &RgDnoSource,
+    settings: &TaskSettings,
     folder: OutputFolder,
     formats: ExportFormats,
 ) -> anyhow::Result<TaskReport> {
-    let device = candle_core::Device::Cpu;
-    let compiled = CompiledProgram::compile(program, &device)?;
     let bar = ProgressBar::new(0);
     bar.set_style(
         ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} loss {msg} ({elapsed}, eta {eta})")
@@ -216,118 +216,35 @@ pub fn run_program(
     // Not a terminal (a log, CI): instead of the bar, a plain line on the first and last step
     // of a stage and at least every PLAIN_PROGRESS_EVERY between.
     let mut last_line: Option<std::time::Instant> = None;
-    let mut show = |stage: &str, round: usize, step: usize, steps: usize, loss: f64| {
-        bar.set_prefix(stage.to_owned());
-        bar.set_length(steps as u64);
-        bar.set_position(step as u64);
-        bar.set_message(format!("{loss:.5} (round {round})"));
-        let due = last_line.is_none_or(|t| t.elapsed() >= PLAIN_PROGRESS_EVERY);
-        if bar.is_hidden() && (due || step <= 1 || step == steps) {
-            last_line = Some(std::time::Instant::now());
-            eprintln!(
-                "{stage} round {round}: step {step}/{steps} loss {loss:.5} ({:.0} s)",
-                start.elapsed().as_secs_f64()
-            );
-        }
-    };
-    let mut fallback = None;
-    let mut config = config.clone();
-    let rg_run = if config.method == Method::RgDno {
-        match rg_dno_run(prior, program, &compiled, &config, rg_source, &device, &mut show) {
-            Ok(done) => Some(done),
-            Err(RgDnoFailure::Fallback(why)) => {
-                eprintln!("RG-DNO falls back to DNO: {why}");
-                fallback = Some(why);
-                config.method = Method::Dno;
-                None
+    let show = |event: Event<'_>| match event {
+        Event::Step { stage, round, step, steps, loss } => {
+            bar.set_prefix(stage.to_owned());
+            bar.set_length(steps as u64);
+            bar.set_position(step as u64);
+            bar.set_message(format!("{loss:.5} (round {round})"));
+            let due = last_line.is_none_or(|t| t.elapsed() >= PLAIN_PROGRESS_EVERY);
+            if bar.is_hidden() && (due || step <= 1 || step == steps) {
+                last_line = Some(std::time::Instant::now());
+                eprintln!(
+                    "{stage} round {round}: step {step}/{steps} loss {loss:.5} ({:.0} s)",
+                    start.elapsed().as_secs_f64()
+                );
             }
-            Err(RgDnoFailure::Error(error)) => return Err(error),
         }
-    } else {
-        None
+        Event::Note(note) => bar.suspend(|| eprintln!("{note}")),
     };
-    let (generated, rg_dno) = match rg_run {
-        Some((generated, rg_report)) => (generated, Some(rg_report)),
-        None => {
-            let method = config.method.to_string();
-            let generated = generate(prior, program, &compiled, &config, &device, |p| {
-                show(&method, p.round, p.step + 1, p.steps, p.loss)
-            })?;
-            (generated, None)
-        }
-    };
+    let device = candle_core::Device::Cpu;
+    let run = run_task(prior, program, settings, &device, show)?;
     bar.finish_and_clear();
-    let mut report = report(program, &compiled, &generated, &config)?;
-    report.rg_dno = rg_dno;
-    report.fallback = fallback;
-    if let Some(figure) = report.non_finite_figure() {
-        anyhow::bail!("the report's {figure} is not finite; nothing was written");
-    }
-    folder.write_npy("features.npy", &prior.to_features(&generated.features)?)?;
-    folder.write_npy("joints.npy", &generated.joints)?;
-    folder.write("report.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
-    let poses = tensor_to_poses(&generated.joints)?;
-    let rows: Vec<StripRow<'_>> = poses
-        .iter()
-        .enumerate()
-        .map(|(i, p)| StripRow { label: format!("{} sample {i} (seed {})", config.method, config.seed), poses: p })
-        .collect();
-    let (scene, carried) = (program.scene_primitives(), program.carried_objects());
-    motion_strip(&rows, 8, &scene, &carried, &program.text, &folder.path().join("strip.png"))?;
-    folder.write("program.json", (program.to_json_pretty()? + "\n").as_bytes())?;
-    let labels = (0..poses.len()).map(|i| format!("{} sample {i} (seed {})", config.method, config.seed)).collect();
-    let report_json = Some(serde_json::to_value(&report)?);
-    write_all(&folder, &program.text, FPS, &poses, labels, Some(program), report_json, formats)?;
+    let manifest = write_task(&folder, prior, program, &run, formats.options())?;
+    print_exports(&folder, &manifest, formats);
     let out = folder.commit()?;
     eprintln!("wrote {}/{{program.json,features.npy,joints.npy,report.json,strip.png}}", out.display());
-    Ok(report)
+    Ok(run.report)
 }
 
 /// Longest silence on a non-terminal stderr during generation.
 const PLAIN_PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_secs(5);
-
-/// Why RG-DNO did not produce motions: a reason to fall back to DNO, or an error.
-enum RgDnoFailure {
-    Fallback(String),
-    Error(anyhow::Error),
-}
-
-/// RG-DNO on `program`, retrieving from the database at `database`.
-fn rg_dno_run(
-    prior: &Prior,
-    program: &TaskProgram,
-    compiled: &CompiledProgram,
-    config: &GenerationConfig,
-    source: &RgDnoSource,
-    device: &candle_core::Device,
-    show: &mut dyn FnMut(&str, usize, usize, usize, f64),
-) -> Result<(motion_core::generation::Generated, RgDnoReport), RgDnoFailure> {
-    if program.relational_parse.is_none() {
-        return Err(RgDnoFailure::Fallback("the program has no relational parse".into()));
-    }
-    let fail = |e: anyhow::Error| RgDnoFailure::Error(e);
-    let database = &source.database;
-    let db = MotionDatabase::load(database)
-        .with_context(|| {
-            format!("reading the retrieval database {} (build it with `mogen data build`)", database.display())
-        })
-        .map_err(fail)?;
-    let rg = &source.config;
-    let clock = std::time::Instant::now();
-    let corpus = RetrievalCorpus::build(&db, compiled.frames(), &rg.retrieval, device).map_err(|e| fail(e.into()))?;
-    eprintln!(
-        "retrieval corpus: {} candidate crops of {} ({:.1} s)",
-        corpus.len(),
-        database.display(),
-        clock.elapsed().as_secs_f64()
-    );
-    let task = RgDnoTask { program, compiled, corpus: &corpus };
-    match generate_rg_dno(prior, task, config, rg, device, |p| show(p.stage.name(), 0, p.step, p.steps, p.loss)) {
-        Ok(done) => Ok(done),
-        Err(e @ (RgDnoError::NoParse | RgDnoError::NothingRetrieved)) => Err(RgDnoFailure::Fallback(e.to_string())),
-        Err(e) => Err(fail(e.into())),
-    }
-}
 
 /// Prints the headline figures of a run.
 pub fn print_summary(report: &TaskReport) {
@@ -374,14 +291,24 @@ pub fn print_summary(report: &TaskReport) {
         }
         for (i, m) in rg.masks.iter().enumerate() {
             println!(
-                "  sample {i}: {:?} mask {:0w$b}, F_C {:.4}, reward {:.4}",
+                "  sample {i}: {:?} mask {:0w$b}, F_C {:.4}, reward {:.4}{}",
                 m.candidate.kind,
                 m.candidate.bits,
                 m.constraint_error,
                 m.reward,
+                rg.restart.get(i).filter(|_| report.config.dno.restarts > 1).map_or(String::new(), |r| format!(
+                    " (restart {r} of {})",
+                    report.config.dno.restarts
+                )),
                 w = m.candidate.segments
             );
         }
+        let s = &rg.seconds;
+        println!(
+            "  RG-DNO seconds: retrieval {:.1}, inversion {:.1}, branches {:.1}, masks {:.1}, soft blend {:.1}, final \
+             round {:.1}",
+            s.retrieval, s.inversion, s.branches, s.masks, s.soft_blend, s.final_round
+        );
     }
     let penetration = report.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
     println!(

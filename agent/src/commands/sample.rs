@@ -8,12 +8,13 @@ use motion_core::cleanup::FootLockConfig;
 use motion_core::diffusion::Guidance;
 use motion_core::export::OutputFolder;
 use motion_core::generation::{clean_up, ensure_finite};
+use motion_core::pipeline::write_exports;
 use motion_core::prior::{Prior, RootDecode};
 use motion_core::quality::tensor_to_poses;
 use motion_core::render::{motion_strip, StripRow};
 use motion_core::skeleton::FPS;
 
-use super::export::{write_all, ExportFormats};
+use super::export::{print_exports, ExportFormats};
 use super::flags;
 use crate::paths;
 
@@ -107,7 +108,8 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         .collect();
     motion_strip(&rows, 8, &[], &[], &args.prompt, &folder.path().join("strip.png"))?;
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
-    write_all(&folder, &args.prompt, FPS, &poses, labels, None, None, args.formats)?;
+    let manifest = write_exports(&folder, &args.prompt, FPS, &poses, labels, None, None, args.formats.options())?;
+    print_exports(&folder, &manifest, args.formats);
     let out = folder.commit()?;
     println!("wrote {}/{{joints.npy,features.npy,strip.png}}", out.display());
     Ok(())

@@ -30,8 +30,9 @@ pub struct TaskArgs {
     /// Print the program before generating.
     #[arg(long)]
     show_program: bool,
-    /// Generation method.
-    #[arg(long, short, value_enum, default_value_t = MethodArg::Dno)]
+    /// Generation method: RG-DNO by default, which falls back to DNO (saying why) when the task
+    /// has no relational parse or no database motion is retrieved.
+    #[arg(long, short, value_enum, default_value_t = MethodArg::RgDno)]
     method: MethodArg,
     #[command(flatten)]
     generation: GenerationArgs,
@@ -143,9 +144,8 @@ pub fn run(args: TaskArgs) -> anyhow::Result<()> {
         return Ok(());
     };
     let options = RunOptions {
-        config: args.generation.config(args.method.into()),
+        settings: args.generation.settings(args.method.into()),
         prior: args.generation.prior.clone(),
-        rg_source: args.generation.rg_source(),
         formats: args.generation.formats,
     };
     generate::run(&planned, &options, out)

@@ -205,15 +205,22 @@ pub fn optimize_with_restarts<S: Solver + ?Sized>(
 }
 
 /// Whether loss `new` should replace `old`: lower, or a number against NaN.
-fn beats(new: f64, old: f64) -> bool {
+pub(crate) fn beats(new: f64, old: f64) -> bool {
     new < old || (old.is_nan() && !new.is_nan())
+}
+
+/// `old` `[B, ...]` with the rows (samples) of `new` where `take` (length B) is true.
+pub(crate) fn take_rows(take: &[bool], new: &Tensor, old: &Tensor) -> Result<Tensor> {
+    let mask: Vec<u8> = take.iter().map(|&t| u8::from(t)).collect();
+    let mut shape = vec![1; old.rank()];
+    shape[0] = take.len();
+    let mask = Tensor::from_vec(mask, shape, old.device())?;
+    mask.broadcast_as(old.shape())?.where_cond(new, old)
 }
 
 /// `old` with the rows of `new` where `take` is true.
 fn merge_rows(old: DnoResult, new: DnoResult, take: &[bool]) -> Result<DnoResult> {
-    let mask: Vec<u8> = take.iter().map(|&t| u8::from(t)).collect();
-    let mask = Tensor::from_vec(mask, (take.len(), 1, 1), old.z.device())?;
-    let pick = |new: &Tensor, old: &Tensor| mask.broadcast_as(old.shape())?.where_cond(new, old);
+    let pick = |new: &Tensor, old: &Tensor| take_rows(take, new, old);
     let rows = old.loss.into_iter().zip(old.history).zip(new.loss.into_iter().zip(new.history)).zip(take);
     let (loss, history) = rows.map(|(((lo, ho), (ln, hn)), &t)| if t { (ln, hn) } else { (lo, ho) }).unzip();
     Ok(DnoResult { z: pick(&new.z, &old.z)?, x: pick(&new.x, &old.x)?, loss, history })

@@ -1,0 +1,255 @@
+//! One planned task end to end, the way every command runs it: compile the program, generate
+//! its motions with the configured method, evaluate them in natural units, and write every
+//! output file.
+//!
+//! RG-DNO ([`crate::rgdno`]) takes the whole plan: the program with its relational parse (the
+//! most difficult constraint and its relations, from which Algorithm 1's groups `C_R`, `C1`,
+//! `C2` are derived), and the retrieval database, opened only when RG-DNO runs (a saved file, or
+//! the catalog's clips built in memory). When the program has no relational parse, or no
+//! database motion passes the semantic check and the threshold, the run falls back to DNO; the
+//! reason goes to the report's `fallback` and to the caller as an [`Event::Note`].
+
+use std::time::Instant;
+
+use candle_core::Device;
+
+use crate::constraints::{CompiledProgram, ConstraintError};
+use crate::database::{DatabaseError, DatabaseSource};
+use crate::evaluation::{report, TaskReport};
+use crate::export::bvh::BvhUnit;
+use crate::export::{position_targets, write_outputs, ExportError, ExportInput, ExportManifest, OutputFolder};
+use crate::generation::{generate, Generated, GenerationConfig, GenerationError, Method};
+use crate::prior::Prior;
+use crate::program::TaskProgram;
+use crate::quality::tensor_to_poses;
+use crate::render::{motion_gif, motion_strip, GifOptions, RenderError, StripRow};
+use crate::rgdno::retrieval::{RetrievalCorpus, RetrievalError};
+use crate::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoTask};
+use crate::skeleton::{Pose, FPS};
+
+/// How a task is run: the method and its settings, RG-DNO's stages and where it retrieves from.
+#[derive(Debug, Clone)]
+pub struct TaskSettings {
+    /// Method, samples, seed, guidance, DNO's optimiser (its `restarts` are RG-DNO's `N_S`
+    /// too), the refinement and the clean-up.
+    pub generation: GenerationConfig,
+    /// RG-DNO's stages.
+    pub rg_dno: RgDnoConfig,
+    /// RG-DNO's retrieval database.
+    pub database: DatabaseSource,
+}
+
+/// What a running task reports.
+#[derive(Debug, Clone)]
+pub enum Event<'a> {
+    /// An optimisation step of a stage (`round` is the restart).
+    Step {
+        /// The method or RG-DNO stage.
+        stage: &'a str,
+        /// The restart.
+        round: usize,
+        /// Steps done.
+        step: usize,
+        /// Steps of the stage.
+        steps: usize,
+        /// Mean loss over the samples.
+        loss: f64,
+    },
+    /// Something the user should read: the retrieval corpus built, a fallback and its reason.
+    Note(String),
+}
+
+/// A finished run: the motions and their report.
+#[derive(Debug, Clone)]
+pub struct TaskRun {
+    /// The motions (the cleaned joints, the network's beside them).
+    pub generated: Generated,
+    /// Every figure in natural units; RG-DNO's stages or the fallback's reason.
+    pub report: TaskReport,
+}
+
+/// Errors of a task run.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The program does not compile.
+    #[error(transparent)]
+    Program(#[from] ConstraintError),
+    /// Generation failed or a setting is unusable.
+    #[error(transparent)]
+    Generation(#[from] GenerationError),
+    /// The retrieval database could not be opened.
+    #[error("the retrieval database ({source_name}): {error}")]
+    Database {
+        /// Where it was looked for.
+        source_name: String,
+        /// What went wrong.
+        error: Box<DatabaseError>,
+    },
+    /// The retrieval corpus could not be built.
+    #[error(transparent)]
+    Retrieval(#[from] RetrievalError),
+    /// A tensor operation failed.
+    #[error(transparent)]
+    Tensor(#[from] candle_core::Error),
+    /// A figure of the report is NaN or infinite; nothing is written.
+    #[error("the report's {0} is not finite; nothing was written")]
+    NonFinite(String),
+    /// Writing a file failed.
+    #[error(transparent)]
+    Export(#[from] ExportError),
+    /// Drawing a picture failed.
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    /// The report could not be serialised.
+    #[error("writing the report: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+/// Runs `program` with `settings`: compile, generate (RG-DNO with its fallback to DNO), and
+/// evaluate. `on` gets every optimisation step and the notes a user should read.
+pub fn run_task(
+    prior: &Prior,
+    program: &TaskProgram,
+    settings: &TaskSettings,
+    device: &Device,
+    mut on: impl FnMut(Event<'_>),
+) -> Result<TaskRun, PipelineError> {
+    let compiled = CompiledProgram::compile(program, device)?;
+    let mut config = settings.generation.clone();
+    let mut fallback = None;
+    let mut rg_report = None;
+    let mut generated = None;
+    if config.method == Method::RgDno {
+        match rg_dno(prior, program, &compiled, settings, device, &mut on) {
+            Ok((done, report)) => (generated, rg_report) = (Some(done), Some(report)),
+            Err(e @ (RgDnoError::NoParse | RgDnoError::NothingRetrieved)) => {
+                let why = e.to_string();
+                on(Event::Note(format!("RG-DNO falls back to DNO: {why}")));
+                fallback = Some(why);
+                config.method = Method::Dno;
+            }
+            Err(RgDnoError::Generation(e)) => return Err(e.into()),
+            Err(RgDnoError::Retrieval(e)) => return Err(e.into()),
+            Err(RgDnoError::Database { source_name, error }) => {
+                return Err(PipelineError::Database { source_name, error })
+            }
+        }
+    }
+    let generated = match generated {
+        Some(done) => done,
+        None => {
+            let stage = config.method.to_string();
+            generate(prior, program, &compiled, &config, device, |p| {
+                on(Event::Step { stage: &stage, round: p.round, step: p.step + 1, steps: p.steps, loss: p.loss })
+            })?
+        }
+    };
+    let mut report = report(program, &compiled, &generated, &config)?;
+    report.rg_dno = rg_report;
+    report.fallback = fallback;
+    if let Some(figure) = report.non_finite_figure() {
+        return Err(PipelineError::NonFinite(figure));
+    }
+    Ok(TaskRun { generated, report })
+}
+
+/// RG-DNO on `program`: opens the database, builds the corpus for the program's frame count and
+/// runs the stages.
+fn rg_dno(
+    prior: &Prior,
+    program: &TaskProgram,
+    compiled: &CompiledProgram,
+    settings: &TaskSettings,
+    device: &Device,
+    on: &mut impl FnMut(Event<'_>),
+) -> Result<(Generated, crate::rgdno::RgDnoReport), RgDnoError> {
+    if program.relational_parse.is_none() {
+        return Err(RgDnoError::NoParse);
+    }
+    let clock = Instant::now();
+    let source = &settings.database;
+    let (database, warnings) = source
+        .open()
+        .map_err(|error| RgDnoError::Database { source_name: source.to_string(), error: Box::new(error) })?;
+    let corpus = RetrievalCorpus::build(&database, compiled.frames(), &settings.rg_dno.retrieval, device)?;
+    // Import warnings (quaternions normalised on read) are `mogen data build`'s to list.
+    let warned = if warnings.is_empty() { String::new() } else { format!(", {} import warnings", warnings.len()) };
+    on(Event::Note(format!(
+        "retrieval corpus: {} candidate crops of {source} ({:.1} s{warned})",
+        corpus.len(),
+        clock.elapsed().as_secs_f64()
+    )));
+    let task = RgDnoTask { program, compiled, corpus: &corpus };
+    generate_rg_dno(prior, task, &settings.generation, &settings.rg_dno, device, |p| {
+        on(Event::Step { stage: p.stage.name(), round: p.round, step: p.step, steps: p.steps, loss: p.loss })
+    })
+}
+
+/// Choices about the exported files (default: no GIF, BVH in metres).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ExportOptions {
+    /// Also write `motion.gif` (side and top views, animated).
+    pub gif: bool,
+    /// Length unit of the BVH files.
+    pub bvh_unit: BvhUnit,
+}
+
+/// Writes a run into `folder` (committed by the caller): `features.npy` (de-normalised
+/// features of the network's motion), `joints.npy` (the output), `report.json`, `strip.png`,
+/// `program.json`, and the exports of [`write_exports`].
+pub fn write_task(
+    folder: &OutputFolder,
+    prior: &Prior,
+    program: &TaskProgram,
+    run: &TaskRun,
+    options: ExportOptions,
+) -> Result<ExportManifest, PipelineError> {
+    let (generated, report) = (&run.generated, &run.report);
+    let config = &report.config;
+    folder.write_npy("features.npy", &prior.to_features(&generated.features)?)?;
+    folder.write_npy("joints.npy", &generated.joints)?;
+    folder.write("report.json", serde_json::to_string_pretty(report)?.as_bytes())?;
+    let poses = tensor_to_poses(&generated.joints)?;
+    let labels: Vec<String> =
+        (0..poses.len()).map(|i| format!("{} sample {i} (seed {})", config.method, config.seed)).collect();
+    let rows: Vec<StripRow<'_>> =
+        poses.iter().zip(&labels).map(|(p, label)| StripRow { label: label.clone(), poses: p }).collect();
+    let (scene, carried) = (program.scene_primitives(), program.carried_objects());
+    motion_strip(&rows, 8, &scene, &carried, &program.text, &folder.path().join("strip.png"))?;
+    folder.write("program.json", (serde_json::to_string_pretty(program)? + "\n").as_bytes())?;
+    let report_json = Some(serde_json::to_value(report)?);
+    write_exports(folder, &program.text, FPS, &poses, labels, Some(program), report_json, options)
+}
+
+/// Writes the BVH and GLB of every motion, the viewer page, `export.json` and, when asked,
+/// `motion.gif` into `folder` (committed by the caller). `labels` name the motions; `program`'s
+/// scene, position targets and carried objects are drawn; `report` is shown by the viewer.
+#[allow(clippy::too_many_arguments)]
+pub fn write_exports(
+    folder: &OutputFolder,
+    title: &str,
+    fps: f64,
+    motions: &[Vec<Pose>],
+    labels: Vec<String>,
+    program: Option<&TaskProgram>,
+    report: Option<serde_json::Value>,
+    options: ExportOptions,
+) -> Result<ExportManifest, PipelineError> {
+    let input = ExportInput {
+        title: title.to_owned(),
+        fps,
+        samples: labels.into_iter().zip(motions).map(|(label, p)| (label, p.as_slice())).collect(),
+        scene: program.map(TaskProgram::scene_primitives).unwrap_or_default(),
+        targets: program.map(position_targets).unwrap_or_default(),
+        carried: program.map(TaskProgram::carried_objects).unwrap_or_default(),
+        report,
+        bvh_unit: options.bvh_unit,
+    };
+    let manifest = write_outputs(folder.path(), &input)?;
+    if options.gif {
+        let rows: Vec<StripRow<'_>> =
+            input.samples.iter().map(|(label, poses)| StripRow { label: label.clone(), poses }).collect();
+        motion_gif(&rows, &input.scene, title, &GifOptions::default(), &folder.path().join("motion.gif"))?;
+    }
+    Ok(manifest)
+}
