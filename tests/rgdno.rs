@@ -160,6 +160,12 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     }
     config.dno.restarts = 1;
 
+    // Table 4's "M = 0.5": no mask search, the branches blended half and half.
+    let half = RgDnoConfig { ablation: motion_core::rgdno::Ablation::HalfMask, ..rg.clone() };
+    let mut stages = Vec::new();
+    let (_, halved) = generate_rg_dno(&prior, task, &config, &half, &device, |p| stages.push(p.stage)).unwrap();
+    assert!(halved.masks.is_empty() && !stages.contains(&Masks) && !stages.contains(&SoftBlend));
+
     // Settings the stages cannot run with are errors naming the field, never a panic.
     for (bad, field) in [
         (RgDnoConfig { segments: 40, ..rg.clone() }, "segments"),

@@ -65,6 +65,51 @@ pub struct RgDnoConfig {
     pub final_steps: usize,
     /// Peak learning rate of the final round (default 0.02).
     pub final_lr: f64,
+    /// One of Table 4's ablations instead of the full method (default: none).
+    pub ablation: Ablation,
+}
+
+/// Table 4's ablations of RG-DNO (each leaves one part of the method out).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ablation {
+    /// The full method.
+    #[default]
+    None,
+    /// `z' = z1`: the random-noise branch alone (no retrieved noise, no mask).
+    RandomOnly,
+    /// `z' = z2`: the retrieved branch alone (no random noise, no mask).
+    RetrievedOnly,
+    /// Without relational task parsing: `C_R = C`.
+    NoParsing,
+    /// Without mask optimisation: `M = 0.5` everywhere.
+    HalfMask,
+    /// Without the reward: masks and the soft blend by `F_C` alone.
+    NoReward,
+    /// `C1 = C2 = C`.
+    SameSets,
+}
+
+impl Ablation {
+    /// Algorithm 1's groups as this ablation changes them.
+    fn groups(self, groups: ConstraintGroups, all: Vec<String>) -> ConstraintGroups {
+        match self {
+            Ablation::NoParsing => ConstraintGroups { retrieval: all, ..groups },
+            Ablation::SameSets => ConstraintGroups { random_noise: all.clone(), retrieved_noise: all, ..groups },
+            _ => groups,
+        }
+    }
+
+    /// The fixed blend of the branches, where the ablation replaces the mask search: the mask
+    /// value `M` of `z' = M·z1 + (1 − M)·z2`.
+    fn fixed_mask(self) -> Option<f64> {
+        match self {
+            Ablation::RandomOnly => Some(1.0),
+            Ablation::RetrievedOnly => Some(0.0),
+            Ablation::HalfMask => Some(0.5),
+            _ => None,
+        }
+    }
 }
 
 impl Default for RgDnoConfig {
@@ -82,6 +127,7 @@ impl Default for RgDnoConfig {
             reward: RewardWeights::default(),
             final_steps: 400,
             final_lr: 0.02,
+            ablation: Ablation::None,
         }
     }
 }
@@ -323,7 +369,8 @@ pub fn generate_rg_dno(
         return Err(GenerationError::Setting("dno.restarts must be at least 1".into()).into());
     }
     let start = Instant::now();
-    let groups = program.constraint_groups().ok_or(RgDnoError::NoParse)?;
+    let all = program.constraints.iter().map(|c| c.id.clone()).collect();
+    let groups = rg.ablation.groups(program.constraint_groups().ok_or(RgDnoError::NoParse)?, all);
     let parse = program.relational_parse.as_ref().ok_or(RgDnoError::NoParse)?;
     let mut seconds = StageSeconds::default();
     let batch = config.samples;
@@ -504,59 +551,16 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         let (z1_error, z2_error) = (fitted.loss[..batch].to_vec(), fitted.loss[batch..].to_vec());
         seconds.branches += clock.elapsed().as_secs_f64();
 
-        // Binary masks (eq. 13), no gradients.
-        let clock = Instant::now();
+        let reward_weights =
+            if rg.ablation == Ablation::NoReward { RewardWeights::NONE } else { rg.reward };
         let full = program_objective(prior, compiled, &initial_joints, config.jitter_weight);
-        let mut rng = StdRng::seed_from_u64(seed ^ 0x0052_4744_4e4f);
-        let candidates: Vec<MaskCandidate> =
-            MaskCandidate::all(rg.segments).into_iter().filter(|c| rg.mask_kinds.contains(&c.kind)).collect();
-        let (masks, best_masks) = choose_masks(
-            &candidates,
-            (&z1, &z2),
-            solver,
-            &full,
-            prior,
-            &rg.reward,
-            rg.mask_batch.max(1),
-            &mut rng,
-            &mut |done| {
-                progress(&StageProgress { stage: Stage::Masks, round, step: done, steps: candidates.len(), loss: 0.0 })
-            },
-        )?;
-        seconds.masks += clock.elapsed().as_secs_f64();
-
-        // Soft blend (supp. A): logits M' from the chosen masks, Adam on F_C + R.
-        let clock = Instant::now();
-        let logits = Var::from_tensor(&soft_logits(&best_masks)?)?;
-        let mut adam = AdamW::new(vec![logits.clone()], 0.0)?;
-        let blend_schedule =
-            DnoConfig { steps: rg.first_steps, lr: rg.first_lr, lr_warmup_steps: 0, ..DnoConfig::default() };
-        let mut soft_blend_objective = vec![f64::NAN; batch];
-        for step in 0..rg.first_steps {
-            let z = soft_blend(logits.as_tensor(), &z1, &z2)?;
-            let x = dno::Solver::solve(solver, &z)?;
-            let joints = prior.to_joints(&x)?;
-            let terms = reward(&joints, &z, &rg.reward, &mut rng)?;
-            let objective = (full(&x)? + terms.total)?;
-            soft_blend_objective = to_vec(&objective)?;
-            let mut grads = objective.sum_all()?.backward()?;
-            let grad = grads
-                .remove(logits.as_tensor())
-                .ok_or_else(|| candle_core::Error::Msg("no gradient reached the mask".into()))?;
-            // Per-sample gradient normalisation, as DNO's loop.
-            let norm = dno::per_sample_norm(&grad)?;
-            grads.insert(logits.as_tensor(), grad.broadcast_div(&norm.reshape((batch, 1, 1))?)?);
-            adam.step(&grads, blend_schedule.learning_rate(step))?;
-            progress(&StageProgress {
-                stage: Stage::SoftBlend,
-                round,
-                step: step + 1,
-                steps: rg.first_steps,
-                loss: mean(&soft_blend_objective),
-            });
-        }
-        let z_blend = soft_blend(logits.as_tensor(), &z1, &z2)?.detach();
-        seconds.soft_blend += clock.elapsed().as_secs_f64();
+        let (z_blend, masks, soft_blend_objective) = match rg.ablation.fixed_mask() {
+            Some(m) => (blend(&Tensor::new(m, z1.device())?, &z1, &z2)?, Vec::new(), Vec::new()),
+            None => {
+                let stages = MaskStages { prior, rg, solver, full: &full, weights: &reward_weights, round };
+                stages.search(&z1, &z2, seed, seconds, progress)?
+            }
+        };
 
         // Final round (eq. 12).
         let clock = Instant::now();
@@ -586,6 +590,86 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         })
     }
 }
+
+/// The mask search of one restart: eq. 13's binary candidates, then the soft blend.
+struct MaskStages<'a, M: Denoiser + ?Sized> {
+    prior: &'a Prior,
+    rg: &'a RgDnoConfig,
+    solver: &'a UnrolledDdim<'a, M>,
+    full: &'a dyn Fn(&Tensor) -> candle_core::Result<Tensor>,
+    weights: &'a RewardWeights,
+    round: usize,
+}
+
+impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
+    /// The blended noise `z'`, each sample's chosen binary mask and its `F_C + R` after the
+    /// soft blend.
+    fn search(
+        &self,
+        z1: &Tensor,
+        z2: &Tensor,
+        seed: u64,
+        seconds: &mut StageSeconds,
+        progress: &mut dyn FnMut(&StageProgress),
+    ) -> Result<(Tensor, Vec<ChosenMask>, Vec<f64>), RgDnoError> {
+        let MaskStages { prior, rg, solver, full, weights, round } = *self;
+        let batch = z1.dim(0)?;
+        // Binary masks (eq. 13), no gradients.
+        let clock = Instant::now();
+        let mut rng = StdRng::seed_from_u64(seed ^ 0x0052_4744_4e4f);
+        let candidates: Vec<MaskCandidate> =
+            MaskCandidate::all(rg.segments).into_iter().filter(|c| rg.mask_kinds.contains(&c.kind)).collect();
+        let (masks, best_masks) = choose_masks(
+            &candidates,
+            (z1, z2),
+            solver,
+            full,
+            prior,
+            weights,
+            rg.mask_batch.max(1),
+            &mut rng,
+            &mut |done| {
+                progress(&StageProgress { stage: Stage::Masks, round, step: done, steps: candidates.len(), loss: 0.0 })
+            },
+        )?;
+        seconds.masks += clock.elapsed().as_secs_f64();
+
+        // Soft blend (supp. A): logits M' from the chosen masks, Adam on F_C + R.
+        let clock = Instant::now();
+        let logits = Var::from_tensor(&soft_logits(&best_masks)?)?;
+        let mut adam = AdamW::new(vec![logits.clone()], 0.0)?;
+        let blend_schedule =
+            DnoConfig { steps: rg.first_steps, lr: rg.first_lr, lr_warmup_steps: 0, ..DnoConfig::default() };
+        let mut soft_blend_objective = vec![f64::NAN; batch];
+        for step in 0..rg.first_steps {
+            let z = soft_blend(logits.as_tensor(), z1, z2)?;
+            let x = dno::Solver::solve(solver, &z)?;
+            let joints = prior.to_joints(&x)?;
+            let terms = reward(&joints, &z, weights, &mut rng)?;
+            let objective = (full(&x)? + terms.total)?;
+            soft_blend_objective = to_vec(&objective)?;
+            let mut grads = objective.sum_all()?.backward()?;
+            let grad = grads
+                .remove(logits.as_tensor())
+                .ok_or_else(|| candle_core::Error::Msg("no gradient reached the mask".into()))?;
+            // Per-sample gradient normalisation, as DNO's loop.
+            let norm = dno::per_sample_norm(&grad)?;
+            grads.insert(logits.as_tensor(), grad.broadcast_div(&norm.reshape((batch, 1, 1))?)?);
+            adam.step(&grads, blend_schedule.learning_rate(step))?;
+            progress(&StageProgress {
+                stage: Stage::SoftBlend,
+                round,
+                step: step + 1,
+                steps: rg.first_steps,
+                loss: mean(&soft_blend_objective),
+            });
+        }
+        let z_blend = soft_blend(logits.as_tensor(), z1, z2)?.detach();
+        seconds.soft_blend += clock.elapsed().as_secs_f64();
+        Ok((z_blend, masks, soft_blend_objective))
+    }
+}
+
 
 /// Eq. 13 per sample: every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient) and
 /// scored by `F_C + R`; returns each sample's best candidate and its mask `[B, T, 263]`.
@@ -680,5 +764,25 @@ mod tests {
         let mut unpolished = paper.clone();
         unpolished.inversion.polish_steps = 0;
         assert_eq!(unpolished.scaled_to(50).inversion.polish_steps, 0);
+    }
+
+    #[test]
+    fn ablations_change_the_groups_or_the_blend_they_name() {
+        let parsed = ConstraintGroups {
+            retrieval: vec!["c1".into()],
+            random_noise: vec!["c2".into()],
+            retrieved_noise: vec!["c1".into(), "c2".into()],
+        };
+        let all = || vec!["c1".to_owned(), "c2".to_owned(), "c3".to_owned()];
+        assert_eq!(Ablation::None.groups(parsed.clone(), all()), parsed);
+        assert_eq!(Ablation::NoParsing.groups(parsed.clone(), all()).retrieval, all());
+        let same = Ablation::SameSets.groups(parsed.clone(), all());
+        assert_eq!((same.retrieval, same.random_noise, same.retrieved_noise), (parsed.retrieval, all(), all()));
+        assert_eq!(Ablation::RandomOnly.fixed_mask(), Some(1.0));
+        assert_eq!(Ablation::RetrievedOnly.fixed_mask(), Some(0.0));
+        assert_eq!(Ablation::HalfMask.fixed_mask(), Some(0.5));
+        assert_eq!(Ablation::NoReward.fixed_mask(), None);
+        let config: RgDnoConfig = serde_json::from_str(r#"{"ablation": "half_mask"}"#).unwrap();
+        assert_eq!(config.ablation, Ablation::HalfMask);
     }
 }

@@ -48,6 +48,8 @@ impl Default for RewardWeights {
 }
 
 impl RewardWeights {
+    /// No reward term (Table 4's "w/o reward").
+    pub const NONE: Self = Self { jitter: 0.0, foot_skate: 0.0, decorrelation: 0.0, semantic: 0.0 };
     /// Supp. A, Task-1 (narrow gap): `L_jitter + L_decorr + 10·L_foot_skate`.
     pub const NARROW_GAP: Self = Self { jitter: 1.0, foot_skate: 10.0, decorrelation: 1.0, semantic: 0.0 };
     /// Supp. A, Task-2 (low barrier): `L_jitter + L_decorr`.
