@@ -26,7 +26,7 @@ pub struct BenchTasksArgs {
     /// Only tasks whose file name contains one of these strings.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
-    /// Methods to run.
+    /// Methods to run (`rg-dno` too; the table then compares it with DNO per task).
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Unconstrained, MethodArg::Ik, MethodArg::IkReg, MethodArg::Dno])]
     methods: Vec<MethodArg>,
     #[command(flatten)]
@@ -167,6 +167,45 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             out.push_str(&format!(
                 "| {task} | {ratio} | {:.2} |\n",
                 d.max_acceleration / u.max_acceleration.max(1e-12)
+            ));
+        }
+    }
+    let pairs: Vec<_> = by_task
+        .iter()
+        .filter_map(|(task, m)| Some((task, m.get(&Method::Dno)?, m.get(&Method::RgDno)?)))
+        .collect();
+    if !pairs.is_empty() {
+        out.push_str(
+            "\nRG-DNO against DNO (same seeds; errors after the refinement and the clean-up, the network's in brackets):\n\n",
+        );
+        out.push_str(
+            "| task | DNO error | RG-DNO error | lower | all met DNO → RG-DNO | max penetration (m) DNO → RG-DNO | max acc DNO → RG-DNO | steps DNO → RG-DNO | retrieved | time DNO → RG-DNO (s) |\n",
+        );
+        out.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
+        for (task, d, r) in pairs {
+            let steps = |p: &TaskReport| p.steps.as_ref().map_or("–".to_owned(), |s| format!("{:?}", s.counts));
+            let retrieved = r
+                .rg_dno
+                .as_ref()
+                .and_then(|rg| rg.retrieved.first())
+                .map_or_else(|| r.fallback.clone().unwrap_or_default(), |x| x.source.to_string());
+            out.push_str(&format!(
+                "| {task} | {:.6} ({:.6}) | {:.6} ({:.6}) | {} | {:.0}% → {:.0}% | {} → {} | {:.3} → {:.3} | {} → {} | {retrieved} | {:.0} → {:.0} |\n",
+                d.constraint_error,
+                d.cleanup.before.constraint_error,
+                r.constraint_error,
+                r.cleanup.before.constraint_error,
+                if r.constraint_error < d.constraint_error { "yes" } else { "no" },
+                100.0 * d.success_rate,
+                100.0 * r.success_rate,
+                fmt_opt(d.max_scene_penetration_m, 3),
+                fmt_opt(r.max_scene_penetration_m, 3),
+                d.max_acceleration,
+                r.max_acceleration,
+                steps(d),
+                steps(r),
+                d.seconds,
+                r.seconds
             ));
         }
     }
