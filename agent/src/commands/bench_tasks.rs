@@ -170,10 +170,8 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             ));
         }
     }
-    let pairs: Vec<_> = by_task
-        .iter()
-        .filter_map(|(task, m)| Some((task, m.get(&Method::Dno)?, m.get(&Method::RgDno)?)))
-        .collect();
+    let pairs: Vec<_> =
+        by_task.iter().filter_map(|(task, m)| Some((task, m.get(&Method::Dno)?, m.get(&Method::RgDno)?))).collect();
     if !pairs.is_empty() {
         out.push_str(
             "\nRG-DNO against DNO (same seeds; errors after the refinement and the clean-up, the network's in brackets):\n\n",

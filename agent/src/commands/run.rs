@@ -298,10 +298,10 @@ pub fn print_summary(report: &TaskReport) {
                 m.candidate.bits,
                 m.constraint_error,
                 m.reward,
-                rg.restart.get(i).filter(|_| report.config.dno.restarts > 1).map_or(String::new(), |r| format!(
-                    " (restart {r} of {})",
-                    report.config.dno.restarts
-                )),
+                rg.restart
+                    .get(i)
+                    .filter(|_| report.config.dno.restarts > 1)
+                    .map_or(String::new(), |r| format!(" (restart {r} of {})", report.config.dno.restarts)),
                 w = m.candidate.segments
             );
         }

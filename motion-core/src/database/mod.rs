@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 use candle_core::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
+use crate::import::ImportWarning;
 use crate::import::{check_clip_length, resample, short_number};
 use crate::limits::LimitExceeded;
 use crate::motion::mirror;
@@ -26,7 +27,6 @@ use crate::representation::{
 use crate::skeleton::{Pose, FPS};
 use crate::tensor_file::{read_metadata, write_safetensors};
 use crate::MotionError;
-use crate::import::ImportWarning;
 use catalog::{Catalog, SourceClip};
 
 /// Version of the file layout, checked on load.

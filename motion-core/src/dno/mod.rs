@@ -20,7 +20,7 @@ mod tests;
 
 pub use config::DnoConfig;
 pub(crate) use optimize::per_sample_norm;
-pub use optimize::{optimize, optimize_with_restarts, DnoResult, DnoStep, RestartsResult, SampleHistory};
 pub(crate) use optimize::{beats, take_rows};
+pub use optimize::{optimize, optimize_with_restarts, DnoResult, DnoStep, RestartsResult, SampleHistory};
 pub use regularizer::{decorrelation_terms, noise_regularize_1d};
 pub use solver::{Solver, UnrolledDdim};

@@ -525,7 +525,8 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         let device = z_r.device();
         let guidance = solver.guidance;
         let z0 = gaussian((batch, frames, FEATURE_DIM), seed, device)?;
-        let initial_joints = prior.to_joints(&solver.sampler.sample(solver.denoiser, &z0, &solver.text, guidance)?)?;
+        let initial_joints =
+            prior.to_joints(&solver.sampler.sample(solver.denoiser, &z0, &solver.text, guidance)?)?;
 
         // The two branches (eqs. 8–9) in one batch: rows 0..B are z1 from random noise fitted to
         // C1, rows B..2B are z2 from z_R fitted to C2.
@@ -545,14 +546,19 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         let branches = |x: &Tensor| Tensor::cat(&[f1(&x.narrow(0, 0, batch)?)?, f2(&x.narrow(0, batch, batch)?)?], 0);
         let starts = Tensor::cat(&[&z0, z_r], 0)?;
         let fitted = dno::optimize(both, branches, &starts, &first, |s| {
-            progress(&StageProgress { stage: Stage::Branches, round, step: s.step + 1, steps: s.steps, loss: mean(&s.loss) })
+            progress(&StageProgress {
+                stage: Stage::Branches,
+                round,
+                step: s.step + 1,
+                steps: s.steps,
+                loss: mean(&s.loss),
+            })
         })?;
         let (z1, z2) = (fitted.z.narrow(0, 0, batch)?, fitted.z.narrow(0, batch, batch)?);
         let (z1_error, z2_error) = (fitted.loss[..batch].to_vec(), fitted.loss[batch..].to_vec());
         seconds.branches += clock.elapsed().as_secs_f64();
 
-        let reward_weights =
-            if rg.ablation == Ablation::NoReward { RewardWeights::NONE } else { rg.reward };
+        let reward_weights = if rg.ablation == Ablation::NoReward { RewardWeights::NONE } else { rg.reward };
         let full = program_objective(prior, compiled, &initial_joints, config.jitter_weight);
         let (z_blend, masks, soft_blend_objective) = match rg.ablation.fixed_mask() {
             Some(m) => (blend(&Tensor::new(m, z1.device())?, &z1, &z2)?, Vec::new(), Vec::new()),
@@ -669,7 +675,6 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         Ok((z_blend, masks, soft_blend_objective))
     }
 }
-
 
 /// Eq. 13 per sample: every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient) and
 /// scored by `F_C + R`; returns each sample's best candidate and its mask `[B, T, 263]`.
