@@ -14,7 +14,7 @@ use std::time::Instant;
 use candle_core::Device;
 
 use crate::constraints::{CompiledProgram, ConstraintError};
-use crate::database::{DatabaseError, DatabaseSource};
+use crate::database::DatabaseSource;
 use crate::evaluation::{report, TaskReport};
 use crate::export::bvh::BvhUnit;
 use crate::export::{position_targets, write_outputs, ExportError, ExportInput, ExportManifest, OutputFolder};
@@ -23,7 +23,7 @@ use crate::prior::Prior;
 use crate::program::TaskProgram;
 use crate::quality::tensor_to_poses;
 use crate::render::{motion_gif, motion_strip, GifOptions, RenderError, StripRow};
-use crate::rgdno::retrieval::{RetrievalCorpus, RetrievalError};
+use crate::rgdno::retrieval::RetrievalCorpus;
 use crate::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoTask};
 use crate::skeleton::{Pose, FPS};
 
@@ -77,17 +77,9 @@ pub enum PipelineError {
     /// Generation failed or a setting is unusable.
     #[error(transparent)]
     Generation(#[from] GenerationError),
-    /// The retrieval database could not be opened.
-    #[error("the retrieval database ({source_name}): {error}")]
-    Database {
-        /// Where it was looked for.
-        source_name: String,
-        /// What went wrong.
-        error: Box<DatabaseError>,
-    },
-    /// The retrieval corpus could not be built.
+    /// RG-DNO failed (a reason to fall back never reaches the caller).
     #[error(transparent)]
-    Retrieval(#[from] RetrievalError),
+    RgDno(#[from] RgDnoError),
     /// A tensor operation failed.
     #[error(transparent)]
     Tensor(#[from] candle_core::Error),
@@ -128,11 +120,7 @@ pub fn run_task(
                 fallback = Some(why);
                 config.method = Method::Dno;
             }
-            Err(RgDnoError::Generation(e)) => return Err(e.into()),
-            Err(RgDnoError::Retrieval(e)) => return Err(e.into()),
-            Err(RgDnoError::Database { source_name, error }) => {
-                return Err(PipelineError::Database { source_name, error })
-            }
+            Err(e) => return Err(e.into()),
         }
     }
     let generated = match generated {

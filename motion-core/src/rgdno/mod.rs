@@ -365,9 +365,7 @@ pub fn generate_rg_dno(
     let RgDnoTask { program, compiled, corpus } = task;
     rg.validate(compiled.frames())?;
     config.check(compiled.frames())?;
-    if config.dno.restarts == 0 {
-        return Err(GenerationError::Setting("dno.restarts must be at least 1".into()).into());
-    }
+    config.dno.validate()?;
     let start = Instant::now();
     let all = program.constraints.iter().map(|c| c.id.clone()).collect();
     let groups = rg.ablation.groups(program.constraint_groups().ok_or(RgDnoError::NoParse)?, all);
@@ -392,8 +390,7 @@ pub fn generate_rg_dno(
     let text = prior.encode_text(&vec![program.text.as_str(); batch], device)?;
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
     let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.dno.ddim_steps)?;
-    let both_text = text.repeat((2, 1))?;
-    let both = UnrolledDdim::new(&prior.mdm, both_text.clone(), guidance, config.dno.ddim_steps)?;
+    let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, guidance, config.dno.ddim_steps)?;
 
     // Inversion (eq. 7), once for the batch.
     let clock = Instant::now();
@@ -462,8 +459,8 @@ pub fn generate_rg_dno(
     Ok((generated, report))
 }
 
-/// What every restart shares: the compiled task and its groups, the settings, the two solvers (batch `B` and `2B`) and
-/// the inverted noise `z_R` `[B, T, 263]`.
+/// What every restart shares: the compiled task and its groups, the settings, the two solvers
+/// (batch `B` and `2B`) and the inverted noise `z_R` `[B, T, 263]`.
 struct Stages<'a, M: Denoiser + ?Sized> {
     prior: &'a Prior,
     compiled: &'a CompiledProgram,
