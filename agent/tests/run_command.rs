@@ -134,3 +134,91 @@ fn a_damaged_prior_is_one_line_without_a_backtrace() {
     assert!(stderr.lines().count() == 1 && !stderr.contains("error.rs"), "{stderr}");
     assert!(!out.exists(), "an output folder was written for a failed run");
 }
+
+/// Per sample: the constraints met and the constraint error of a report.
+fn standing(report: &serde_json::Value) -> Vec<(usize, f64)> {
+    let errors = report["constraint_error_per_sample"].as_array().unwrap();
+    let constraints = report["constraints"].as_array().unwrap();
+    (0..errors.len())
+        .map(|b| {
+            let met = constraints.iter().filter(|c| c["pass"][b].as_bool().unwrap()).count();
+            (met, errors[b].as_f64().unwrap())
+        })
+        .collect()
+}
+
+#[test]
+fn retries_generate_the_unmet_samples_again_and_keep_the_better_attempt() {
+    let dir = tempfile::tempdir().unwrap();
+    // The pelvis 2 m to the side on the last frame: no sample meets it after two DNO steps.
+    let program = write(
+        dir.path(),
+        "task.json",
+        r#"{"text": "a person walks", "frames": 30, "constraints": [{"id": "c1", "expr": {"op": "equal",
+            "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "x"}, "target": [2.0],
+            "frames": {"keyframes": ["last"]}}}]}"#,
+    );
+    let run = |name: &str, retries: &str| {
+        let out = dir.path().join(name);
+        let output = mogen(&[
+            "run",
+            &program,
+            "--method",
+            "dno",
+            "--steps",
+            "2",
+            "-n",
+            "2",
+            "--no-refine",
+            "--retry-unmet",
+            retries,
+            "--out",
+            &out.display().to_string(),
+        ]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+        (report, String::from_utf8_lossy(&output.stderr).into_owned())
+    };
+    let (once, once_log) = run("once", "0");
+    let (retried, log) = run("retried", "2");
+    assert!(once.get("attempt").is_none(), "no attempts are reported without retries: {once}");
+    assert!(!once_log.contains("attempt 2"), "{once_log}");
+    assert!(log.contains("attempt 2 of 3: sample(s) 0, 1 miss a constraint"), "{log}");
+    let kept = retried["attempt"].as_array().unwrap();
+    assert_eq!(kept.len(), 2, "{retried}");
+    for ((met, error), (met_once, error_once)) in standing(&retried).into_iter().zip(standing(&once)) {
+        assert!(met > met_once || (met == met_once && error <= error_once), "{error} against {error_once}");
+    }
+    // The first attempt is the run without retries: a sample that kept it has its error.
+    for (b, k) in kept.iter().enumerate() {
+        if k.as_u64() == Some(0) {
+            assert_eq!(retried["constraint_error_per_sample"][b], once["constraint_error_per_sample"][b]);
+        }
+    }
+    assert!(kept.iter().any(|k| k.as_u64() != Some(0)), "fresh noise ends nearer the target for some sample: {kept:?}");
+}
+
+#[test]
+fn retries_leave_samples_that_meet_every_constraint_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = write(dir.path(), "task.json", &PROGRAM.replace("\"max\": 1.2", "\"max\": 5.0"));
+    let out = dir.path().join("out");
+    let output = mogen(&[
+        "run",
+        &program,
+        "--method",
+        "dno",
+        "--steps",
+        "2",
+        "--retry-unmet",
+        "3",
+        "--out",
+        &out.display().to_string(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(!String::from_utf8_lossy(&output.stderr).contains("attempt 2"));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["attempt"], serde_json::json!([0]), "{report}");
+}

@@ -91,6 +91,8 @@ fn without_dry_run_the_task_becomes_motions_with_rg_dno() {
         "1",
         "--rg-dno",
         tiny,
+        "--retry-unmet",
+        "1",
         "--out",
         out.path().to_str().unwrap(),
     ]);
@@ -112,6 +114,11 @@ fn without_dry_run_the_task_becomes_motions_with_rg_dno() {
     let (stdout, stderr) = (text(&output.stdout), text(&output.stderr));
     assert!(stdout.contains("rg-dno: constraint error") && stdout.contains("retrieved "), "{stdout}");
     assert!(stderr.contains("retrieval corpus: ") && stderr.contains("built in memory"), "{stderr}");
+    // Three steps meet nothing: the sample runs again, RG-DNO on the same corpus (built once).
+    assert!(stderr.contains("attempt 2 of 2: sample(s) 0 miss a constraint"), "{stderr}");
+    assert_eq!(stderr.matches("retrieval corpus: ").count(), 1, "{stderr}");
+    assert_eq!(report["attempt"].as_array().map(Vec::len), Some(1), "{report}");
+    assert_eq!(rg["masks"].as_array().map(Vec::len), Some(1), "{rg}");
 }
 
 #[test]

@@ -146,6 +146,10 @@ pub struct TaskReport {
     /// Why the method that ran is not the one asked for (RG-DNO falling back to DNO).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fallback: Option<String>,
+    /// With retries of the samples that miss a constraint ([`crate::pipeline::TaskSettings::retry_unmet`]):
+    /// the attempt each sample kept (0: the first); absent when retries are off.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attempt: Option<Vec<usize>>,
 }
 
 /// The constraint figures of one set of joints.
@@ -212,6 +216,24 @@ fn worst(values: &Option<Vec<f64>>) -> Option<f64> {
 }
 
 impl TaskReport {
+    /// The samples that miss at least one constraint at its tolerance.
+    pub fn unmet_samples(&self) -> Vec<usize> {
+        (0..self.constraint_error_per_sample.len())
+            .filter(|&b| self.constraints.iter().any(|c| !c.pass.get(b).copied().unwrap_or(false)))
+            .collect()
+    }
+
+    /// Whether sample `i` of `other` (another attempt at the same program) is better than this
+    /// report's sample `b`: more constraints met at their tolerances, or as many with a lower
+    /// constraint error (a number beats NaN).
+    pub fn beaten_by(&self, b: usize, other: &TaskReport, i: usize) -> bool {
+        let met =
+            |r: &TaskReport, s: usize| r.constraints.iter().filter(|c| c.pass.get(s).copied().unwrap_or(false)).count();
+        let (own, theirs) = (met(self, b), met(other, i));
+        let error = |r: &TaskReport, s: usize| r.constraint_error_per_sample.get(s).copied().unwrap_or(f64::NAN);
+        theirs > own || (theirs == own && crate::dno::beats(error(other, i), error(self, b)))
+    }
+
     /// The name of the first figure that is NaN or infinite (`None` when all are finite): a
     /// report must never store a broken figure as `null` or print it as a pass.
     pub fn non_finite_figure(&self) -> Option<String> {
@@ -305,6 +327,7 @@ pub fn report(
         cleanup,
         rg_dno: None,
         fallback: None,
+        attempt: None,
     })
 }
 
@@ -376,5 +399,11 @@ mod tests {
         assert!((r.max_under_floor_m - 0.16).abs() < 1e-6, "{}", r.max_under_floor_m);
         assert_eq!(r.constraints[0].pass, vec![true, false]);
         assert_eq!(r.success_rate, 0.5);
+        // The sample under the floor is the one to retry; the standing one beats it, not the
+        // reverse, and a sample never beats itself.
+        assert_eq!(r.unmet_samples(), vec![1]);
+        assert!(r.beaten_by(1, &r, 0));
+        assert!(!r.beaten_by(0, &r, 1));
+        assert!(!r.beaten_by(1, &r, 1));
     }
 }

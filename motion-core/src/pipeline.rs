@@ -15,7 +15,7 @@ use candle_core::Device;
 
 use crate::constraints::{CompiledProgram, ConstraintError};
 use crate::database::DatabaseSource;
-use crate::evaluation::{report, TaskReport};
+use crate::evaluation::{self, TaskReport};
 use crate::export::bvh::BvhUnit;
 use crate::export::{position_targets, write_outputs, ExportError, ExportInput, ExportManifest, OutputFolder};
 use crate::generation::{generate, Generated, GenerationConfig, GenerationError, Method};
@@ -24,7 +24,7 @@ use crate::program::TaskProgram;
 use crate::quality::tensor_to_poses;
 use crate::render::{motion_gif, motion_strip, GifOptions, RenderError, StripRow};
 use crate::rgdno::retrieval::RetrievalCorpus;
-use crate::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoTask};
+use crate::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
 use crate::skeleton::{Pose, FPS};
 
 /// How a task is run: the method and its settings, RG-DNO's stages and where it retrieves from.
@@ -37,6 +37,11 @@ pub struct TaskSettings {
     pub rg_dno: RgDnoConfig,
     /// RG-DNO's retrieval database.
     pub database: DatabaseSource,
+    /// Further attempts for the samples that miss a constraint at its tolerance: each such
+    /// sample is generated again from fresh start noise (attempt k + 1 from seed + k·N_S) and
+    /// keeps its best attempt (most constraints met, then the lowest constraint error), up to
+    /// this many times (DNO's noise search, spent only where it is needed). 0: off.
+    pub retry_unmet: usize,
 }
 
 /// What a running task reports.
@@ -98,7 +103,9 @@ pub enum PipelineError {
 }
 
 /// Runs `program` with `settings`: compile, generate (RG-DNO with its fallback to DNO), and
-/// evaluate. `on` gets every optimisation step and the notes a user should read.
+/// evaluate; then, with [`TaskSettings::retry_unmet`], generate the samples that miss a
+/// constraint again and keep each one's best attempt. `on` gets every optimisation step and
+/// the notes a user should read.
 pub fn run_task(
     prior: &Prior,
     program: &TaskProgram,
@@ -109,48 +116,94 @@ pub fn run_task(
     let compiled = CompiledProgram::compile(program, device)?;
     let mut config = settings.generation.clone();
     let mut fallback = None;
-    let mut rg_report = None;
-    let mut generated = None;
+    let mut corpus = None;
     if config.method == Method::RgDno {
-        match rg_dno(prior, program, &compiled, settings, device, &mut on) {
-            Ok((done, report)) => (generated, rg_report) = (Some(done), Some(report)),
-            Err(e @ (RgDnoError::NoParse | RgDnoError::NothingRetrieved)) => {
-                let why = e.to_string();
-                on(Event::Note(format!("RG-DNO falls back to DNO: {why}")));
-                fallback = Some(why);
-                config.method = Method::Dno;
-            }
-            Err(e) => return Err(e.into()),
+        match rg_dno_corpus(program, &compiled, settings, device, &mut on) {
+            Ok(built) => corpus = Some(built),
+            Err(e) => fallback = Some(fall_back(e, &mut config, &mut on)?),
         }
     }
-    let generated = match generated {
-        Some(done) => done,
-        None => {
-            let stage = config.method.to_string();
-            generate(prior, program, &compiled, &config, device, |p| {
-                on(Event::Step { stage: &stage, round: p.round, step: p.step + 1, steps: p.steps, loss: p.loss })
-            })?
+    let attempt = Attempt { prior, program, compiled: &compiled, corpus: corpus.as_ref(), settings, device };
+    let (mut generated, mut rg_report) = match attempt.run(&config, &mut on) {
+        Err(PipelineError::RgDno(e @ RgDnoError::NothingRetrieved)) => {
+            fallback = Some(fall_back(e, &mut config, &mut on)?);
+            attempt.run(&config, &mut on)?
         }
+        done => done?,
     };
-    let mut report = report(program, &compiled, &generated, &config)?;
+    let mut report = evaluation::report(program, &compiled, &generated, &config)?;
+    let mut kept = vec![0; config.samples];
+    for k in 1..=settings.retry_unmet {
+        let unmet = report.unmet_samples();
+        if unmet.is_empty() {
+            break;
+        }
+        let seed = retry_seed(&config, k);
+        let list = unmet.iter().map(usize::to_string).collect::<Vec<_>>().join(", ");
+        on(Event::Note(format!(
+            "attempt {} of {}: sample(s) {list} miss a constraint; generating them again from seed {seed}",
+            k + 1,
+            settings.retry_unmet + 1
+        )));
+        let retry_config = GenerationConfig { samples: unmet.len(), seed, ..config.clone() };
+        let (retry, retry_rg) = attempt.run(&retry_config, &mut on)?;
+        let retry_report = evaluation::report(program, &compiled, &retry, &retry_config)?;
+        let mut rows = vec![None; config.samples];
+        for (i, &b) in unmet.iter().enumerate() {
+            if report.beaten_by(b, &retry_report, i) {
+                rows[b] = Some(i);
+                kept[b] = k;
+            }
+        }
+        generated = generated.with_rows_from(retry, &rows)?;
+        rg_report = match (rg_report, retry_rg) {
+            (Some(own), Some(other)) => Some(own.with_rows_from(other, &rows)),
+            (own, _) => own,
+        };
+        report = evaluation::report(program, &compiled, &generated, &config)?;
+    }
     report.rg_dno = rg_report;
     report.fallback = fallback;
+    report.attempt = (settings.retry_unmet > 0).then_some(kept);
     if let Some(figure) = report.non_finite_figure() {
         return Err(PipelineError::NonFinite(figure));
     }
     Ok(TaskRun { generated, report })
 }
 
-/// RG-DNO on `program`: opens the database, builds the corpus for the program's frame count and
-/// runs the stages.
-fn rg_dno(
-    prior: &Prior,
+/// The start seed of retry `k` (≥ 1): `seed + k·N_S`, so that no retry repeats a start noise of
+/// an earlier attempt's restarts (restart r of an attempt from seed s starts from s + r).
+fn retry_seed(config: &GenerationConfig, k: usize) -> u64 {
+    config.seed.wrapping_add((k * config.dno.restarts.max(1)) as u64)
+}
+
+/// Switches `config` to DNO when `error` is a reason to fall back (no relational parse, nothing
+/// retrieved), telling `on` why; any other error is returned.
+fn fall_back(
+    error: RgDnoError,
+    config: &mut GenerationConfig,
+    on: &mut impl FnMut(Event<'_>),
+) -> Result<String, PipelineError> {
+    match error {
+        RgDnoError::NoParse | RgDnoError::NothingRetrieved => {
+            let why = error.to_string();
+            on(Event::Note(format!("RG-DNO falls back to DNO: {why}")));
+            config.method = Method::Dno;
+            Ok(why)
+        }
+        error => Err(error.into()),
+    }
+}
+
+/// RG-DNO's retrieval corpus for `program`: opens the database and crops its windows to the
+/// program's frame count (built once for every attempt).
+fn rg_dno_corpus(
     program: &TaskProgram,
     compiled: &CompiledProgram,
     settings: &TaskSettings,
     device: &Device,
     on: &mut impl FnMut(Event<'_>),
-) -> Result<(Generated, crate::rgdno::RgDnoReport), RgDnoError> {
+) -> Result<RetrievalCorpus, RgDnoError> {
     if program.relational_parse.is_none() {
         return Err(RgDnoError::NoParse);
     }
@@ -167,10 +220,52 @@ fn rg_dno(
         corpus.len(),
         clock.elapsed().as_secs_f64()
     )));
-    let task = RgDnoTask { program, compiled, corpus: &corpus };
-    generate_rg_dno(prior, task, &settings.generation, &settings.rg_dno, device, |p| {
-        on(Event::Step { stage: p.stage.name(), round: p.round, step: p.step, steps: p.steps, loss: p.loss })
-    })
+    Ok(corpus)
+}
+
+/// One attempt at a compiled task: everything but the generation settings, which change from
+/// attempt to attempt (the samples, the seed, the method after a fallback).
+struct Attempt<'a> {
+    prior: &'a Prior,
+    program: &'a TaskProgram,
+    compiled: &'a CompiledProgram,
+    /// RG-DNO's corpus; `None` when the method is not RG-DNO.
+    corpus: Option<&'a RetrievalCorpus>,
+    settings: &'a TaskSettings,
+    device: &'a Device,
+}
+
+impl Attempt<'_> {
+    /// Generates with `config` (RG-DNO on the corpus when the method is RG-DNO).
+    fn run(
+        &self,
+        config: &GenerationConfig,
+        on: &mut impl FnMut(Event<'_>),
+    ) -> Result<(Generated, Option<RgDnoReport>), PipelineError> {
+        let Attempt { prior, program, compiled, corpus, settings, device } = *self;
+        match (config.method, corpus) {
+            (Method::RgDno, Some(corpus)) => {
+                let task = RgDnoTask { program, compiled, corpus };
+                let (generated, report) = generate_rg_dno(prior, task, config, &settings.rg_dno, device, |p| {
+                    on(Event::Step {
+                        stage: p.stage.name(),
+                        round: p.round,
+                        step: p.step,
+                        steps: p.steps,
+                        loss: p.loss,
+                    })
+                })?;
+                Ok((generated, Some(report)))
+            }
+            _ => {
+                let stage = config.method.to_string();
+                let generated = generate(prior, program, compiled, config, device, |p| {
+                    on(Event::Step { stage: &stage, round: p.round, step: p.step + 1, steps: p.steps, loss: p.loss })
+                })?;
+                Ok((generated, None))
+            }
+        }
+    }
 }
 
 /// Choices about the exported files (default: no GIF, BVH in metres).
@@ -198,8 +293,13 @@ pub fn write_task(
     folder.write_npy("joints.npy", &generated.joints)?;
     folder.write("report.json", serde_json::to_string_pretty(report)?.as_bytes())?;
     let poses = tensor_to_poses(&generated.joints)?;
+    // A retried sample is labelled with the seed of the attempt it kept.
+    let seed = |i: usize| match report.attempt.as_ref().and_then(|a| a.get(i)) {
+        Some(&k) if k > 0 => retry_seed(config, k),
+        _ => config.seed,
+    };
     let labels: Vec<String> =
-        (0..poses.len()).map(|i| format!("{} sample {i} (seed {})", config.method, config.seed)).collect();
+        (0..poses.len()).map(|i| format!("{} sample {i} (seed {})", config.method, seed(i))).collect();
     let rows: Vec<StripRow<'_>> =
         poses.iter().zip(&labels).map(|(p, label)| StripRow { label: label.clone(), poses: p }).collect();
     let (scene, carried) = (program.scene_primitives(), program.carried_objects());

@@ -63,6 +63,11 @@ pub struct GenerationArgs {
     /// Random restarts N_S of DNO and RG-DNO; the best per sample is kept.
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
+    /// Attempts more for the samples that miss a constraint at its tolerance: each is generated
+    /// again from fresh noise (attempt k + 1 from seed + k·restarts) and keeps its best attempt
+    /// (most constraints met, then the lowest error); report.json's `attempt` says which. 0: off
+    #[arg(long, default_value_t = 0)]
+    pub retry_unmet: usize,
     /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).
     #[arg(long, value_parser = flags::learning_rate)]
     pub lr: Option<f64>,
@@ -130,7 +135,12 @@ impl GenerationArgs {
             Some(steps) => self.rg_dno.scaled_to(steps),
             None => (*self.rg_dno).clone(),
         };
-        TaskSettings { generation: self.config(method), rg_dno, database: database_source(self.database.as_deref()) }
+        TaskSettings {
+            generation: self.config(method),
+            rg_dno,
+            database: database_source(self.database.as_deref()),
+            retry_unmet: self.retry_unmet,
+        }
     }
 
     /// The generation settings for `method`.
@@ -282,6 +292,10 @@ pub fn print_summary(report: &TaskReport) {
     println!("  all constraints met by {:.0}% of the samples", 100.0 * report.success_rate);
     if let Some(why) = &report.fallback {
         println!("  RG-DNO fell back to DNO: {why}");
+    }
+    if let Some(attempt) = report.attempt.as_ref().filter(|a| a.iter().any(|&k| k > 0)) {
+        let kept: Vec<String> = attempt.iter().map(|k| (k + 1).to_string()).collect();
+        println!("  attempt kept per sample (1 = the first): {}", kept.join(", "));
     }
     if let Some(rg) = &report.rg_dno {
         if let Some(r) = rg.retrieved.first() {

@@ -170,18 +170,17 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         smoothed = Some(s);
         bar.set_position(r.step as u64);
         bar.set_message(format!("loss {s:.4} lr {:.1e} T={}", r.lr, r.frames));
-        if !bar.is_hidden() || r.step % 100 == 0 {
-            if bar.is_hidden() {
-                eprintln!(
-                    "step {}/{} loss {s:.4} velocity {:.4} foot contact {:.4} lr {:.1e} ({:.0} s)",
-                    r.step,
-                    r.steps,
-                    r.velocity,
-                    r.foot_contact,
-                    r.lr,
-                    start.elapsed().as_secs_f64()
-                );
-            }
+        // Not a terminal: a plain line every 100 steps instead of the bar.
+        if bar.is_hidden() && r.step % 100 == 0 {
+            eprintln!(
+                "step {}/{} loss {s:.4} velocity {:.4} foot contact {:.4} lr {:.1e} ({:.0} s)",
+                r.step,
+                r.steps,
+                r.velocity,
+                r.foot_contact,
+                r.lr,
+                start.elapsed().as_secs_f64()
+            );
         }
         if let Some(f) = csv.as_mut() {
             use std::io::Write;

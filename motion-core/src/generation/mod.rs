@@ -297,6 +297,39 @@ pub struct Generated {
     pub seconds: f64,
 }
 
+impl Generated {
+    /// These motions with rows taken from `other` (another attempt at the same program): row
+    /// `b` becomes `other`'s row `i` where `rows[b]` is `Some(i)`. The seconds add up.
+    pub fn with_rows_from(self, other: Generated, rows: &[Option<usize>]) -> candle_core::Result<Generated> {
+        let n = rows.len();
+        let index: Vec<u32> = rows.iter().enumerate().map(|(b, row)| row.map_or(b, |i| n + i) as u32).collect();
+        let index = Tensor::new(index, self.joints.device())?;
+        let pick = |own: &Tensor, theirs: &Tensor| Tensor::cat(&[own, theirs], 0)?.index_select(&index, 0);
+        Ok(Generated {
+            features: pick(&self.features, &other.features)?,
+            joints: pick(&self.joints, &other.joints)?,
+            raw_joints: pick(&self.raw_joints, &other.raw_joints)?,
+            initial_joints: pick(&self.initial_joints, &other.initial_joints)?,
+            refine: pick_rows(self.refine, &other.refine, rows),
+            foot_lock: pick_rows(self.foot_lock, &other.foot_lock, rows),
+            loss_history: pick_rows(self.loss_history, &other.loss_history, rows),
+            seconds: self.seconds + other.seconds,
+        })
+    }
+}
+
+/// `own` (one entry per sample) with entry `b` replaced by `other[i]` where `rows[b]` is
+/// `Some(i)`; entries without a row in `rows` are kept.
+pub fn pick_rows<T: Clone>(own: Vec<T>, other: &[T], rows: &[Option<usize>]) -> Vec<T> {
+    own.into_iter()
+        .enumerate()
+        .map(|(b, entry)| match rows.get(b).copied().flatten().and_then(|i| other.get(i)) {
+            Some(replacement) => replacement.clone(),
+            None => entry,
+        })
+        .collect()
+}
+
 /// Generates `config.samples` motions for `program` with `config.method`.
 ///
 /// `progress` is called after every optimisation step.
@@ -465,6 +498,51 @@ mod tests {
         config.samples = 1;
         config.jitter_weight = f64::INFINITY;
         assert!(config.check(40).unwrap_err().to_string().contains("jitter weight"));
+    }
+
+    #[test]
+    fn rows_from_another_attempt_replace_only_the_named_samples() {
+        let device = Device::Cpu;
+        // Sample b of an attempt is filled with `base + b` everywhere.
+        let attempt = |base: f32, samples: usize| -> Generated {
+            let rows = |shape: &[usize]| {
+                let per: usize = shape[1..].iter().product();
+                let data: Vec<f32> = (0..samples).flat_map(|b| vec![base + b as f32; per]).collect();
+                Tensor::from_vec(data, shape, &device).unwrap()
+            };
+            let report = |b: usize| RefineReport {
+                applied: true,
+                error_before: f64::from(base) + b as f64,
+                error_after: 0.0,
+                max_offset_m: 0.0,
+                mean_offset_m: 0.0,
+            };
+            Generated {
+                features: rows(&[samples, 2, FEATURE_DIM]),
+                joints: rows(&[samples, 2, 22, 3]),
+                raw_joints: rows(&[samples, 2, 22, 3]),
+                initial_joints: rows(&[samples, 2, 22, 3]),
+                refine: (0..samples).map(report).collect(),
+                foot_lock: Vec::new(),
+                loss_history: (0..samples).map(|b| vec![f64::from(base) + b as f64]).collect(),
+                seconds: 1.5,
+            }
+        };
+        // Three samples; the retry made two, and sample 2 takes the retry's second.
+        let merged = attempt(0.0, 3).with_rows_from(attempt(10.0, 2), &[None, None, Some(1)]).unwrap();
+        let first = |t: &Tensor| -> Vec<f32> {
+            (0..3).map(|b| t.get(b).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap()[0]).collect()
+        };
+        for t in [&merged.features, &merged.joints, &merged.raw_joints, &merged.initial_joints] {
+            assert_eq!(first(t), vec![0.0, 1.0, 11.0]);
+        }
+        assert_eq!(merged.joints.dims(), &[3, 2, 22, 3]);
+        assert_eq!(merged.refine.iter().map(|r| r.error_before).collect::<Vec<_>>(), vec![0.0, 1.0, 11.0]);
+        assert_eq!(merged.loss_history, vec![vec![0.0], vec![1.0], vec![11.0]]);
+        assert_eq!(merged.seconds, 3.0, "the seconds of both attempts");
+        // An empty per-sample list stays empty; a row past the other's end keeps its own entry.
+        assert!(merged.foot_lock.is_empty());
+        assert_eq!(pick_rows(vec![1, 2], &[7], &[Some(3), Some(0)]), vec![1, 7]);
     }
 
     #[test]

@@ -176,7 +176,7 @@ fn swing_rotations(poses: &[Pose], r_rot: &[DQuat]) -> Vec<[DQuat; NUM_JOINTS]> 
                     };
                     let local = acc.conjugate() * swing;
                     q[child] = local;
-                    acc = acc * local;
+                    acc *= local;
                 }
             }
             q

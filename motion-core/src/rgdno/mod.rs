@@ -30,7 +30,7 @@ use crate::constraints::CompiledProgram;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{Denoiser, Guidance};
 use crate::dno::{self, DnoConfig, UnrolledDdim};
-use crate::generation::{finish, program_objective, Generated, GenerationConfig, GenerationError};
+use crate::generation::{finish, pick_rows, program_objective, Generated, GenerationConfig, GenerationError};
 use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
 use crate::prior::Prior;
 use crate::program::{ConstraintGroups, TaskProgram};
@@ -257,6 +257,37 @@ pub struct StageSeconds {
     pub soft_blend: f64,
     /// The final DNO round.
     pub final_round: f64,
+}
+
+impl StageSeconds {
+    /// The seconds of both runs, stage by stage.
+    fn plus(&self, other: &StageSeconds) -> StageSeconds {
+        StageSeconds {
+            retrieval: self.retrieval + other.retrieval,
+            inversion: self.inversion + other.inversion,
+            branches: self.branches + other.branches,
+            masks: self.masks + other.masks,
+            soft_blend: self.soft_blend + other.soft_blend,
+            final_round: self.final_round + other.final_round,
+        }
+    }
+}
+
+impl RgDnoReport {
+    /// This report with the per-sample figures of `other` (another attempt at the same task)
+    /// where `rows[b]` is `Some(i)`, as [`Generated::with_rows_from`]; the seconds add up.
+    pub fn with_rows_from(self, other: RgDnoReport, rows: &[Option<usize>]) -> RgDnoReport {
+        RgDnoReport {
+            z1_error: pick_rows(self.z1_error, &other.z1_error, rows),
+            z2_error: pick_rows(self.z2_error, &other.z2_error, rows),
+            masks: pick_rows(self.masks, &other.masks, rows),
+            soft_blend_objective: pick_rows(self.soft_blend_objective, &other.soft_blend_objective, rows),
+            restart: pick_rows(self.restart, &other.restart, rows),
+            final_objective: pick_rows(self.final_objective, &other.final_objective, rows),
+            seconds: self.seconds.plus(&other.seconds),
+            ..self
+        }
+    }
 }
 
 /// What each RG-DNO stage did.
