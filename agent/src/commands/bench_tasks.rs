@@ -137,6 +137,11 @@ pub fn markdown(rows: &[ResultRow]) -> String {
                 fmt_opt(p.max_scene_penetration_m, 3),
             )
         };
+        // With --retry-unmet: how many samples kept a later attempt.
+        let met = match &p.attempt {
+            Some(kept) => format!("{met} ({} of {} retried)", kept.iter().filter(|&&k| k > 0).count(), kept.len()),
+            None => met,
+        };
         out.push_str(&format!(
             "| {} | {} | {:.6} | {met} | {penetration} | {:.3} | {:.2} | {:.3} | {:.4} | {:.3} | {skate} | {:.3} | {steps} | {:.1} |\n",
             r.task,

@@ -63,7 +63,7 @@ pub struct GenerationArgs {
     /// Random restarts N_S of DNO and RG-DNO; the best per sample is kept.
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
-    /// Attempts more for the samples that miss a constraint at its tolerance: each is generated
+    /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
     /// again from fresh noise (attempt k + 1 from seed + k·restarts) and keeps its best attempt
     /// (most constraints met, then the lowest error); report.json's `attempt` says which. 0: off
     #[arg(long, default_value_t = 0)]
