@@ -135,6 +135,30 @@ fn a_damaged_prior_is_one_line_without_a_backtrace() {
     assert!(!out.exists(), "an output folder was written for a failed run");
 }
 
+/// `mogen run` of `program` with two DNO steps, `samples` motions and `--retry-unmet retries`
+/// into `out`: its report and stderr.
+fn run_retrying(program: &str, out: &Path, samples: &str, retries: &str) -> (serde_json::Value, String) {
+    let output = mogen(&[
+        "run",
+        program,
+        "--method",
+        "dno",
+        "--steps",
+        "2",
+        "-n",
+        samples,
+        "--no-refine",
+        "--retry-unmet",
+        retries,
+        "--out",
+        &out.display().to_string(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    (report, String::from_utf8_lossy(&output.stderr).into_owned())
+}
+
 /// Per sample: the constraints met and the constraint error of a report.
 fn standing(report: &serde_json::Value) -> Vec<(usize, f64)> {
     let errors = report["constraint_error_per_sample"].as_array().unwrap();
@@ -158,30 +182,8 @@ fn retries_generate_the_unmet_samples_again_and_keep_the_better_attempt() {
             "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "x"}, "target": [2.0],
             "frames": {"keyframes": ["last"]}}}]}"#,
     );
-    let run = |name: &str, retries: &str| {
-        let out = dir.path().join(name);
-        let output = mogen(&[
-            "run",
-            &program,
-            "--method",
-            "dno",
-            "--steps",
-            "2",
-            "-n",
-            "2",
-            "--no-refine",
-            "--retry-unmet",
-            retries,
-            "--out",
-            &out.display().to_string(),
-        ]);
-        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-        let report: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
-        (report, String::from_utf8_lossy(&output.stderr).into_owned())
-    };
-    let (once, once_log) = run("once", "0");
-    let (retried, log) = run("retried", "2");
+    let (once, once_log) = run_retrying(&program, &dir.path().join("once"), "2", "0");
+    let (retried, log) = run_retrying(&program, &dir.path().join("retried"), "2", "2");
     assert!(once.get("attempt").is_none(), "no attempts are reported without retries: {once}");
     assert!(!once_log.contains("attempt 2"), "{once_log}");
     assert!(log.contains("attempt 2 of 3: sample(s) 0, 1 miss a constraint"), "{log}");
@@ -203,22 +205,7 @@ fn retries_generate_the_unmet_samples_again_and_keep_the_better_attempt() {
 fn retries_leave_samples_that_meet_every_constraint_alone() {
     let dir = tempfile::tempdir().unwrap();
     let program = write(dir.path(), "task.json", &PROGRAM.replace("\"max\": 1.2", "\"max\": 5.0"));
-    let out = dir.path().join("out");
-    let output = mogen(&[
-        "run",
-        &program,
-        "--method",
-        "dno",
-        "--steps",
-        "2",
-        "--retry-unmet",
-        "3",
-        "--out",
-        &out.display().to_string(),
-    ]);
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    assert!(!String::from_utf8_lossy(&output.stderr).contains("attempt 2"));
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let (report, log) = run_retrying(&program, &dir.path().join("out"), "1", "3");
+    assert!(!log.contains("attempt 2"), "{log}");
     assert_eq!(report["attempt"], serde_json::json!([0]), "{report}");
 }
