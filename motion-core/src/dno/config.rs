@@ -47,6 +47,12 @@ pub struct DnoConfig {
     /// Seed of the random start noise and of the loop's noise (regulariser padding,
     /// perturbation); restart r uses `seed + r` (default 0).
     pub seed: u64,
+    /// Return, per sample, the iterate with the lowest criterion loss seen instead of the last
+    /// one (default off, as DNO). RG-DNO turns it on for its branches and final round: a step
+    /// can throw a latent that starts from an inverted motion over a cliff it never climbs back
+    /// (HSI-2's `z2`: loss 0.017 at step 15, 0.37 from step 20 on).
+    #[serde(default)]
+    pub keep_best: bool,
 }
 
 impl Default for DnoConfig {
@@ -64,6 +70,7 @@ impl Default for DnoConfig {
             start_timestep: None,
             restarts: 1,
             seed: 0,
+            keep_best: false,
         }
     }
 }

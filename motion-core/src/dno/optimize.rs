@@ -49,10 +49,12 @@ pub struct SampleHistory {
 /// The outcome of [`optimize`].
 #[derive(Debug, Clone)]
 pub struct DnoResult {
-    /// Optimised noise after the last update, `[batch, frames, 263]`.
+    /// Optimised noise after the last update, `[batch, frames, 263]` (with
+    /// [`DnoConfig::keep_best`]: each sample's best iterate, the noise of `x`).
     pub z: Tensor,
-    /// Motion of the LAST forward (before the last update, as DNO returns it), detached,
-    /// `[batch, frames, 263]` normalised features.
+    /// Motion of the LAST forward (before the last update, as DNO returns it; with
+    /// `keep_best`, of each sample's lowest loss), detached, `[batch, frames, 263]` normalised
+    /// features.
     pub x: Tensor,
     /// Criterion loss of `x`, per sample.
     pub loss: Vec<f64>,
@@ -103,7 +105,9 @@ pub fn optimize<S: Solver + ?Sized>(
     let mut adam = AdamW::new(vec![z.clone()], 0.0)?;
     let mut rng = loop_rng(config.seed);
     let mut history = vec![SampleHistory::default(); batch];
-    let mut last = None;
+    let mut last: Option<(Tensor, Vec<f64>)> = None;
+    // With `keep_best`: per sample, the iterate with the lowest loss so far (z, x, loss).
+    let mut best: Option<(Tensor, Tensor, Vec<f64>)> = None;
     for step in 0..config.steps {
         let lr_factor = config.lr_factor(step);
         let lr = config.lr * lr_factor;
@@ -128,6 +132,20 @@ pub fn optimize<S: Solver + ?Sized>(
         } else {
             Tensor::zeros(batch, z.dtype(), z.device())?
         };
+
+        if config.keep_best {
+            let z_now = z.as_tensor().detach().copy()?;
+            let loss_now = to_f64(&loss)?;
+            best = Some(match best {
+                None => (z_now, x_out.clone(), loss_now),
+                Some((z_best, x_best, loss_best)) => {
+                    let take: Vec<bool> = loss_now.iter().zip(&loss_best).map(|(&n, &o)| beats(n, o)).collect();
+                    let loss = loss_now.iter().zip(&loss_best).zip(&take).map(|((&n, &o), &t)| if t { n } else { o });
+                    let loss = loss.collect();
+                    (take_rows(&take, &z_now, &z_best)?, take_rows(&take, &x_out, &x_best)?, loss)
+                }
+            });
+        }
 
         let mut grads = total.backward()?;
         let grad =
@@ -160,7 +178,10 @@ pub fn optimize<S: Solver + ?Sized>(
         last = Some((x_out, report.loss));
     }
     let (x, loss) = last.ok_or_else(|| candle_core::Error::Msg("DNO ran no steps".into()))?;
-    Ok(DnoResult { z: z.as_tensor().detach(), x, loss, history })
+    Ok(match best {
+        Some((z, x, loss)) => DnoResult { z, x, loss, history },
+        None => DnoResult { z: z.as_tensor().detach(), x, loss, history },
+    })
 }
 
 /// Runs `config.restarts` independent DNO runs from seeded random noise and keeps, per sample,

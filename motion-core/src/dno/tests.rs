@@ -204,3 +204,34 @@ fn a_late_start_denoises_the_noised_initial_motion_from_there() {
     let g = grads.get(z_var.as_tensor()).expect("a gradient reaches z");
     assert!(g.abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap() > 0.0);
 }
+
+#[test]
+fn keep_best_returns_each_samples_lowest_iterate_and_its_noise() {
+    let dev = Device::Cpu;
+    let z0 = gaussian((2, FRAMES, FEATURE_DIM), 5, &dev).unwrap();
+    // An lr far too high for this quadratic: Adam overshoots, so the last loss is not the lowest.
+    let config = DnoConfig {
+        steps: 40,
+        lr: 3.0,
+        lr_warmup_steps: 0,
+        lr_decay_steps: Some(0),
+        decorrelate_scale: 0.0,
+        ..DnoConfig::default()
+    };
+    let criterion = reach(&[0.5, -0.5], &[1.0, 1.0]);
+    let last = optimize(&identity, &criterion, &z0, &config, |_| {}).unwrap();
+    let best = optimize(&identity, &criterion, &z0, &DnoConfig { keep_best: true, ..config }, |_| {}).unwrap();
+    assert_eq!(best.history, last.history, "keeping the best changes what is returned, not the run");
+    for (b, h) in last.history.iter().enumerate() {
+        let lowest = h.loss.iter().copied().fold(f64::INFINITY, f64::min);
+        assert_eq!(last.loss[b], h.loss[39], "without it: the last forward");
+        assert_eq!(best.loss[b], lowest, "sample {b}: {:?}", h.loss);
+    }
+    assert!(last.history.iter().any(|h| h.loss[39] > h.loss.iter().copied().fold(f64::INFINITY, f64::min)));
+    // The returned noise is the returned motion's (the solver is the identity) and its loss.
+    assert_eq!(max_abs_diff(&best.z, &best.x), 0.0);
+    let again: Vec<f64> = criterion(&best.x).unwrap().to_dtype(DType::F64).unwrap().to_vec1().unwrap();
+    for (a, l) in again.iter().zip(&best.loss) {
+        assert!((a - l).abs() <= 1e-6 * l.max(1.0), "{a} against {l}");
+    }
+}

@@ -566,6 +566,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             lr_decay_steps: None,
             seed,
             restarts: 1,
+            keep_best: true,
             ..config.dno.clone()
         };
         let (c1, c2) = (compiled.subset(&groups.random_noise), compiled.subset(&groups.retrieved_noise));
@@ -598,7 +599,14 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
 
         // Final round (eq. 12).
         let clock = Instant::now();
-        let last = DnoConfig { steps: rg.final_steps, lr: rg.final_lr, seed, restarts: 1, ..config.dno.clone() };
+        let last = DnoConfig {
+            steps: rg.final_steps,
+            lr: rg.final_lr,
+            seed,
+            restarts: 1,
+            keep_best: true,
+            ..config.dno.clone()
+        };
         let run = dno::optimize(solver, &full, &z_blend, &last, |s| {
             progress(&StageProgress {
                 stage: Stage::FinalRound,
