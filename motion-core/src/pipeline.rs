@@ -8,6 +8,9 @@
 //! the catalog's clips built in memory). When the program has no relational parse, or no
 //! database motion passes the semantic check and the threshold, the run falls back to DNO; the
 //! reason goes to the report's `fallback` and to the caller as an [`Event::Note`].
+//!
+//! With [`TaskSettings::retry_unmet`], the samples that miss a constraint at its tolerance are
+//! generated again from fresh noise, each keeping its best attempt (the report's `attempt`).
 
 use std::time::Instant;
 
