@@ -133,15 +133,19 @@ pub fn optimize<S: Solver + ?Sized>(
             Tensor::zeros(batch, z.dtype(), z.device())?
         };
 
+        let loss_now = to_f64(&loss)?;
         if config.keep_best {
             let z_now = z.as_tensor().detach().copy()?;
-            let loss_now = to_f64(&loss)?;
             best = Some(match best {
-                None => (z_now, x_out.clone(), loss_now),
+                None => (z_now, x_out.clone(), loss_now.clone()),
                 Some((z_best, x_best, loss_best)) => {
                     let take: Vec<bool> = loss_now.iter().zip(&loss_best).map(|(&n, &o)| beats(n, o)).collect();
-                    let loss = loss_now.iter().zip(&loss_best).zip(&take).map(|((&n, &o), &t)| if t { n } else { o });
-                    let loss = loss.collect();
+                    let loss = loss_now
+                        .iter()
+                        .zip(&loss_best)
+                        .zip(&take)
+                        .map(|((&n, &o), &t)| if t { n } else { o })
+                        .collect();
                     (take_rows(&take, &z_now, &z_best)?, take_rows(&take, &x_out, &x_best)?, loss)
                 }
             });
@@ -164,7 +168,7 @@ pub fn optimize<S: Solver + ?Sized>(
             step,
             steps: config.steps,
             lr,
-            loss: to_f64(&loss)?,
+            loss: loss_now,
             decorrelation: to_f64(&decorrelation)?,
             diff_norm: to_f64(&diff_norm)?,
             grad_norm: to_f64(&grad_norm)?,

@@ -368,6 +368,13 @@ pub struct StageProgress {
     pub loss: f64,
 }
 
+impl StageProgress {
+    /// The progress of a DNO step of `stage` in restart `round`.
+    fn of_dno(stage: Stage, round: usize, step: &dno::DnoStep) -> Self {
+        StageProgress { stage, round, step: step.step + 1, steps: step.steps, loss: mean(&step.loss) }
+    }
+}
+
 /// A task as RG-DNO takes it: the program (with its relational parse), compiled, and the
 /// retrieval corpus built for its frame count.
 #[derive(Debug, Clone, Copy)]
@@ -575,13 +582,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         let branches = |x: &Tensor| Tensor::cat(&[f1(&x.narrow(0, 0, batch)?)?, f2(&x.narrow(0, batch, batch)?)?], 0);
         let starts = Tensor::cat(&[&z0, z_r], 0)?;
         let fitted = dno::optimize(both, branches, &starts, &first, |s| {
-            progress(&StageProgress {
-                stage: Stage::Branches,
-                round,
-                step: s.step + 1,
-                steps: s.steps,
-                loss: mean(&s.loss),
-            })
+            progress(&StageProgress::of_dno(Stage::Branches, round, s))
         })?;
         let (z1, z2) = (fitted.z.narrow(0, 0, batch)?, fitted.z.narrow(0, batch, batch)?);
         let (z1_error, z2_error) = (fitted.loss[..batch].to_vec(), fitted.loss[batch..].to_vec());
@@ -608,17 +609,10 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             ..config.dno.clone()
         };
         let run = dno::optimize(solver, &full, &z_blend, &last, |s| {
-            progress(&StageProgress {
-                stage: Stage::FinalRound,
-                round,
-                step: s.step + 1,
-                steps: s.steps,
-                loss: mean(&s.loss),
-            })
+            progress(&StageProgress::of_dno(Stage::FinalRound, round, s))
         })?;
-        // The optimiser reports the motion before its last update; sample the final noise.
-        let features = solver.sampler.sample(solver.denoiser, &run.z, &solver.text, guidance)?;
-        let objective = to_vec(&full(&features)?)?;
+        // With the best iterate kept, `run.x` is the motion of `run.z` and `run.loss` its F_C.
+        let (features, objective) = (run.x, run.loss);
         seconds.final_round += clock.elapsed().as_secs_f64();
         Ok(Attempt {
             features,
