@@ -8,6 +8,11 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+/// mimalloc keeps freed pages for reuse: the DNO loop allocates and frees tens of MB of
+/// activations per step, which glibc's malloc hands back to the kernel and faults in again.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Constrained human motion generation driven by language.
 ///
 /// `mogen "walk forwards through a 0.4 m wide gap and stop 5 m ahead"`: an LLM writes the
