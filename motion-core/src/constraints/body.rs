@@ -66,18 +66,26 @@ pub fn surface_points(joints: &Tensor) -> Result<Tensor> {
     let u = u.broadcast_div(&(u.sqr()?.sum_keepdim(D::Minus1)? + NORM_EPS)?.sqrt()?)?;
     let v = cross(&dir, &u)?;
 
-    let radii: Vec<f64> = bones().map(|(_, c)| bone_radius_m(c)).collect();
-    let radii = Tensor::new(radii.as_slice(), device)?.to_dtype(dtype)?.reshape((1, 1, n_bones, 1))?;
-    let mut rings = Vec::with_capacity(RING_FRACTIONS.len() * POINTS_PER_RING);
+    // Every ring point at once: point (fraction f, angle a) of bone k is
+    // parent_k + f·axis_k + cos a·r_k·u_k + sin a·r_k·v_k, one product of the `[ring points, 4]`
+    // coefficients with `[parent; axis; r·u; r·v]` per frame (a few graph nodes instead of a few
+    // per point: the DNO loop and the refinement differentiate this hundreds of times).
+    let mut coefficients = Vec::new();
     for fraction in RING_FRACTIONS {
-        let centre = (&parent + (&axis * fraction)?)?;
         for k in 0..POINTS_PER_RING {
             let angle = std::f64::consts::TAU * k as f64 / POINTS_PER_RING as f64;
-            let offset = ((&u * angle.cos())? + (&v * angle.sin())?)?.broadcast_mul(&radii)?;
-            rings.push((&centre + offset)?);
+            coefficients.extend([1.0, fraction, angle.cos(), angle.sin()]);
         }
     }
-    let rings = Tensor::cat(&rings, 2)?; // [B, T, K·rings·points, 3]
+    let ring_points = coefficients.len() / 4;
+    let coefficients = Tensor::from_vec(coefficients, (ring_points, 4), device)?.to_dtype(dtype)?;
+    let radii: Vec<f64> = bones().map(|(_, c)| bone_radius_m(c)).collect();
+    let radii = Tensor::new(radii.as_slice(), device)?.to_dtype(dtype)?.reshape((1, 1, n_bones, 1))?;
+    let (b, t) = (joints.dim(0)?, joints.dim(1)?);
+    let basis = Tensor::stack(&[&parent, &axis, &u.broadcast_mul(&radii)?, &v.broadcast_mul(&radii)?], 2)?
+        .reshape((b, t, 4, n_bones * 3))?;
+    // [B, T, K·rings·points, 3], fraction-major, then the point on the ring, then the bone.
+    let rings = coefficients.broadcast_matmul(&basis)?.reshape((b, t, ring_points * n_bones, 3))?;
 
     let head = joints.narrow(2, Joint::Head.index(), 1)?; // [B, T, 1, 3]
     let directions: Vec<f64> = head_directions().into_iter().flatten().collect();
