@@ -70,14 +70,14 @@ pub fn surface_points(joints: &Tensor) -> Result<Tensor> {
     // parent_k + f·axis_k + cos a·r_k·u_k + sin a·r_k·v_k, one product of the `[ring points, 4]`
     // coefficients with `[parent; axis; r·u; r·v]` per frame (a few graph nodes instead of a few
     // per point: the DNO loop and the refinement differentiate this hundreds of times).
-    let mut coefficients = Vec::new();
+    let ring_points = RING_FRACTIONS.len() * POINTS_PER_RING;
+    let mut coefficients = Vec::with_capacity(ring_points * 4);
     for fraction in RING_FRACTIONS {
         for k in 0..POINTS_PER_RING {
             let angle = std::f64::consts::TAU * k as f64 / POINTS_PER_RING as f64;
             coefficients.extend([1.0, fraction, angle.cos(), angle.sin()]);
         }
     }
-    let ring_points = coefficients.len() / 4;
     let coefficients = Tensor::from_vec(coefficients, (ring_points, 4), device)?.to_dtype(dtype)?;
     let radii: Vec<f64> = bones().map(|(_, c)| bone_radius_m(c)).collect();
     let radii = Tensor::new(radii.as_slice(), device)?.to_dtype(dtype)?.reshape((1, 1, n_bones, 1))?;
