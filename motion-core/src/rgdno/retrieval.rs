@@ -25,7 +25,9 @@
 //! batches on the candidates' joints.
 //!
 //! **Semantic check.** A crop is dropped when its label contradicts the prompt's direction words
-//! (forward/backward, left/right) and, for counting tasks, when it lacks the prompt's action verb.
+//! (forward/backward, left/right) or its gait (a walk against a jump or a run; beyond the paper,
+//! whose check left a walking task free to retrieve a two-footed jump and keep its hops) and, for
+//! counting tasks, when it lacks the prompt's action verb.
 
 use candle_core::{DType, Device, Tensor};
 use serde::Serialize;
@@ -335,23 +337,32 @@ fn score(
 }
 
 /// Pairs of direction words that contradict each other (either way round).
-const CONTRADICTIONS: [(&str, &str); 3] = [("forward", "backward"), ("left", "right"), ("up", "down")];
+const DIRECTION_CONTRADICTIONS: [(&str, &str); 3] = [("forward", "backward"), ("left", "right"), ("up", "down")];
+
+/// Pairs of gaits that contradict each other (either way round): a walk always has a foot on
+/// the ground, these have a flight phase. A crawl is not among them: the paper retrieves
+/// crawling for walking prompts (RG-DNO Fig. 3), to pass under barriers.
+const GAIT_CONTRADICTIONS: [(&str, &str); 5] =
+    [("walk", "run"), ("walk", "jog"), ("walk", "jump"), ("walk", "hop"), ("walk", "leap")];
 
 /// Action verbs the semantic check of a counting task looks for, by stem.
 const ACTION_VERBS: [&str; 12] =
     ["walk", "run", "jog", "jump", "hop", "crawl", "clap", "kick", "punch", "wave", "step", "touch"];
 
-/// The supplementary's keyword check: `false` when `label` holds a direction word that
-/// contradicts one of `prompt`'s (e.g. "backwards" against "walks forwards"), or when
-/// `counting` and the prompt names an action verb that `label` lacks.
+/// The supplementary's keyword check: `false` when `label` holds a direction word or a gait
+/// that contradicts one of `prompt`'s and that the prompt does not name itself ("backwards"
+/// against "walks forwards", "jumps" against "walks", but not "turns right" against "turns
+/// left, then right"), or when `counting` and the prompt names an action verb that `label`
+/// lacks. Words match by stem ("walk" matches "walks" and "walking").
 pub fn semantically_consistent(prompt: &str, label: &str, counting: bool) -> bool {
     let prompt_words = words(prompt);
     let label_words = words(label);
     let has = |ws: &[String], stem: &str| ws.iter().any(|w| w.starts_with(stem));
-    for (a, b) in CONTRADICTIONS {
-        if (has(&prompt_words, a) && has(&label_words, b)) || (has(&prompt_words, b) && has(&label_words, a)) {
-            return false;
-        }
+    let contradicts =
+        |named: &str, other: &str| has(&prompt_words, named) && !has(&prompt_words, other) && has(&label_words, other);
+    if DIRECTION_CONTRADICTIONS.iter().chain(&GAIT_CONTRADICTIONS).any(|&(a, b)| contradicts(a, b) || contradicts(b, a))
+    {
+        return false;
     }
     if counting {
         let verbs: Vec<&str> = ACTION_VERBS.iter().copied().filter(|v| has(&prompt_words, v)).collect();
@@ -391,11 +402,23 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_semantic_check_drops_contradicting_directions_and_missing_verbs() {
+    fn the_semantic_check_drops_contradicting_directions_gaits_and_missing_verbs() {
         assert!(!semantically_consistent("a man walks forwards", "a person walks backwards", false));
         assert!(semantically_consistent("a man walks forwards", "a person walks forward", false));
         assert!(semantically_consistent("a man walks forwards", "a person crawls forward on the ground", false));
         assert!(!semantically_consistent("a person walks and turns left", "a person walks and turns right", false));
+        // A direction the prompt names both ways contradicts nothing.
+        assert!(semantically_consistent("a person turns left, then right", "a person walks and turns right", false));
+        // Gaits: a walk is not a jump or a run (either way round), but may be a crawl.
+        assert!(!semantically_consistent("a man walks forwards", "a person jumps forward", false));
+        assert!(!semantically_consistent("a man walks forwards", "a person runs forward", false));
+        assert!(!semantically_consistent("a person jumps forward", "a person walks forward", false));
+        assert!(semantically_consistent(
+            "a man runs forwards and jumps over an obstacle",
+            "a person jumps forward",
+            false
+        ));
+        assert!(semantically_consistent("a man walks forwards and jumps", "a person jumps forward", false));
         // Counting tasks need the action verb.
         assert!(!semantically_consistent("a man walks six steps", "a person dances in place", true));
         assert!(semantically_consistent("a man walks six steps", "a person walks forward punching", true));
