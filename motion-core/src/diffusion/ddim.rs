@@ -39,6 +39,53 @@ pub struct DdimProgress<'a> {
     pub x0_hat: &'a Tensor,
 }
 
+/// One deterministic (eta = 0) DDIM move of x from spaced timestep `timestep` (ᾱ_from) to
+/// ᾱ_to, given the guided prediction x̂0 there: ε̂ = (x/√ᾱ_from − x̂0)/√(1/ᾱ_from − 1) and
+/// x_next = √ᾱ_to·x̂0 + √(1 − ᾱ_to)·ε̂, folded into x_next = `c_x`·x + `c_0`·x̂0 with
+/// c_x = √(1−ᾱ_to)/√(1−ᾱ_from) and c_0 = √ᾱ_to − c_x·√ᾱ_from. Denoising moves to ᾱ_{k−1}
+/// (ᾱ_{−1} := 1: c_x = 0, c_0 = 1, the last move returns x̂0), inversion to ᾱ_{k+1}.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DdimMove {
+    /// Original-scale timestep of x, where the denoiser is evaluated.
+    pub timestep: usize,
+    /// Coefficient of x.
+    pub c_x: f64,
+    /// Coefficient of x̂0.
+    pub c_0: f64,
+}
+
+impl DdimMove {
+    /// The move from ᾱ_from (at `timestep`) to ᾱ_to.
+    pub fn new(timestep: usize, abar_from: f64, abar_to: f64) -> Self {
+        if abar_to == 1.0 {
+            return Self { timestep, c_x: 0.0, c_0: 1.0 };
+        }
+        let c_x = ((1.0 - abar_to) / (1.0 - abar_from)).sqrt();
+        Self { timestep, c_x, c_0: abar_to.sqrt() - c_x * abar_from.sqrt() }
+    }
+
+    /// x_next from x and x̂0 (x̂0 itself when c_x = 0 and c_0 = 1).
+    pub fn apply(&self, x: &Tensor, x0_hat: &Tensor) -> Result<Tensor> {
+        if self.c_x == 0.0 && self.c_0 == 1.0 {
+            return Ok(x0_hat.clone());
+        }
+        x.affine(self.c_x, 0.0)? + x0_hat.affine(self.c_0, 0.0)?
+    }
+}
+
+/// The move composed from its parts for any denoiser: x̂0 by [`Guidance::predict_x0`]
+/// (`guidance` already resolved by [`Guidance::for_text`]), then [`DdimMove::apply`].
+/// The default of [`Denoiser::ddim_move`]. Differentiable in `x`.
+pub fn guided_move<D: Denoiser + ?Sized>(
+    denoiser: &D,
+    x: &Tensor,
+    text: &Tensor,
+    guidance: Guidance,
+    step: DdimMove,
+) -> Result<Tensor> {
+    step.apply(x, &guidance.predict_x0(denoiser, x, &timestep_tensor(step.timestep, x)?, text)?)
+}
+
 /// A K-step deterministic (eta = 0) DDIM sampler over a respaced schedule.
 ///
 /// Spaced index k ∈ 0..K has original timestep `timesteps()[k]` and ᾱ_k =
@@ -94,7 +141,7 @@ impl DdimSampler {
         text: &Tensor,
         guidance: Guidance,
     ) -> Result<Tensor> {
-        self.denoise(denoiser, x_t, text, guidance, false, &mut |_| {})
+        self.denoise(denoiser, x_t, text, guidance, false, None)
     }
 
     /// [`Self::sample`], calling `on_step` after every step with that step's x̂0.
@@ -106,7 +153,7 @@ impl DdimSampler {
         guidance: Guidance,
         mut on_step: impl FnMut(&DdimProgress<'_>),
     ) -> Result<Tensor> {
-        self.denoise(denoiser, x_t, text, guidance, false, &mut on_step)
+        self.denoise(denoiser, x_t, text, guidance, false, Some(&mut on_step))
     }
 
     /// [`Self::sample`] keeping the whole autograd graph (DNO's `ddim_loop_with_gradient`),
@@ -120,7 +167,7 @@ impl DdimSampler {
         text: &Tensor,
         guidance: Guidance,
     ) -> Result<Tensor> {
-        self.denoise(denoiser, x_t, text, guidance, true, &mut |_| {})
+        self.denoise(denoiser, x_t, text, guidance, true, None)
     }
 
     /// Deterministic DDIM inversion of a clean motion `x0` (`[batch, frames, 263]`, taken as x
@@ -165,7 +212,8 @@ impl DdimSampler {
         }
         for k in 0..self.steps() - 1 {
             let (abar, abar_next) = (self.alphas_cumprod[k], self.alphas_cumprod[k + 1]);
-            let mut next = ddim_update(&x, &predict(&x, self.timesteps[k])?, abar, abar_next)?;
+            let mut next =
+                denoiser.ddim_move(&x, text, guidance, DdimMove::new(self.timesteps[k], abar, abar_next))?.detach();
             let a = (abar_next / abar).sqrt();
             let b = (1.0 - abar_next).sqrt() - a * (1.0 - abar).sqrt();
             for _ in 0..fixed_point_iterations {
@@ -179,7 +227,9 @@ impl DdimSampler {
         Ok(x)
     }
 
-    /// The reverse loop k = K−1 … 0 shared by the samplers.
+    /// The reverse loop k = K−1 … 0 shared by the samplers: each step one
+    /// [`Denoiser::ddim_move`] (one fused op per step on MDM's CPU path), or with `on_step` the
+    /// composed move, whose x̂0 the callback sees.
     fn denoise<D: Denoiser + ?Sized>(
         &self,
         denoiser: &D,
@@ -187,7 +237,7 @@ impl DdimSampler {
         text: &Tensor,
         guidance: Guidance,
         keep_graph: bool,
-        on_step: &mut dyn FnMut(&DdimProgress<'_>),
+        mut on_step: Option<&mut dyn FnMut(&DdimProgress<'_>)>,
     ) -> Result<Tensor> {
         let guidance = guidance.for_text(text)?;
         check_batch(x_t, text)?;
@@ -195,28 +245,19 @@ impl DdimSampler {
         let mut x = detach(x_t.clone());
         let steps = self.steps();
         for (k, (&t, &abar)) in self.timesteps.iter().zip(&self.alphas_cumprod).enumerate().rev() {
-            // ᾱ_{−1} := 1, so the last step returns the model's x̂0 at t = 0.
             let abar_prev = k.checked_sub(1).and_then(|j| self.alphas_cumprod.get(j)).copied().unwrap_or(1.0);
-            let x0_hat = detach(guidance.predict_x0(denoiser, &x, &timestep_tensor(t, &x)?, text)?);
-            x = detach(ddim_update(&x, &x0_hat, abar, abar_prev)?);
-            on_step(&DdimProgress { step: steps - k, steps, timestep: t, x0_hat: &x0_hat });
+            let step = DdimMove::new(t, abar, abar_prev);
+            x = detach(match on_step.as_mut() {
+                None => denoiser.ddim_move(&x, text, guidance, step)?,
+                Some(on_step) => {
+                    let x0_hat = detach(guidance.predict_x0(denoiser, &x, &timestep_tensor(t, &x)?, text)?);
+                    on_step(&DdimProgress { step: steps - k, steps, timestep: t, x0_hat: &x0_hat });
+                    step.apply(&x, &x0_hat)?
+                }
+            });
         }
         Ok(x)
     }
-}
-
-/// One eta = 0 DDIM move of `x` from ᾱ_from to ᾱ_to given the prediction `x0_hat`:
-/// ε̂ = (x/√ᾱ_from − x̂0)/√(1/ᾱ_from − 1), result = √ᾱ_to·x̂0 + √(1 − ᾱ_to)·ε̂.
-///
-/// Folded into two f64 coefficients, result = c_x·x + c_0·x̂0 with c_x = √(1−ᾱ_to)/√(1−ᾱ_from)
-/// and c_0 = √ᾱ_to − c_x·√ᾱ_from. Denoising uses ᾱ_to = ᾱ_{k−1}, inversion ᾱ_to = ᾱ_{k+1}.
-fn ddim_update(x: &Tensor, x0_hat: &Tensor, abar_from: f64, abar_to: f64) -> Result<Tensor> {
-    if abar_to == 1.0 {
-        return Ok(x0_hat.clone());
-    }
-    let c_x = ((1.0 - abar_to) / (1.0 - abar_from)).sqrt();
-    let c_0 = abar_to.sqrt() - c_x * abar_from.sqrt();
-    x.affine(c_x, 0.0)? + x0_hat.affine(c_0, 0.0)?
 }
 
 /// `[batch]` u32 tensor filled with timestep `t`, on `x`'s device.

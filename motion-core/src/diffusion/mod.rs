@@ -10,7 +10,7 @@ pub mod schedule;
 #[cfg(test)]
 mod test_denoiser;
 
-pub use ddim::{respaced_timesteps, DdimProgress, DdimSampler};
+pub use ddim::{guided_move, respaced_timesteps, DdimMove, DdimProgress, DdimSampler};
 pub use guidance::Guidance;
 pub use schedule::NoiseSchedule;
 
@@ -39,6 +39,15 @@ pub trait Denoiser {
     ///
     /// Returns x̂0, `[batch, frames, 263]`. Inference mode: no dropout.
     fn predict_x0(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<Tensor>;
+
+    /// One DDIM move of `x_t` (`[batch, frames, 263]`, at `step.timestep`) with the guided
+    /// x̂0: `step.c_x·x_t + step.c_0·x̂0`, `guidance` already resolved by
+    /// [`Guidance::for_text`]. Differentiable in `x_t`. The default composes
+    /// [`Self::predict_x0`] and the update ([`guided_move`]); MDM's CPU path overrides it with
+    /// one fused op, so an unrolled sampler records one autograd node per step.
+    fn ddim_move(&self, x_t: &Tensor, text: &Tensor, guidance: Guidance, step: DdimMove) -> Result<Tensor> {
+        guided_move(self, x_t, text, guidance, step)
+    }
 
     /// Width of the condition vectors.
     fn text_dim(&self) -> usize;

@@ -5,7 +5,8 @@
 //! candle's backward allocates a zero tensor plus a sum for each gradient edge. Fusing the
 //! pass (the input projection, the condition token and positional encoding, per layer
 //! attention, both residual LayerNorms and the GELU feed-forward block, then the output
-//! projection) leaves one node per pass, keeps exactly the activations the input gradient
+//! projection; with an [`Epilogue`] also both guidance branches, x̂0 and the DDIM update)
+//! leaves one node per pass, keeps exactly the activations the input gradient
 //! needs (q/k/v, attention probabilities, normalised residuals, pre-activation) and never
 //! forms weight gradients. The per-layer maths are the kernels of [`crate::nn`], shared with
 //! the single-op versions.
@@ -132,6 +133,73 @@ pub(crate) struct Ends {
     pub cond: Tensor,
     /// `[frames + 1, d]`.
     pub pe: Tensor,
+    /// A DDIM move folded into the pass: what the op returns instead of the output
+    /// projection (`None`: the projection itself).
+    pub step: Option<Epilogue>,
+}
+
+/// A guided DDIM move as the end of a whole denoiser pass: the op maps `x [batch, frames, F]`
+/// to `x_coeff·x + out_coeff·ô`, where ô is the output projection `out`, or with guidance
+/// scale s over the `2·batch` elements [x under `cond` rows 0..batch; x under rows
+/// batch..2·batch (the empty text)], ô = out_u + s·(out_c − out_u) (the same f32 operations as
+/// the composed [`crate::diffusion::guided_move`], so the same values).
+///
+/// For an x0-predicting denoiser `(x_coeff, out_coeff)` = the move's `(c_x, c_0)`.
+/// Backward: ∂/∂out_c = s·out_coeff·g, ∂/∂out_u = (1 − s)·out_coeff·g, and the two
+/// elements' input gradients are summed with x_coeff·g.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Epilogue {
+    /// Classifier-free guidance scale, or `None` for one element per sample.
+    pub guidance: Option<f64>,
+    pub x_coeff: f64,
+    pub out_coeff: f64,
+}
+
+impl Epilogue {
+    /// Elements the stack runs per input sample.
+    fn copies(&self) -> usize {
+        if self.guidance.is_some() {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// The move from `x` (`n` values) and the elements' outputs `out` (`copies·n`).
+    fn forward<T: Real>(&self, x: &[T], out: &[T]) -> Vec<T> {
+        let (a, c) = (T::from_f64(self.x_coeff), T::from_f64(self.out_coeff));
+        match self.guidance {
+            None => x.iter().zip(out).map(|(&x, &o)| x * a + o * c).collect(),
+            Some(s) => {
+                let s = T::from_f64(s);
+                let (cond, uncond) = out.split_at(x.len());
+                x.iter().zip(cond.iter().zip(uncond)).map(|(&x, (&oc, &ou))| x * a + (ou + (oc - ou) * s) * c).collect()
+            }
+        }
+    }
+
+    /// The gradient with respect to the elements' outputs (`copies·n`) from `g` (`n`).
+    fn out_grad<T: Real>(&self, g: &[T]) -> Vec<T> {
+        let c = self.out_coeff;
+        let weights = match self.guidance {
+            None => vec![c],
+            Some(s) => vec![s * c, (1.0 - s) * c],
+        };
+        weights.into_iter().flat_map(|w| g.iter().map(move |&g| g * T::from_f64(w))).collect()
+    }
+
+    /// The input gradient (`n`): the elements' input gradients `dx` (`copies·n`) summed, plus
+    /// `x_coeff·g`.
+    fn input_grad<T: Real>(&self, g: &[T], dx: &[T]) -> Vec<T> {
+        let a = T::from_f64(self.x_coeff);
+        let mut out: Vec<T> = g.iter().zip(dx).map(|(&g, &d)| d + g * a).collect();
+        for rest in dx.chunks_exact(g.len().max(1)).skip(1) {
+            for (o, &d) in out.iter_mut().zip(rest) {
+                *o += d;
+            }
+        }
+        out
+    }
 }
 
 impl Ends {
@@ -460,6 +528,11 @@ impl FusedEncoderStack {
         f(&params, ends.as_ref())
     }
 
+    /// The DDIM move folded into the pass, if any.
+    fn step(&self) -> Option<Epilogue> {
+        self.ends.as_ref().and_then(|e| e.step)
+    }
+
     /// Width `d` of the stack (from the first layer's LayerNorm).
     fn width(&self) -> Result<usize> {
         match self.layers.first() {
@@ -473,12 +546,17 @@ impl FusedEncoderStack {
             [b, rows, cols] => (*b, *rows, *cols),
             dims => bail!("fused encoder stack expects [batch, tokens, width], got {dims:?}"),
         };
-        let x = contiguous_slice::<T>(x_storage, l)?;
+        let x_in = contiguous_slice::<T>(x_storage, l)?;
         let d = self.width()?;
-        // With the ends the input is [batch, frames, F] and the stack sees frames + 1 tokens.
+        // With the ends the input is [batch, frames, F] and the stack sees frames + 1 tokens;
+        // with a guided move each sample runs as two elements.
         let s = if self.ends.is_some() { rows + 1 } else { rows };
         let dims = self.dims(d, s)?;
-        let plan = Plan::new(b);
+        let step = self.step();
+        let elements = b * step.map_or(1, |e| e.copies());
+        let x = if elements == b { std::borrow::Cow::Borrowed(x_in) } else { x_in.repeat(elements / b).into() };
+        let x = &*x;
+        let plan = Plan::new(elements);
         let in_width = rows * cols;
         let (y, groups) = self.with_params::<T, _>(d, |params, ends| {
             if ends.is_none() && cols != d {
@@ -507,11 +585,11 @@ impl FusedEncoderStack {
             let outputs: Vec<(Vec<T>, Group)> = match plan {
                 Plan::Elements { .. } => {
                     use rayon::prelude::*;
-                    plan.groups(b).into_par_iter().map(forward).collect::<Result<_>>()?
+                    plan.groups(elements).into_par_iter().map(forward).collect::<Result<_>>()?
                 }
-                Plan::Rows { .. } => plan.groups(b).into_iter().map(forward).collect::<Result<_>>()?,
+                Plan::Rows { .. } => plan.groups(elements).into_iter().map(forward).collect::<Result<_>>()?,
             };
-            let mut y = Vec::with_capacity(b * in_width);
+            let mut y = Vec::with_capacity(elements * in_width);
             let mut groups = Vec::with_capacity(outputs.len());
             for (h, group) in outputs {
                 y.extend_from_slice(&h);
@@ -520,6 +598,10 @@ impl FusedEncoderStack {
             Ok((y, groups))
         })?;
         *self.lock()? = Some(Saved { plan, groups });
+        let y = match step {
+            Some(e) => e.forward(x_in, &y),
+            None => y,
+        };
         Ok((T::to_cpu_storage_owned(y), l.shape().clone()))
     }
 
@@ -535,8 +617,11 @@ impl FusedEncoderStack {
         let threads = plan.threads();
         let in_width = rows * cols;
         let grad = grad.contiguous()?;
-        let dx = kernels::with_slice::<T, _>(&grad, |g| {
-            self.with_params::<T, _>(d, |params, ends| {
+        let step = self.step();
+        let dx = kernels::with_slice::<T, _>(&grad, |g_in| {
+            let g_out = step.map(|e| e.out_grad(g_in));
+            let g = g_out.as_deref().unwrap_or(g_in);
+            let dx = self.with_params::<T, _>(d, |params, ends| {
                 let backward = |group: &Group| -> Result<Vec<T>> {
                     let g = &g[group.first * in_width..(group.first + group.count) * in_width];
                     let mut dh = match ends {
@@ -559,6 +644,10 @@ impl FusedEncoderStack {
                     Plan::Rows { .. } => groups.iter().map(backward).collect::<Result<_>>()?,
                 };
                 Ok(parts.concat())
+            })?;
+            Ok(match step {
+                Some(e) => e.input_grad(g_in, &dx),
+                None => dx,
             })
         })?;
         if dx.len() != b * in_width {

@@ -5,7 +5,7 @@ use candle_core::{Result, Shape, Tensor};
 use candle_nn::{Init, VarBuilder};
 use rand::RngCore;
 
-pub(crate) use super::fused_stack::Ends;
+pub(crate) use super::fused_stack::{Ends, Epilogue};
 use super::fused_stack::{FusedEncoderStack, LayerWeights};
 use super::MdmConfig;
 use crate::nn::{self, LayerNorm, Linear, LAYER_NORM_EPS};

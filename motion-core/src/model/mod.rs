@@ -28,7 +28,7 @@ pub use config::{MdmConfig, Prediction};
 use init::SeededInit;
 use layer::{Dropout, EncoderLayer, ParamLoader};
 
-use crate::diffusion::{Denoiser, NoiseSchedule};
+use crate::diffusion::{guided_move, DdimMove, Denoiser, Guidance, NoiseSchedule};
 use crate::nn::Linear;
 
 /// Rows of MDM's sinusoidal table (`PositionalEncoding(max_len=5000)`).
@@ -165,31 +165,42 @@ impl Mdm {
         self.to_x0(self.output_process.forward(&h.narrow(1, 1, frames)?)?, x_t, timesteps)
     }
 
-    /// The frozen-weight path behind [`Denoiser::predict_x0`].
-    /// The frozen path: on the CPU one fused op from the features to the output projection
-    /// (the condition token computed here is a constant of the pass, so gradients flow to
-    /// `x_t` only); elsewhere the primitive path.
+    /// The frozen-weight path behind [`Denoiser::predict_x0`]: on the CPU one fused op from
+    /// the features to the output projection (the condition token computed here is a
+    /// constant of the pass, so gradients flow to `x_t` only); elsewhere the primitive path.
     fn forward_frozen(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<Tensor> {
         let frames = self.check_inputs(x_t, timesteps, text)?;
         if !crate::nn::ops::has_cpu_kernel(x_t) {
             return self.forward_eval(x_t, timesteps, text);
         }
+        let out = layer::frozen_stack(&self.layers, x_t, Some(self.frozen_ends(frames, timesteps, text, None)?))?;
+        self.to_x0(out, x_t, timesteps)
+    }
+
+    /// The fused pass's [`layer::Ends`] for `frames` frames under condition rows `timesteps`
+    /// `[rows]` and `text` `[rows, text_dim]`, ending in `step`.
+    fn frozen_ends(
+        &self,
+        frames: usize,
+        timesteps: &Tensor,
+        text: &Tensor,
+        step: Option<layer::Epilogue>,
+    ) -> Result<layer::Ends> {
         let (te0, te2) = &self.time_embed;
         let t_emb = te2.forward_frozen(&te0.forward_frozen(&self.pe.index_select(timesteps, 0)?)?.silu()?)?;
         let cond = (t_emb + self.embed_text.forward_frozen(text)?)?.detach();
         let bias = |l: &Linear| -> Result<Tensor> {
             l.bias().map(Tensor::detach).ok_or_else(|| candle_core::Error::Msg("denoiser linear without bias".into()))
         };
-        let ends = layer::Ends {
+        Ok(layer::Ends {
             input_weight: self.input_process.weight().detach(),
             input_bias: bias(&self.input_process)?,
             output_weight: self.output_process.weight().detach(),
             output_bias: bias(&self.output_process)?,
             cond: cond.contiguous()?,
             pe: self.pe.narrow(0, 0, frames + 1)?.contiguous()?.detach(),
-        };
-        let out = layer::frozen_stack(&self.layers, x_t, Some(ends))?;
-        self.to_x0(out, x_t, timesteps)
+            step,
+        })
     }
 
     fn to_x0(&self, out: Tensor, x_t: &Tensor, timesteps: &Tensor) -> Result<Tensor> {
@@ -232,6 +243,37 @@ impl Denoiser for Mdm {
     /// Frozen-weight forward (no dropout); gradients flow to `x_t` (and `text`) only.
     fn predict_x0(&self, x_t: &Tensor, timesteps: &Tensor, text: &Tensor) -> Result<Tensor> {
         self.forward_frozen(x_t, timesteps, text)
+    }
+
+    /// On the CPU one fused op per move (the guidance branches, x̂0 and the update inside the
+    /// pass); elsewhere the composed move.
+    fn ddim_move(&self, x_t: &Tensor, text: &Tensor, guidance: Guidance, step: DdimMove) -> Result<Tensor> {
+        if !crate::nn::ops::has_cpu_kernel(x_t) {
+            return guided_move(self, x_t, text, guidance, step);
+        }
+        let batch = x_t.dim(0)?;
+        let timestep = u32::try_from(step.timestep)
+            .map_err(|_| candle_core::Error::Msg(format!("timestep {} overflows u32", step.timestep)))?;
+        self.check_inputs(x_t, &Tensor::full(timestep, batch, x_t.device())?, text)?;
+        let (rows, scale) = if guidance.is_active() {
+            (Tensor::cat(&[text, &text.zeros_like()?], 0)?, Some(guidance.scale))
+        } else {
+            (text.clone(), None)
+        };
+        // x̂0 = out (x0 prediction) or √ᾱ_t·x − √(1 − ᾱ_t)·out (velocity), folded into the move.
+        let (x_coeff, out_coeff) = match &self.velocity_schedule {
+            None => (step.c_x, step.c_0),
+            Some(schedule) => {
+                let abar = schedule.alphas_cumprod().get(step.timestep).copied().ok_or_else(|| {
+                    candle_core::Error::Msg(format!("timestep {} outside the schedule", step.timestep))
+                })?;
+                (step.c_x + step.c_0 * abar.sqrt(), -step.c_0 * (1.0 - abar).sqrt())
+            }
+        };
+        let epilogue = layer::Epilogue { guidance: scale, x_coeff, out_coeff };
+        let timesteps = Tensor::full(timestep, rows.dim(0)?, x_t.device())?;
+        let ends = self.frozen_ends(x_t.dim(1)?, &timesteps, &rows, Some(epilogue))?;
+        layer::frozen_stack(&self.layers, x_t, Some(ends))
     }
 
     fn text_dim(&self) -> usize {

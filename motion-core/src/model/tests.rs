@@ -291,6 +291,40 @@ fn velocity_prediction_scales_input_and_output(dev: &Device) -> Result<()> {
     Ok(())
 }
 
+/// The fused DDIM move (guidance, x̂0 and the update inside the pass) against the composed
+/// one, for both predictions, with and without guidance and for the last move (x̂0 itself):
+/// the same values, and a gradient that matches finite differences and the composed one.
+fn fused_ddim_move_is_the_composed_move(dev: &Device) -> Result<()> {
+    use crate::diffusion::{guided_move, DdimMove, Guidance};
+    for prediction in [Prediction::X0, Prediction::Velocity] {
+        let cfg = MdmConfig { prediction, ..tiny_config() };
+        let model = Mdm::random(cfg.clone(), DType::F64, dev, 12)?;
+        let x = randn(&[2, 5, cfg.input_feats], 57, dev)?;
+        let text = randn(&[2, cfg.text_dim], 58, dev)?;
+        let w = randn(x.dims(), 59, dev)?;
+        for (guidance, step) in [
+            (Guidance::default(), DdimMove::new(500, 0.3, 0.6)),
+            (Guidance::none(), DdimMove::new(900, 0.02, 0.1)),
+            (Guidance::default(), DdimMove::new(0, 0.99, 1.0)),
+        ] {
+            let label = format!("{prediction:?}, scale {}, {step:?}", guidance.scale);
+            let fused = model.ddim_move(&x, &text, guidance, step)?;
+            let composed = guided_move(&model, &x, &text, guidance, step)?;
+            assert!(max_abs_diff(&fused, &composed)? < 1e-12, "{label}");
+            finite_difference_check(&x, |x| loss(&model.ddim_move(x, &text, guidance, step)?, &w), 1e-5, 1e-6)?;
+            let z = Var::from_tensor(&x)?;
+            let grad = |out: Tensor| -> Result<Tensor> {
+                let grads = loss(&out, &w)?.backward()?;
+                grads.get(z.as_tensor()).cloned().ok_or_else(|| candle_core::Error::Msg("no gradient".into()))
+            };
+            let g_fused = grad(model.ddim_move(z.as_tensor(), &text, guidance, step)?)?;
+            let g_composed = grad(guided_move(&model, z.as_tensor(), &text, guidance, step)?)?;
+            assert!(max_abs_diff(&g_fused, &g_composed)? < 1e-12, "{label}");
+        }
+    }
+    Ok(())
+}
+
 fn bad_inputs_are_errors(dev: &Device) -> Result<()> {
     let cfg = tiny_config();
     let model = Mdm::random(cfg.clone(), DType::F64, dev, 10)?;
@@ -316,6 +350,7 @@ mod cpu {
         fused_stack_is_the_same_on_any_thread_count,
         training_mode_has_seeded_dropout_and_weight_gradients,
         velocity_prediction_scales_input_and_output,
+        fused_ddim_move_is_the_composed_move,
         bad_inputs_are_errors,
     );
 }
