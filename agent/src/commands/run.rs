@@ -108,9 +108,11 @@ pub struct GenerationArgs {
     pub database: Option<PathBuf>,
     /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
     /// first_lr, segments, mask_kinds, mask_batch, reward, final_steps, final_lr, ablation;
-    /// missing fields keep the paper's defaults), e.g. '{"retrieval": {"related_weight": 0.01}}'
-    /// or Table 4's '{"ablation": "random_only"}' (also retrieved_only, no_parsing, half_mask,
-    /// no_reward, same_sets).
+    /// missing fields keep the paper's defaults), e.g. '{"retrieval": {"related_weight": 0.01}}',
+    /// the supplementary's reward for a task '{"reward": "steps_raising_hands"}' (also
+    /// narrow_gap, low_barrier; or the weights '{"reward": {"semantic": 0.5}}') or Table 4's
+    /// '{"ablation": "random_only"}' (also retrieved_only, no_parsing, half_mask, no_reward,
+    /// same_sets).
     #[arg(long, value_parser = parse_rg_dno_config, default_value = "{}")]
     pub rg_dno: Box<RgDnoConfig>,
 }

@@ -28,8 +28,11 @@ pub const CONTACT_HEIGHT_M: f64 = 0.025;
 const CONTACT_EDGE_M: f64 = 0.005;
 
 /// The weights λ of eq. 14 (defaults 1, the paper's; 0 leaves a term out).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
+///
+/// In JSON either the four weights (missing ones keep their defaults) or the name of a
+/// preset: `"default"`, `"none"`, `"narrow_gap"`, `"low_barrier"`, `"steps_raising_hands"`
+/// (the supplementary's per-task choices, [`RewardWeights::preset`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct RewardWeights {
     /// λ1, maximum jitter.
     pub jitter: f64,
@@ -56,6 +59,65 @@ impl RewardWeights {
     pub const LOW_BARRIER: Self = Self { jitter: 1.0, foot_skate: 0.0, decorrelation: 1.0, semantic: 0.0 };
     /// Supp. A, Task-3 (steps while raising hands): `L_foot_skate + 0.5·L_semantic`.
     pub const STEPS_RAISING_HANDS: Self = Self { jitter: 0.0, foot_skate: 1.0, decorrelation: 0.0, semantic: 0.5 };
+
+    /// The weights named `name` (see the type's doc), or `None` for an unknown name.
+    pub fn preset(name: &str) -> Option<Self> {
+        Some(match name {
+            "default" => Self::default(),
+            "none" => Self::NONE,
+            "narrow_gap" => Self::NARROW_GAP,
+            "low_barrier" => Self::LOW_BARRIER,
+            "steps_raising_hands" => Self::STEPS_RAISING_HANDS,
+            _ => return None,
+        })
+    }
+}
+
+/// Reads the four weights (an object) or a preset's name (a string); an unknown name is an
+/// error that lists the presets.
+impl<'de> Deserialize<'de> for RewardWeights {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
+        struct WeightsOrPreset;
+        impl<'de> serde::de::Visitor<'de> for WeightsOrPreset {
+            type Value = RewardWeights;
+
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("reward weights {jitter, foot_skate, decorrelation, semantic} or a preset name")
+            }
+
+            fn visit_str<E: serde::de::Error>(self, name: &str) -> std::result::Result<RewardWeights, E> {
+                RewardWeights::preset(name).ok_or_else(|| {
+                    E::custom(format!(
+                        "unknown reward preset {name:?} (default, none, narrow_gap, low_barrier, steps_raising_hands)"
+                    ))
+                })
+            }
+
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> std::result::Result<RewardWeights, A::Error> {
+                let Weights { jitter, foot_skate, decorrelation, semantic } =
+                    Weights::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
+                Ok(RewardWeights { jitter, foot_skate, decorrelation, semantic })
+            }
+        }
+        deserializer.deserialize_any(WeightsOrPreset)
+    }
+}
+
+/// The four weights as written out, missing ones at their defaults.
+#[derive(Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct Weights {
+    jitter: f64,
+    foot_skate: f64,
+    decorrelation: f64,
+    semantic: f64,
+}
+
+impl Default for Weights {
+    fn default() -> Self {
+        let RewardWeights { jitter, foot_skate, decorrelation, semantic } = RewardWeights::default();
+        Self { jitter, foot_skate, decorrelation, semantic }
+    }
 }
 
 /// The terms of one evaluation, per sample `[B]`.
@@ -137,6 +199,21 @@ mod tests {
     use super::*;
     use candle_core::Device;
     use rand::SeedableRng;
+
+    #[test]
+    fn weights_parse_from_numbers_or_a_preset_name() {
+        let parse = |json: &str| serde_json::from_str::<RewardWeights>(json);
+        assert_eq!(parse(r#""steps_raising_hands""#).ok(), Some(RewardWeights::STEPS_RAISING_HANDS));
+        assert_eq!(parse(r#""narrow_gap""#).ok(), Some(RewardWeights::NARROW_GAP));
+        let partial = parse(r#"{"semantic": 0.5}"#).ok();
+        assert_eq!(partial, Some(RewardWeights { semantic: 0.5, ..RewardWeights::default() }));
+        let typo = parse(r#""narrow-gap""#).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(typo.contains("unknown reward preset \"narrow-gap\"") && typo.contains("narrow_gap"), "{typo}");
+        assert!(parse(r#"{"jiter": 1.0}"#).is_err());
+        // Written out as the four weights, which read back the same.
+        let written = serde_json::to_string(&RewardWeights::LOW_BARRIER).unwrap_or_default();
+        assert_eq!(parse(&written).ok(), Some(RewardWeights::LOW_BARRIER));
+    }
 
     fn standing(frames: usize) -> Tensor {
         // A still figure: joint j at (0.1·j, 0.05·j, 0), the feet within 1.3 cm of the floor,
