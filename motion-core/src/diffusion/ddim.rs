@@ -83,7 +83,7 @@ pub fn guided_move<D: Denoiser + ?Sized>(
     guidance: Guidance,
     step: DdimMove,
 ) -> Result<Tensor> {
-    step.apply(x, &guidance.predict_x0(denoiser, x, &timestep_tensor(step.timestep, x)?, text)?)
+    step.apply(x, &guidance.predict_x0(denoiser, x, &timestep_tensor(step.timestep, x.dim(0)?, x.device())?, text)?)
 }
 
 /// A K-step deterministic (eta = 0) DDIM sampler over a respaced schedule.
@@ -203,7 +203,7 @@ impl DdimSampler {
         let guidance = guidance.for_text(text)?;
         check_batch(x0, text)?;
         let predict = |x: &Tensor, t: usize| -> Result<Tensor> {
-            Ok(guidance.predict_x0(denoiser, x, &timestep_tensor(t, x)?, text)?.detach())
+            Ok(guidance.predict_x0(denoiser, x, &timestep_tensor(t, x.dim(0)?, x.device())?, text)?.detach())
         };
         let target = x0.detach();
         let mut x = target.clone();
@@ -250,7 +250,8 @@ impl DdimSampler {
             x = detach(match on_step.as_mut() {
                 None => denoiser.ddim_move(&x, text, guidance, step)?,
                 Some(on_step) => {
-                    let x0_hat = detach(guidance.predict_x0(denoiser, &x, &timestep_tensor(t, &x)?, text)?);
+                    let x0_hat =
+                        detach(guidance.predict_x0(denoiser, &x, &timestep_tensor(t, x.dim(0)?, x.device())?, text)?);
                     on_step(&DdimProgress { step: steps - k, steps, timestep: t, x0_hat: &x0_hat });
                     step.apply(&x, &x0_hat)?
                 }
@@ -260,10 +261,10 @@ impl DdimSampler {
     }
 }
 
-/// `[batch]` u32 tensor filled with timestep `t`, on `x`'s device.
-fn timestep_tensor(t: usize, x: &Tensor) -> Result<Tensor> {
+/// `[rows]` u32 tensor filled with timestep `t`, on `device`.
+pub(crate) fn timestep_tensor(t: usize, rows: usize, device: &candle_core::Device) -> Result<Tensor> {
     let t = u32::try_from(t).map_err(|_| candle_core::Error::Msg(format!("timestep {t} overflows u32")))?;
-    Tensor::full(t, x.dim(0)?, x.device())
+    Tensor::full(t, rows, device)
 }
 
 /// Errors unless `text` has one row per sample of `x`.

@@ -28,6 +28,7 @@ pub use config::{MdmConfig, Prediction};
 use init::SeededInit;
 use layer::{Dropout, EncoderLayer, ParamLoader};
 
+use crate::diffusion::ddim::timestep_tensor;
 use crate::diffusion::{guided_move, DdimMove, Denoiser, Guidance, NoiseSchedule};
 use crate::nn::Linear;
 
@@ -251,10 +252,11 @@ impl Denoiser for Mdm {
         if !crate::nn::ops::has_cpu_kernel(x_t) {
             return guided_move(self, x_t, text, guidance, step);
         }
-        let batch = x_t.dim(0)?;
-        let timestep = u32::try_from(step.timestep)
-            .map_err(|_| candle_core::Error::Msg(format!("timestep {} overflows u32", step.timestep)))?;
-        self.check_inputs(x_t, &Tensor::full(timestep, batch, x_t.device())?, text)?;
+        let (batch, frames) = (x_t.dim(0)?, x_t.dim(1)?);
+        // Guidance runs each sample twice: under its text, then under the empty one.
+        let copies = if guidance.is_active() { 2 } else { 1 };
+        let timesteps = timestep_tensor(step.timestep, copies * batch, x_t.device())?;
+        self.check_inputs(x_t, &timesteps.narrow(0, 0, batch)?, text)?;
         let (rows, scale) = if guidance.is_active() {
             (Tensor::cat(&[text, &text.zeros_like()?], 0)?, Some(guidance.scale))
         } else {
@@ -271,8 +273,7 @@ impl Denoiser for Mdm {
             }
         };
         let epilogue = layer::Epilogue { guidance: scale, x_coeff, out_coeff };
-        let timesteps = Tensor::full(timestep, rows.dim(0)?, x_t.device())?;
-        let ends = self.frozen_ends(x_t.dim(1)?, &timesteps, &rows, Some(epilogue))?;
+        let ends = self.frozen_ends(frames, &timesteps, &rows, Some(epilogue))?;
         layer::frozen_stack(&self.layers, x_t, Some(ends))
     }
 
