@@ -26,7 +26,7 @@ use candle_core::{bail, CpuStorage, CustomOp1, Error, Layout, Result, Shape, Sto
 
 use crate::nn::kernels::{
     self, contiguous_slice, dispatch_real, linear_rows, linear_rows_bwd, par_each, row_chunks, rows_of, split_rows,
-    MatView, Real, Rows,
+    MatView, Real, Rows, Weight,
 };
 
 /// How one call shares its work among the rayon workers.
@@ -81,15 +81,22 @@ fn run<I: Send>(threads: usize, items: Vec<I>, f: impl Fn(I) -> Result<()> + Syn
 }
 
 /// The frozen weights of one layer (detached tensors: reading them never records a graph).
+/// The four linear weights come twice: as loaded (`[out, in]`, which the input gradient
+/// reads as it lies) and transposed once into contiguous `[in, out]` (`*_t`, which the forward
+/// products read as they lie, instead of gathering `[out, in]`'s columns on every call).
 #[derive(Debug, Clone)]
 pub(crate) struct LayerWeights {
     pub in_proj_weight: Tensor,
+    pub in_proj_weight_t: Tensor,
     pub in_proj_bias: Tensor,
     pub out_proj_weight: Tensor,
+    pub out_proj_weight_t: Tensor,
     pub out_proj_bias: Tensor,
     pub linear1_weight: Tensor,
+    pub linear1_weight_t: Tensor,
     pub linear1_bias: Tensor,
     pub linear2_weight: Tensor,
+    pub linear2_weight_t: Tensor,
     pub linear2_bias: Tensor,
     pub norm1_weight: Tensor,
     pub norm1_bias: Tensor,
@@ -98,7 +105,7 @@ pub(crate) struct LayerWeights {
 }
 
 impl LayerWeights {
-    fn each(&self) -> [&Tensor; 12] {
+    fn each(&self) -> [&Tensor; 16] {
         [
             &self.in_proj_weight,
             &self.in_proj_bias,
@@ -112,6 +119,10 @@ impl LayerWeights {
             &self.norm1_bias,
             &self.norm2_weight,
             &self.norm2_bias,
+            &self.in_proj_weight_t,
+            &self.out_proj_weight_t,
+            &self.linear1_weight_t,
+            &self.linear2_weight_t,
         ]
     }
 }
@@ -294,7 +305,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
                 }
             }
             let rows = &x[((first + i) * frames + r.first) * f..][..r.len * f];
-            linear_rows(out, rows, r.len, f, self.w_in, None)
+            linear_rows(out, rows, r.len, f, Weight::OutIn(self.w_in), None)
         })?;
         Ok(h)
     }
@@ -306,7 +317,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
         let tasks = frame_tasks(&mut out, frames, 0, f, frames, threads);
         run(threads, tasks, |(i, r, o)| {
             let rows = &h[(i * s + 1 + r.first) * d..][..r.len * d];
-            linear_rows(o, rows, r.len, d, self.w_out, Some(self.b_out))
+            linear_rows(o, rows, r.len, d, Weight::OutIn(self.w_out), Some(self.b_out))
         })
         .map(|()| out)
     }
@@ -378,8 +389,13 @@ struct Cache {
 
 /// The frozen weights of one layer as CPU slices, with their sizes.
 struct Params<'a, T> {
-    /// `[3d, d]`, `[d, d]`, `[ff, d]`, `[d, ff]` row-major (`[out, in]`).
+    /// `[3d, d]`, `[d, d]`, `[ff, d]`, `[d, ff]` row-major (`[out, in]`), and each transposed
+    /// (`*_wt`, row-major `[in, out]`).
     in_w: &'a [T],
+    in_wt: &'a [T],
+    out_wt: &'a [T],
+    l1_wt: &'a [T],
+    l2_wt: &'a [T],
     in_b: &'a [T],
     out_w: &'a [T],
     out_b: &'a [T],
@@ -394,7 +410,7 @@ struct Params<'a, T> {
 }
 
 impl<'a, T: Real> Params<'a, T> {
-    fn new(g: &'a [(StorageRef<'_>, &'a Layout); 12], d: usize) -> Result<Self> {
+    fn new(g: &'a [(StorageRef<'_>, &'a Layout); 16], d: usize) -> Result<Self> {
         let slice = |i: usize, len: usize| -> Result<&'a [T]> {
             let data = match &*g[i].0 {
                 Storage::Cpu(storage) => contiguous_slice::<T>(storage, g[i].1)?,
@@ -411,6 +427,10 @@ impl<'a, T: Real> Params<'a, T> {
         };
         Ok(Self {
             in_w: slice(0, 3 * d * d)?,
+            in_wt: slice(12, 3 * d * d)?,
+            out_wt: slice(13, d * d)?,
+            l1_wt: slice(14, ff * d)?,
+            l2_wt: slice(15, d * ff)?,
             in_b: slice(1, 3 * d)?,
             out_w: slice(2, d * d)?,
             out_b: slice(3, d)?,
@@ -675,7 +695,9 @@ impl FusedEncoderStack {
 
         let mut qkv = vec![zero; m * 3 * d];
         let tasks: Vec<_> = chunks.iter().copied().zip(split_rows(&mut qkv, 3 * d, chunks.iter().copied())).collect();
-        run(threads, tasks, |(r, out)| linear_rows(out, rows_of(x, d, r), r.len, d, p.in_w, Some(p.in_b)))?;
+        run(threads, tasks, |(r, out)| {
+            linear_rows(out, rows_of(x, d, r), r.len, d, Weight::InOut(p.in_wt), Some(p.in_b))
+        })?;
 
         let mut probs = vec![zero; b * s * h * s];
         let mut ctx = vec![zero; m * d];
@@ -727,18 +749,18 @@ impl FusedEncoderStack {
             // r1 = x + ctx·W_outᵀ + b_out, h1 = LN1(r1).
             let mut r1: Vec<T> =
                 rows_of(x, d, r).iter().zip(p.out_b.iter().cycle()).map(|(&xv, &bv)| xv + bv).collect();
-            linear_rows(&mut r1, rows_of(ctx, d, r), n, d, p.out_w, None)?;
+            linear_rows(&mut r1, rows_of(ctx, d, r), n, d, Weight::InOut(p.out_wt), None)?;
             let mut h1 = vec![zero; n * d];
             kernels::layer_norm_fwd(&r1, p.n1_w, p.n1_b, self.eps, &mut h1, Some((xhat1, rstd1)));
             // r2 = h1 + GELU(h1·W1ᵀ + b1)·W2ᵀ + b2, y = LN2(r2).
-            linear_rows(pre, &h1, n, d, p.l1_w, Some(p.l1_b))?;
+            linear_rows(pre, &h1, n, d, Weight::InOut(p.l1_wt), Some(p.l1_b))?;
             let mut act = vec![zero; n * ff];
             kernels::gelu_fwd(pre, &mut act);
             let mut r2 = r1;
             for ((r, &hv), &bv) in r2.iter_mut().zip(&h1).zip(p.l2_b.iter().cycle()) {
                 *r = hv + bv;
             }
-            linear_rows(&mut r2, &act, n, ff, p.l2_w, None)?;
+            linear_rows(&mut r2, &act, n, ff, Weight::InOut(p.l2_wt), None)?;
             kernels::layer_norm_fwd(&r2, p.n2_w, p.n2_b, self.eps, y, Some((xhat2, rstd2)));
             Ok(())
         })?;

@@ -1,6 +1,8 @@
 //! PyTorch's `nn.TransformerEncoderLayer(d, heads, ff, dropout, activation="gelu")`, post-LN,
 //! with its parameter names, and the loader helpers that record every parameter by name.
 
+use std::sync::OnceLock;
+
 use candle_core::{Result, Shape, Tensor};
 use candle_nn::{Init, VarBuilder};
 use rand::RngCore;
@@ -67,6 +69,10 @@ pub(crate) struct EncoderLayer {
     norm1: LayerNorm,
     norm2: LayerNorm,
     num_heads: usize,
+    /// `Wᵀ` of in_proj, out_proj, linear1 and linear2 for the fused path, made on its first
+    /// call and kept when the weights are constants (a trainable layer's weights change under
+    /// the optimiser, so its transposes are made afresh on every call).
+    transposed: OnceLock<[Tensor; 4]>,
 }
 
 impl EncoderLayer {
@@ -90,6 +96,7 @@ impl EncoderLayer {
             norm1: loader.layer_norm(&vb.pp("norm1"), d)?,
             norm2: loader.layer_norm(&vb.pp("norm2"), d)?,
             num_heads: cfg.num_heads,
+            transposed: OnceLock::new(),
         })
     }
 
@@ -123,18 +130,38 @@ impl EncoderLayer {
         self.out_proj.forward(&ctx)
     }
 
+    /// `Wᵀ` (contiguous `[in, out]`) of the four linears, cached when no weight is a variable.
+    fn transposed_weights(&self) -> Result<[Tensor; 4]> {
+        if let Some(t) = self.transposed.get() {
+            return Ok(t.clone());
+        }
+        let linears = [&self.in_proj, &self.out_proj, &self.linear1, &self.linear2];
+        let t = |l: &Linear| l.weight().detach().t()?.contiguous();
+        let made = [t(linears[0])?, t(linears[1])?, t(linears[2])?, t(linears[3])?];
+        if linears.iter().all(|l| !l.weight().is_variable()) {
+            // Another thread may have filled it meanwhile with the same values.
+            let _ = self.transposed.set(made.clone());
+        }
+        Ok(made)
+    }
+
     fn frozen_weights(&self) -> Result<LayerWeights> {
         let bias = |l: &Linear| -> Result<Tensor> {
             l.bias().map(Tensor::detach).ok_or_else(|| candle_core::Error::Msg("encoder linear without bias".into()))
         };
+        let [in_t, out_t, l1_t, l2_t] = self.transposed_weights()?;
         Ok(LayerWeights {
             in_proj_weight: self.in_proj.weight().detach(),
+            in_proj_weight_t: in_t,
             in_proj_bias: bias(&self.in_proj)?,
             out_proj_weight: self.out_proj.weight().detach(),
+            out_proj_weight_t: out_t,
             out_proj_bias: bias(&self.out_proj)?,
             linear1_weight: self.linear1.weight().detach(),
+            linear1_weight_t: l1_t,
             linear1_bias: bias(&self.linear1)?,
             linear2_weight: self.linear2.weight().detach(),
+            linear2_weight_t: l2_t,
             linear2_bias: bias(&self.linear2)?,
             norm1_weight: self.norm1.weight().detach(),
             norm1_bias: self.norm1.bias().detach(),

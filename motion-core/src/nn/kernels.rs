@@ -359,23 +359,45 @@ pub(crate) fn par_each<I: Send>(items: Vec<I>, f: impl Fn(I) -> Result<()> + Syn
     items.into_par_iter().try_for_each(f)
 }
 
-/// `dst [rows, n] = x [rows, k] · Wᵀ + bias` for a row-major `W [n, k]` (bias broadcast
-/// over rows, or `dst` kept and accumulated when `bias` is `None`).
+/// How a linear layer's weight `W` (`y = x·Wᵀ`, `in = k` inputs, `out = n` outputs) lies in
+/// memory.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Weight<'a, T> {
+    /// Row-major `[n, k]`, PyTorch's `nn.Linear` layout, read transposed in place (the product
+    /// then gathers `W`'s columns into gemm's packed layout on every call).
+    OutIn(&'a [T]),
+    /// Row-major `[k, n]`: `Wᵀ` stored contiguously (a frozen weight transposed once), which
+    /// the product reads as it lies.
+    InOut(&'a [T]),
+}
+
+impl<T> Weight<'_, T> {
+    /// `Wᵀ [k, n]` as a view into the slice, and the slice.
+    fn transposed_view(&self, k: usize) -> (&[T], MatView) {
+        match *self {
+            Weight::OutIn(w) => (w, MatView::contiguous(0, 1, w.len() / k.max(1), k).t()),
+            Weight::InOut(w) => (w, MatView::contiguous(0, 1, k, w.len() / k.max(1))),
+        }
+    }
+}
+
+/// `dst [rows, n] = x [rows, k] · Wᵀ + bias` (bias broadcast over rows, or `dst` kept and
+/// accumulated when `bias` is `None`).
 pub(crate) fn linear_rows<T: Real>(
     dst: &mut [T],
     x: &[T],
     rows: usize,
     k: usize,
-    w: &[T],
+    w: Weight<'_, T>,
     bias: Option<&[T]>,
 ) -> Result<()> {
-    let n = w.len() / k.max(1);
+    let (w, wt) = w.transposed_view(k);
+    let n = wt.cols;
     if let Some(bias) = bias {
         for row in dst.chunks_exact_mut(n) {
             row.copy_from_slice(bias);
         }
     }
-    let wt = MatView::contiguous(0, 1, n, k).t();
     gemm_into(dst, MatView::contiguous(0, 1, rows, n), x, MatView::contiguous(0, 1, rows, k), w, wt, true)
 }
 
@@ -423,7 +445,7 @@ pub(crate) fn linear<T: Real>(x: &[T], xv: MatView, w: &[T], n: usize, bias: Opt
         let Some(rows) = x.get(first..first + r.len * k) else {
             bail!("linear: input view {xv:?} reaches past its {} elements", x.len());
         };
-        linear_rows(out, rows, r.len, k, w, bias)
+        linear_rows(out, rows, r.len, k, Weight::OutIn(w), bias)
     })?;
     Ok(y)
 }
