@@ -353,6 +353,10 @@ pub(crate) struct FusedEncoderStack {
     ends: Option<Ends>,
     num_heads: usize,
     eps: f64,
+    /// Whether the forward pass keeps its activations for a backward pass (false when the
+    /// input records no graph, so no gradient can reach this op: then each layer's
+    /// activations are dropped as soon as the next layer has its input).
+    keep_activations: bool,
     cache: Mutex<Option<Saved>>,
 }
 
@@ -519,8 +523,14 @@ impl Dims {
 }
 
 impl FusedEncoderStack {
-    pub(crate) fn new(layers: Vec<LayerWeights>, ends: Option<Ends>, num_heads: usize, eps: f64) -> Self {
-        Self { layers, ends, num_heads, eps, cache: Mutex::new(None) }
+    pub(crate) fn new(
+        layers: Vec<LayerWeights>,
+        ends: Option<Ends>,
+        num_heads: usize,
+        eps: f64,
+        keep_activations: bool,
+    ) -> Self {
+        Self { layers, ends, num_heads, eps, keep_activations, cache: Mutex::new(None) }
     }
 
     fn lock(&self) -> Result<std::sync::MutexGuard<'_, Option<Saved>>> {
@@ -594,7 +604,9 @@ impl FusedEncoderStack {
                 for p in params {
                     let (next, cache) = self.layer_fwd(p, dims, &h, count, plan.threads())?;
                     h = next;
-                    layers.push(cache);
+                    if self.keep_activations {
+                        layers.push(cache);
+                    }
                 }
                 let out = match ends {
                     Some(e) => e.project_out(&h, count, rows, d, plan.threads())?,
@@ -617,7 +629,9 @@ impl FusedEncoderStack {
             }
             Ok((y, groups))
         })?;
-        *self.lock()? = Some(Saved { plan, groups });
+        if self.keep_activations {
+            *self.lock()? = Some(Saved { plan, groups });
+        }
         let y = match step {
             Some(e) => e.forward(x_in, &y),
             None => y,

@@ -191,5 +191,12 @@ pub(crate) fn frozen_stack(layers: &[EncoderLayer], h: &Tensor, ends: Option<End
         return Ok(h);
     }
     let weights = layers.iter().map(EncoderLayer::frozen_weights).collect::<Result<Vec<_>>>()?;
-    h.contiguous()?.apply_op1(FusedEncoderStack::new(weights, ends, first.num_heads, first.norm1.eps()))
+    let keep_activations = h.track_op();
+    h.contiguous()?.apply_op1(FusedEncoderStack::new(
+        weights,
+        ends,
+        first.num_heads,
+        first.norm1.eps(),
+        keep_activations,
+    ))
 }

@@ -722,6 +722,9 @@ fn choose_masks<M: Denoiser + ?Sized>(
 ) -> Result<(Vec<ChosenMask>, Tensor), RgDnoError> {
     let (batch, frames, _) = z1.dims3()?;
     let device = z1.device();
+    // No gradient is taken here: detached inputs record no graph, and the denoiser then
+    // keeps no activations for a backward pass.
+    let (z1, z2) = (&z1.detach(), &z2.detach());
     let mut best: Vec<Option<(ChosenMask, f64)>> = vec![None; batch];
     for (chunk_index, chunk) in candidates.chunks(per_batch).enumerate() {
         let masks = chunk
