@@ -391,6 +391,63 @@ struct Cache {
     rstd2: CpuStorage,
 }
 
+/// One layer's forward buffers over the rows of a group: the activations a backward pass
+/// reads ([`Cache`]) and the attention context. Every kernel that fills them overwrites every
+/// element, so a forward-only pass hands one layer's buffers to the next instead of
+/// allocating and zeroing them again.
+struct Activations<T> {
+    qkv: Vec<T>,
+    probs: Vec<T>,
+    ctx: Vec<T>,
+    xhat1: Vec<T>,
+    rstd1: Vec<T>,
+    pre: Vec<T>,
+    xhat2: Vec<T>,
+    rstd2: Vec<T>,
+}
+
+impl<T: Real> Activations<T> {
+    /// Buffers for `m` rows of width `d`, `probs` probabilities and feed-forward width `ff`.
+    fn zeros(m: usize, d: usize, probs: usize, ff: usize) -> Self {
+        let zeros = |n: usize| vec![T::from_f64(0.0); n];
+        Self {
+            qkv: zeros(m * 3 * d),
+            probs: zeros(probs),
+            ctx: zeros(m * d),
+            xhat1: zeros(m * d),
+            rstd1: zeros(m),
+            pre: zeros(m * ff),
+            xhat2: zeros(m * d),
+            rstd2: zeros(m),
+        }
+    }
+
+    /// Whether these buffers have the sizes of [`Activations::zeros`] with the same arguments.
+    fn fits(&self, m: usize, d: usize, probs: usize, ff: usize) -> bool {
+        self.qkv.len() == m * 3 * d
+            && self.probs.len() == probs
+            && self.ctx.len() == m * d
+            && self.xhat1.len() == m * d
+            && self.rstd1.len() == m
+            && self.pre.len() == m * ff
+            && self.xhat2.len() == m * d
+            && self.rstd2.len() == m
+    }
+
+    /// What the backward pass keeps (the context is not needed).
+    fn into_cache(self) -> Cache {
+        Cache {
+            qkv: T::to_cpu_storage_owned(self.qkv),
+            probs: T::to_cpu_storage_owned(self.probs),
+            xhat1: T::to_cpu_storage_owned(self.xhat1),
+            rstd1: T::to_cpu_storage_owned(self.rstd1),
+            pre_gelu: T::to_cpu_storage_owned(self.pre),
+            xhat2: T::to_cpu_storage_owned(self.xhat2),
+            rstd2: T::to_cpu_storage_owned(self.rstd2),
+        }
+    }
+}
+
 /// The frozen weights of one layer as CPU slices, with their sizes.
 struct Params<'a, T> {
     /// `[3d, d]`, `[d, d]`, `[ff, d]`, `[d, ff]` row-major (`[out, in]`), and each transposed
@@ -601,11 +658,14 @@ impl FusedEncoderStack {
                     None => x[first * in_width..(first + count) * in_width].to_vec(),
                 };
                 let mut layers = Vec::with_capacity(params.len());
+                let mut spare = None;
                 for p in params {
-                    let (next, cache) = self.layer_fwd(p, dims, &h, count, plan.threads())?;
+                    let (next, activations) = self.layer_fwd(p, dims, &h, count, plan.threads(), spare.take())?;
                     h = next;
                     if self.keep_activations {
-                        layers.push(cache);
+                        layers.push(activations.into_cache());
+                    } else {
+                        spare = Some(activations);
                     }
                 }
                 let out = match ends {
@@ -700,21 +760,24 @@ impl FusedEncoderStack {
         x: &[T],
         b: usize,
         threads: usize,
-    ) -> Result<(Vec<T>, Cache)> {
+        reuse: Option<Activations<T>>,
+    ) -> Result<(Vec<T>, Activations<T>)> {
         let (s, d) = (dims.tokens, dims.d);
         let (m, h, ff) = (b * s, dims.heads, p.ff());
         let scale = T::from_f64(1.0 / (dims.head_dim() as f64).sqrt());
         let zero = T::from_f64(0.0);
         let (chunks, blocks) = (row_chunks(m, threads), attention_blocks(b, s, threads));
 
-        let mut qkv = vec![zero; m * 3 * d];
+        let Activations { mut qkv, mut probs, mut ctx, mut xhat1, mut rstd1, mut pre, mut xhat2, mut rstd2 } =
+            match reuse {
+                Some(a) if a.fits(m, d, b * s * h * s, ff) => a,
+                _ => Activations::zeros(m, d, b * s * h * s, ff),
+            };
         let tasks: Vec<_> = chunks.iter().copied().zip(split_rows(&mut qkv, 3 * d, chunks.iter().copied())).collect();
         run(threads, tasks, |(r, out)| {
             linear_rows(out, rows_of(x, d, r), r.len, d, Weight::InOut(p.in_wt), Some(p.in_b))
         })?;
 
-        let mut probs = vec![zero; b * s * h * s];
-        let mut ctx = vec![zero; m * d];
         let rows = blocks.iter().map(|blk| blk.rows);
         let tasks: Vec<_> =
             blocks.iter().zip(split_rows(&mut probs, h * s, rows.clone())).zip(split_rows(&mut ctx, d, rows)).collect();
@@ -747,9 +810,6 @@ impl FusedEncoderStack {
         })?;
 
         let mut y = vec![zero; m * d];
-        let (mut xhat1, mut rstd1) = (vec![zero; m * d], vec![zero; m]);
-        let mut pre = vec![zero; m * ff];
-        let (mut xhat2, mut rstd2) = (vec![zero; m * d], vec![zero; m]);
         let cs = || chunks.iter().copied();
         let tasks: Vec<_> = cs()
             .zip(split_rows(&mut y, d, cs()))
@@ -757,13 +817,13 @@ impl FusedEncoderStack {
             .zip(split_rows(&mut pre, ff, cs()))
             .zip(split_rows(&mut xhat2, d, cs()).into_iter().zip(split_rows(&mut rstd2, 1, cs())))
             .collect();
-        let ctx = &ctx;
+        let ctx_ref = &ctx;
         run(threads, tasks, |((((r, y), (xhat1, rstd1)), pre), (xhat2, rstd2))| {
             let n = r.len;
             // r1 = x + ctx·W_outᵀ + b_out, h1 = LN1(r1).
             let mut r1: Vec<T> =
                 rows_of(x, d, r).iter().zip(p.out_b.iter().cycle()).map(|(&xv, &bv)| xv + bv).collect();
-            linear_rows(&mut r1, rows_of(ctx, d, r), n, d, Weight::InOut(p.out_wt), None)?;
+            linear_rows(&mut r1, rows_of(ctx_ref, d, r), n, d, Weight::InOut(p.out_wt), None)?;
             let mut h1 = vec![zero; n * d];
             kernels::layer_norm_fwd(&r1, p.n1_w, p.n1_b, self.eps, &mut h1, Some((xhat1, rstd1)));
             // r2 = h1 + GELU(h1·W1ᵀ + b1)·W2ᵀ + b2, y = LN2(r2).
@@ -779,16 +839,7 @@ impl FusedEncoderStack {
             Ok(())
         })?;
 
-        let cache = Cache {
-            qkv: T::to_cpu_storage_owned(qkv),
-            probs: T::to_cpu_storage_owned(probs),
-            xhat1: T::to_cpu_storage_owned(xhat1),
-            rstd1: T::to_cpu_storage_owned(rstd1),
-            pre_gelu: T::to_cpu_storage_owned(pre),
-            xhat2: T::to_cpu_storage_owned(xhat2),
-            rstd2: T::to_cpu_storage_owned(rstd2),
-        };
-        Ok((y, cache))
+        Ok((y, Activations { qkv, probs, ctx, xhat1, rstd1, pre, xhat2, rstd2 }))
     }
 
     /// One layer's input gradient over `b` elements in four phases (in parallel when
