@@ -173,11 +173,20 @@ pub fn program_objective<'a>(
     initial: &'a Tensor,
     jitter_weight: f64,
 ) -> impl Fn(&Tensor) -> candle_core::Result<Tensor> + 'a {
-    move |x: &Tensor| {
-        let joints = prior.to_joints(x)?;
-        let error = compiled.evaluate(&joints, Some(initial)).map_err(candle_core::Error::wrap)?.total;
+    let on_joints = joints_objective(compiled, initial, jitter_weight);
+    move |x: &Tensor| on_joints(&prior.to_joints(x)?)
+}
+
+/// [`program_objective`] on joints `[B, T, 22, 3]` (m) instead of features.
+pub fn joints_objective<'a>(
+    compiled: &'a CompiledProgram,
+    initial: &'a Tensor,
+    jitter_weight: f64,
+) -> impl Fn(&Tensor) -> candle_core::Result<Tensor> + 'a {
+    move |joints: &Tensor| {
+        let error = compiled.evaluate(joints, Some(initial)).map_err(candle_core::Error::wrap)?.total;
         if jitter_weight > 0.0 {
-            error + (jitter_penalty(&joints, JITTER_LIMIT)? * jitter_weight)?
+            error + (jitter_penalty(joints, JITTER_LIMIT)? * jitter_weight)?
         } else {
             Ok(error)
         }

@@ -30,7 +30,9 @@ use crate::constraints::CompiledProgram;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{Denoiser, Guidance};
 use crate::dno::{self, DnoConfig, UnrolledDdim};
-use crate::generation::{finish, pick_rows, program_objective, Generated, GenerationConfig, GenerationError};
+use crate::generation::{
+    finish, joints_objective, pick_rows, program_objective, Generated, GenerationConfig, GenerationError,
+};
 use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
 use crate::prior::Prior;
 use crate::program::{ConstraintGroups, TaskProgram};
@@ -593,7 +595,19 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         let (z_blend, masks, soft_blend_objective) = match rg.ablation.fixed_mask() {
             Some(m) => (blend(&Tensor::new(m, z1.device())?, &z1, &z2)?, Vec::new(), Vec::new()),
             None => {
-                let stages = MaskStages { prior, rg, solver, full: &full, weights: &reward_weights, round };
+                let stages = MaskStages {
+                    prior,
+                    rg,
+                    solver,
+                    full: &full,
+                    candidates_objective: Objective {
+                        compiled,
+                        initial: &initial_joints,
+                        jitter_weight: config.jitter_weight,
+                    },
+                    weights: &reward_weights,
+                    round,
+                };
                 stages.search(&z1, &z2, seed, seconds, progress)?
             }
         };
@@ -633,8 +647,31 @@ struct MaskStages<'a, M: Denoiser + ?Sized> {
     rg: &'a RgDnoConfig,
     solver: &'a UnrolledDdim<'a, M>,
     full: &'a dyn Fn(&Tensor) -> candle_core::Result<Tensor>,
+    /// `full`'s parts, to score every mask candidate of a chunk in one evaluation.
+    candidates_objective: Objective<'a>,
     weights: &'a RewardWeights,
     round: usize,
+}
+
+/// The program objective's parts ([`program_objective`]): the compiled program, the initial
+/// joints `[B or 1, T, 22, 3]` and the jitter guard's weight.
+#[derive(Clone, Copy)]
+struct Objective<'a> {
+    compiled: &'a CompiledProgram,
+    initial: &'a Tensor,
+    jitter_weight: f64,
+}
+
+impl Objective<'_> {
+    /// Per row `[copies·B]` for joints whose row `k·B + b` belongs to sample `b`.
+    fn on_copies(&self, joints: &Tensor, copies: usize) -> candle_core::Result<Tensor> {
+        let initial = match self.initial.dim(0)? {
+            1 => self.initial.clone(),
+            _ => self.initial.repeat((copies, 1, 1, 1))?,
+        };
+        let objective = joints_objective(self.compiled, &initial, self.jitter_weight);
+        objective(joints)
+    }
 }
 
 impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
@@ -648,7 +685,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         seconds: &mut StageSeconds,
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<(Tensor, Vec<ChosenMask>, Vec<f64>), RgDnoError> {
-        let MaskStages { prior, rg, solver, full, weights, round } = *self;
+        let MaskStages { prior, rg, solver, full, candidates_objective, weights, round } = *self;
         let batch = z1.dim(0)?;
         // Binary masks (eq. 13), no gradients.
         let clock = Instant::now();
@@ -659,7 +696,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
             &candidates,
             (z1, z2),
             solver,
-            full,
+            candidates_objective,
             prior,
             weights,
             rg.mask_batch.max(1),
@@ -713,7 +750,7 @@ fn choose_masks<M: Denoiser + ?Sized>(
     candidates: &[MaskCandidate],
     (z1, z2): (&Tensor, &Tensor),
     solver: &UnrolledDdim<'_, M>,
-    objective: &dyn Fn(&Tensor) -> candle_core::Result<Tensor>,
+    objective: Objective<'_>,
     prior: &Prior,
     weights: &RewardWeights,
     per_batch: usize,
@@ -736,7 +773,7 @@ fn choose_masks<M: Denoiser + ?Sized>(
         let text = solver.text.repeat((chunk.len(), 1))?;
         let x = solver.sampler.sample(solver.denoiser, &z, &text, solver.guidance)?;
         let joints = prior.to_joints(&x)?;
-        let constraint = to_vec(&tile_objective(objective, &x, chunk.len(), batch)?)?;
+        let constraint = to_vec(&objective.on_copies(&joints, chunk.len())?)?;
         let terms = to_vec(&reward(&joints, &z, weights, rng)?.total)?;
         for (k, candidate) in chunk.iter().enumerate() {
             for b in 0..batch {
@@ -759,19 +796,6 @@ fn choose_masks<M: Denoiser + ?Sized>(
         .map(|m| m.candidate.tensor(frames, device)?.broadcast_as((1, frames, FEATURE_DIM))?.contiguous())
         .collect::<candle_core::Result<Vec<_>>>()?;
     Ok((chosen, Tensor::cat(&tensors, 0)?.to_dtype(z1.dtype())?))
-}
-
-/// The objective (built for `batch` rows, e.g. with a `[B, T, 22, 3]` initial motion) on
-/// `copies·batch` rows, evaluated copy by copy.
-fn tile_objective(
-    objective: &dyn Fn(&Tensor) -> candle_core::Result<Tensor>,
-    x: &Tensor,
-    copies: usize,
-    batch: usize,
-) -> candle_core::Result<Tensor> {
-    let parts =
-        (0..copies).map(|k| objective(&x.narrow(0, k * batch, batch)?)).collect::<candle_core::Result<Vec<_>>>()?;
-    Tensor::cat(&parts, 0)
 }
 
 fn to_vec(t: &Tensor) -> candle_core::Result<Vec<f64>> {
