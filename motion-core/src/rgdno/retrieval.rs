@@ -382,17 +382,22 @@ fn words(text: &str) -> Vec<String> {
 /// `(from − 1)/(to − 1)` so that the motion covers the same ground and turn in its new length.
 pub fn resize_features(data: &[f32], from: usize, to: usize) -> Vec<f32> {
     let scale = if to > 1 { (from.max(1) - 1) as f32 / (to - 1) as f32 } else { 0.0 };
+    // Velocities are per frame: a clip stretched by 1/scale moves 1/scale as far per frame.
+    let factors: Vec<f32> = (0..FEATURE_DIM)
+        .map(|c| match c == ROOT_ROT_VEL || ROOT_LIN_VEL.contains(&c) || LOCAL_VEL.contains(&c) {
+            true => scale,
+            false => 1.0,
+        })
+        .collect();
+    let row = |t: usize| &data[t * FEATURE_DIM..(t + 1) * FEATURE_DIM];
     let mut out = Vec::with_capacity(to * FEATURE_DIM);
     for t in 0..to {
         let position = t as f32 * scale;
         let lower = (position.floor() as usize).min(from - 1);
         let upper = (lower + 1).min(from - 1);
         let w = position - lower as f32;
-        for c in 0..FEATURE_DIM {
-            let value = (1.0 - w) * data[lower * FEATURE_DIM + c] + w * data[upper * FEATURE_DIM + c];
-            let is_velocity = c == ROOT_ROT_VEL || ROOT_LIN_VEL.contains(&c) || LOCAL_VEL.contains(&c);
-            out.push(if is_velocity { value * scale } else { value });
-        }
+        let blended = row(lower).iter().zip(row(upper)).zip(&factors);
+        out.extend(blended.map(|((&a, &b), &f)| ((1.0 - w) * a + w * b) * f));
     }
     out
 }
