@@ -244,6 +244,21 @@ impl MatView {
     }
 }
 
+/// gemm copies a product's left operand (its vector axis; our `B`, since gemm transposes
+/// row-major products) into a packed layout when the product has more than this many × 6
+/// columns (gemm's default: 8). Our operands are small, and a layer's weight stays in L2
+/// between calls, so for operands already contiguous along that axis (the transposed weights,
+/// the input gradient's weights) packing costs more than it saves: products of 51–202 rows of
+/// the denoiser's shapes ran 5–30 % faster unpacked on one core (a standalone probe), and a
+/// Task-1 DNO sample 0.6–0.8 s faster, with the same values (packing moves data, it does not
+/// reorder sums). Operands strided along that axis, or whose length along it is not a multiple
+/// of 16, are still packed. 256 is the largest value gemm takes.
+const LHS_PACKING_THRESHOLD: usize = 256;
+
+/// Applies [`LHS_PACKING_THRESHOLD`] once per process. The setting is gemm's global, so it also
+/// holds for candle's single-threaded (small) products.
+static LHS_PACKING: std::sync::Once = std::sync::Once::new();
+
 /// `C = A·B`, or `C += A·B` when `accumulate`, for single matrices (`batch` 1) held in
 /// slices, with `C` written through the strided view `cv` of `dst`. The product runs on the
 /// calling thread only (the `gemm` crate without its own threading): the fused layer
@@ -291,6 +306,7 @@ pub(crate) fn gemm_into<T: Real>(
         return Ok(());
     }
     let stride = |s: usize| s as isize;
+    LHS_PACKING.call_once(|| gemm::set_lhs_packing_threshold_single_thread(LHS_PACKING_THRESHOLD));
     // SAFETY: every element the call reads or writes is `offset + i·row_stride +
     // j·col_stride` of its view with `i < rows`, `j < cols`: at most `end() − 1`, which the
     // checks above keep inside `a`, `b` and `dst`. `dst` is borrowed mutably and `a`, `b`
