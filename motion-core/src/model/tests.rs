@@ -157,6 +157,30 @@ fn frozen_and_primitive_paths_agree(dev: &Device) -> Result<()> {
     Ok(())
 }
 
+/// The fused path's transposed weights follow a trainable model's weights as the optimiser
+/// changes them, and a loaded model's cached transposes give the same pass every time.
+fn frozen_path_follows_changed_weights(dev: &Device) -> Result<()> {
+    let cfg = tiny_config();
+    let varmap = VarMap::new();
+    let model = Mdm::init_seeded(cfg.clone(), &varmap, DType::F64, dev, 4)?;
+    let inp = tiny_inputs(&cfg, dev)?;
+    let before = model.predict_x0(&inp.x, &inp.t, &inp.text)?;
+    for var in varmap.all_vars() {
+        var.set(&(var.as_tensor() * 1.25)?)?;
+    }
+    let after = model.predict_x0(&inp.x, &inp.t, &inp.text)?;
+    assert!(max_abs_diff(&before, &after)? > 1e-3, "the fused path kept the old weights");
+    assert!(max_abs_diff(&after, &model.forward_eval(&inp.x, &inp.t, &inp.text)?)? < 1e-12);
+
+    let (loaded, _) = parity_model(parity_config(), dev)?;
+    let x = randn(&[1, 4, loaded.config().input_feats], 7, dev)?.to_dtype(DType::F32)?;
+    let (t, text) = (Tensor::new(&[5u32], dev)?, Tensor::zeros((1, loaded.config().text_dim), DType::F32, dev)?);
+    let first = loaded.predict_x0(&x, &t, &text)?;
+    assert_eq!(max_abs_diff(&first, &loaded.predict_x0(&x, &t, &text)?)?, 0.0);
+    assert!(max_abs_diff(&first, &loaded.forward_eval(&x, &t, &text)?)? < 1e-5);
+    Ok(())
+}
+
 fn loss(out: &Tensor, w: &Tensor) -> Result<Tensor> {
     out.mul(w)?.sum_all()? + out.sqr()?.mean_all()?
 }
@@ -344,6 +368,7 @@ mod cpu {
         positional_table_matches_checkpoint_buffer,
         save_and_reload_round_trip,
         frozen_and_primitive_paths_agree,
+        frozen_path_follows_changed_weights,
         gradients_match_finite_differences,
         frozen_gradient_equals_primitive_gradient,
         fused_stack_gradient_matches_finite_differences,
