@@ -599,12 +599,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
                     prior,
                     rg,
                     solver,
-                    full: &full,
-                    candidates_objective: Objective {
-                        compiled,
-                        initial: &initial_joints,
-                        jitter_weight: config.jitter_weight,
-                    },
+                    objective: Objective { compiled, initial: &initial_joints, jitter_weight: config.jitter_weight },
                     weights: &reward_weights,
                     round,
                 };
@@ -646,9 +641,8 @@ struct MaskStages<'a, M: Denoiser + ?Sized> {
     prior: &'a Prior,
     rg: &'a RgDnoConfig,
     solver: &'a UnrolledDdim<'a, M>,
-    full: &'a dyn Fn(&Tensor) -> candle_core::Result<Tensor>,
-    /// `full`'s parts, to score every mask candidate of a chunk in one evaluation.
-    candidates_objective: Objective<'a>,
+    /// `F_C`, evaluated on joints the stage has already recovered.
+    objective: Objective<'a>,
     weights: &'a RewardWeights,
     round: usize,
 }
@@ -665,8 +659,8 @@ struct Objective<'a> {
 impl Objective<'_> {
     /// Per row `[copies·B]` for joints whose row `k·B + b` belongs to sample `b`.
     fn on_copies(&self, joints: &Tensor, copies: usize) -> candle_core::Result<Tensor> {
-        let initial = match self.initial.dim(0)? {
-            1 => self.initial.clone(),
+        let initial = match (self.initial.dim(0)?, copies) {
+            (1, _) | (_, 1) => self.initial.clone(),
             _ => self.initial.repeat((copies, 1, 1, 1))?,
         };
         let objective = joints_objective(self.compiled, &initial, self.jitter_weight);
@@ -685,7 +679,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         seconds: &mut StageSeconds,
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<(Tensor, Vec<ChosenMask>, Vec<f64>), RgDnoError> {
-        let MaskStages { prior, rg, solver, full, candidates_objective, weights, round } = *self;
+        let MaskStages { prior, rg, solver, objective, weights, round } = *self;
         let batch = z1.dim(0)?;
         // Binary masks (eq. 13), no gradients.
         let clock = Instant::now();
@@ -696,7 +690,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
             &candidates,
             (z1, z2),
             solver,
-            candidates_objective,
+            objective,
             prior,
             weights,
             rg.mask_batch.max(1),
@@ -719,9 +713,12 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
             let x = dno::Solver::solve(solver, &z)?;
             let joints = prior.to_joints(&x)?;
             let terms = reward(&joints, &z, weights, &mut rng)?;
-            let objective = (full(&x)? + terms.total)?;
-            soft_blend_objective = to_vec(&objective)?;
-            let mut grads = objective.sum_all()?.backward()?;
+            // F_C on its own recovery of the joints, as DNO's objective takes them: sharing
+            // `joints` with the reward gives the same values but sums the gradient in another
+            // order, which 500 later steps carry into centimetres.
+            let total = (objective.on_copies(&prior.to_joints(&x)?, 1)? + terms.total)?;
+            soft_blend_objective = to_vec(&total)?;
+            let mut grads = total.sum_all()?.backward()?;
             let grad = grads
                 .remove(logits.as_tensor())
                 .ok_or_else(|| candle_core::Error::Msg("no gradient reached the mask".into()))?;
