@@ -37,12 +37,12 @@ pub struct LegSolution {
 /// Thigh `|knee − hip|`, shin `|ankle − knee|` and foot `|toe − ankle|` keep their input lengths.
 /// A target nearer than `thigh + shin − soft_m` to the hip is hit exactly; beyond, the ankle lies
 /// on the hip–target line at [`soft_reach`] of the distance, m.
-/// The knee lies in the plane spanned by the hip→target line and the way the original knee bends
-/// off its own hip–ankle line ([`bend`], the pole vector); a straight original leg bends towards
-/// `forward` (the body's facing direction, knees bend forward). The toe is placed at the foot's
+/// The knee lies in the plane spanned by the hip→target line and `pole`, the way the knee
+/// bends ([`knee_bend`], or [`knee_poles`] over several frames); any vector perpendicular to that
+/// line when `pole` lies along it. The toe is placed at the foot's
 /// length from the new ankle towards `toe_target` (exactly on it when the two targets are a
 /// foot's length apart).
-pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, forward: DVec3, soft_m: f64) -> LegSolution {
+pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, pole: DVec3, soft_m: f64) -> LegSolution {
     let thigh = (leg.knee - leg.hip).length();
     let shin = (leg.ankle - leg.knee).length();
     let foot = (leg.toe - leg.ankle).length();
@@ -53,9 +53,7 @@ pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, forward: DVe
     let distance = to_target.length();
     let reached = distance >= min_reach && distance <= max_reach;
     let distance = soft_reach(distance, max_reach, soft_m).max(min_reach);
-    let pole = perpendicular(bend(leg, forward), axis)
-        .or_else(|| perpendicular(forward, axis))
-        .unwrap_or_else(|| axis.any_orthonormal_vector());
+    let pole = perpendicular(pole, axis).unwrap_or_else(|| axis.any_orthonormal_vector());
     // Law of cosines for the angle at the hip between the hip→ankle line and the thigh.
     let cos_hip = ((thigh * thigh + distance * distance - shin * shin) / (2.0 * thigh * distance)).clamp(-1.0, 1.0);
     let sin_hip = (1.0 - cos_hip * cos_hip).max(0.0).sqrt();
@@ -74,13 +72,30 @@ pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, forward: DVe
 /// Taken against the leg's own hip–ankle line, not the line to the new target: a straight
 /// stance leg whose ankle is held ahead of where it was would otherwise have its thigh direction
 /// read as a backward bend, and its knee flips behind the leg for a frame (seen as a 0.49
-/// m/frame² spike on the README's gap task).
-fn bend(leg: &Leg, forward: DVec3) -> DVec3 {
+/// m/frame² spike on the README's gap task). Its length says how well the frame defines the
+/// direction, so a sum over neighbouring frames weights the well-bent ones.
+pub fn knee_bend(leg: &Leg, forward: DVec3) -> DVec3 {
     let line = (leg.ankle - leg.hip).try_normalize().unwrap_or(DVec3::NEG_Y);
     let knee = leg.knee - leg.hip;
     let offset = knee - knee.dot(line) * line;
     let straightness = (1.0 - offset.length() / STRAIGHT_KNEE_M).max(0.0);
     offset + STRAIGHT_KNEE_M * straightness * forward.normalize_or_zero()
+}
+
+/// Frames on either side whose [`knee_bend`]s [`knee_poles`] sums (0.1 s at 20 fps).
+pub const KNEE_BEND_FRAMES: usize = 2;
+
+/// The pole of each frame's leg solve: the [`knee_bend`]s of the frames within
+/// [`KNEE_BEND_FRAMES`] summed (`legs` and the body's `forwards`, one per frame). A knee the
+/// motion holds nearly straight for a frame or two bends only 2–3 cm off its hip–ankle line,
+/// sideways or backwards as it happens; a leg the IK bends further there would swing its knee
+/// that way and back within a frame (up to 0.23 m/frame² on generated turning walks). In the sum
+/// the well-bent neighbours, whose bends are 10–20 cm long, set the direction.
+pub fn knee_poles(legs: &[Leg], forwards: &[DVec3]) -> Vec<DVec3> {
+    let bends: Vec<DVec3> = legs.iter().zip(forwards).map(|(leg, &forward)| knee_bend(leg, forward)).collect();
+    (0..bends.len())
+        .map(|t| bends[t.saturating_sub(KNEE_BEND_FRAMES)..(t + KNEE_BEND_FRAMES + 1).min(bends.len())].iter().sum())
+        .collect()
 }
 
 /// A knee less than this off its hip–ankle line counts as nearly straight, m.
@@ -203,6 +218,39 @@ mod tests {
         assert!(s.reached);
         assert!(s.leg.knee.z > 0.1, "knee forward (+z): {}", s.leg.knee);
         assert_lengths_kept(&leg, &s.leg);
+    }
+
+    #[test]
+    fn a_knee_straight_for_one_frame_keeps_bending_the_way_its_neighbours_do() {
+        // Seven frames of a leg bent forward (+z) by 20 cm, except frame 3: nearly straight, its
+        // knee 2 cm off the hip–ankle line, outwards and a little back.
+        let [thigh, shin] = [0.45, 0.45];
+        let leg_bent = |off: DVec3| {
+            let (hip, ankle) = (
+                DVec3::new(0.1, 0.9, 0.0),
+                DVec3::new(0.1, 0.9 - 2.0 * (0.45f64.powi(2) - off.length_squared()).sqrt(), 0.0),
+            );
+            Leg { hip, knee: (hip + ankle) / 2.0 + off, ankle, toe: ankle + DVec3::new(0.0, -0.05, 0.12) }
+        };
+        let odd = DVec3::new(0.018, 0.0, -0.009);
+        let legs: Vec<Leg> = (0..7).map(|t| leg_bent(if t == 3 { odd } else { DVec3::new(0.0, 0.0, 0.2) })).collect();
+        let poles = knee_poles(&legs, &[DVec3::Z; 7]);
+        let cos = poles[3].normalize().dot(DVec3::Z);
+        assert!(cos > 0.95, "frame 3's pole follows its neighbours: {}", poles[3]);
+        // Held 20 cm nearer the hip (a lifted, caught foot), frame 3's knee bends forward, as
+        // in the frames around it; with the frame's own bend it would swing out and back.
+        let leg = legs[3];
+        let target = leg.ankle + DVec3::Y * 0.2;
+        let knee_off = |pole: DVec3| {
+            let s = solve_leg(&leg, target, target + DVec3::new(0.0, -0.05, 0.12), pole, 0.0);
+            assert!(s.reached);
+            assert_lengths_kept(&leg, &s.leg);
+            s.leg.knee - (s.leg.hip + s.leg.ankle) / 2.0
+        };
+        let (smoothed, own) = (knee_off(poles[3]), knee_off(knee_bend(&leg, DVec3::Z)));
+        assert!(smoothed.z > 0.2 && smoothed.x.abs() < 0.08, "forward: {smoothed}");
+        assert!(own.x > 0.2 && own.z < 0.0, "the frame's own bend points out and back: {own}");
+        assert!((thigh + shin - (leg.ankle - leg.hip).length()) < 0.002, "nearly straight in the input");
     }
 
     #[test]

@@ -20,7 +20,8 @@
 //!    vertical motion, such as a heel rising before the foot leaves); it eases back to its own
 //!    motion over [`FootLockConfig::blend_frames`] frames on either side, more for a large
 //!    offset ([`FootLockConfig::blend_speed_m_per_s`]), so nothing pops.
-//! 4. **Leg IK** ([`leg_ik::solve_leg`]): hip fixed, knee in its original bend plane, thigh,
+//! 4. **Leg IK** ([`leg_ik::solve_leg`]): hip fixed, knee in its original bend plane (summed
+//!    over ±[`leg_ik::KNEE_BEND_FRAMES`] frames, [`leg_ik::knee_poles`]), thigh,
 //!    shin and foot lengths kept exactly; a free ankle follows its toe's correction (and a free
 //!    toe its ankle's), so the foot turns about the planted joint. A target out of the leg's
 //!    reach gives the closest point the leg reaches with the knee a little bent (soft reach,
@@ -57,7 +58,7 @@ use crate::skeleton::{bone_lengths, Joint, Pose, CONTACT_JOINTS, FPS, NUM_JOINTS
 use crate::MotionError;
 use contact::{detect, floor_height, runs, sinking_lift, speeds, Hysteresis};
 use foot_lock::{corrections, steadiest, Correction, Easing, Lock};
-use leg_ik::{solve_leg, Leg, LegSolution};
+use leg_ik::{knee_poles, solve_leg, Leg, LegSolution};
 
 /// The clean-up raises no task constraint's error `E` by more than this fraction of `E` ...
 pub const CONSTRAINT_TOLERANCE_RELATIVE: f64 = 0.05;
@@ -323,11 +324,19 @@ pub fn foot_lock(
     for (hip, knee, a, b) in LEGS {
         let (ankle, toe) = (CONTACT_JOINTS[a].index(), CONTACT_JOINTS[b].index());
         let moved = |t: usize| correction[a][t].weight > 0.0 || correction[b][t].weight > 0.0;
+        let leg_at = |t: usize| {
+            let pose = &out[t];
+            Leg { hip: pose[hip.index()], knee: pose[knee.index()], ankle: pose[ankle], toe: pose[toe] }
+        };
+        let poles = knee_poles(
+            &(0..out.len()).map(leg_at).collect::<Vec<_>>(),
+            &out.iter()
+                .map(|p| (p[Joint::LeftHip.index()] - p[Joint::RightHip.index()]).cross(DVec3::Y))
+                .collect::<Vec<_>>(),
+        );
         // The leg of frame t solved towards `fraction` of its correction.
         let solve = |t: usize, fraction: f64| {
-            let pose = &out[t];
-            let forward = (pose[Joint::LeftHip.index()] - pose[Joint::RightHip.index()]).cross(DVec3::Y);
-            let leg = Leg { hip: pose[hip.index()], knee: pose[knee.index()], ankle: pose[ankle], toe: pose[toe] };
+            let leg = leg_at(t);
             let (ankle_c, toe_c) = (correction[a][t], correction[b][t]);
             // A free joint follows its partner's correction: the foot rolls about the held one.
             let ankle_offset = ankle_c.offset + (1.0 - ankle_c.weight) * toe_c.offset;
@@ -337,7 +346,7 @@ pub fn foot_lock(
                 &leg,
                 target(leg.ankle, ankle_offset),
                 target(leg.toe, toe_offset),
-                forward,
+                poles[t],
                 config.soft_reach_m,
             );
             (leg, solved)
