@@ -328,19 +328,16 @@ pub fn foot_lock(
     for (hip, knee, a, b) in LEGS {
         let (ankle, toe) = (CONTACT_JOINTS[a].index(), CONTACT_JOINTS[b].index());
         let moved = |t: usize| correction[a][t].weight > 0.0 || correction[b][t].weight > 0.0;
-        let leg_at = |t: usize| {
-            let pose = &out[t];
-            Leg { hip: pose[hip.index()], knee: pose[knee.index()], ankle: pose[ankle], toe: pose[toe] }
-        };
-        let poles = knee_poles(
-            &(0..out.len()).map(leg_at).collect::<Vec<_>>(),
-            &out.iter()
-                .map(|p| (p[Joint::LeftHip.index()] - p[Joint::RightHip.index()]).cross(DVec3::Y))
-                .collect::<Vec<_>>(),
-        );
+        let legs: Vec<Leg> = out
+            .iter()
+            .map(|p| Leg { hip: p[hip.index()], knee: p[knee.index()], ankle: p[ankle], toe: p[toe] })
+            .collect();
+        let forwards: Vec<DVec3> =
+            out.iter().map(|p| (p[Joint::LeftHip.index()] - p[Joint::RightHip.index()]).cross(DVec3::Y)).collect();
+        let poles = knee_poles(&legs, &forwards);
         // The leg of frame t solved towards `fraction` of its correction.
         let solve = |t: usize, fraction: f64| {
-            let leg = leg_at(t);
+            let leg = legs[t];
             let (ankle_c, toe_c) = (correction[a][t], correction[b][t]);
             // A free joint follows its partner's correction: the foot rolls about the held one.
             let ankle_offset = ankle_c.offset + (1.0 - ankle_c.weight) * toe_c.offset;
