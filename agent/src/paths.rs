@@ -111,6 +111,11 @@ pub fn default_catalog() -> PathBuf {
     fixtures_dir().join("mocap").join("catalog.json")
 }
 
+/// The shipped motion corpus.
+pub fn default_corpus() -> PathBuf {
+    fixtures_dir().join("corpus").join("corpus.safetensors.gz")
+}
+
 /// Where `data build` writes the database by default.
 pub fn default_database() -> PathBuf {
     PathBuf::from("out").join("database.safetensors")

@@ -5,6 +5,7 @@
 
 pub mod cleanup;
 pub mod constraints;
+pub mod corpus;
 pub mod database;
 pub mod diffusion;
 pub mod dno;

@@ -1,11 +1,15 @@
-//! `mogen data ...`: build and inspect the motion database.
+//! `mogen data ...`: build and inspect the motion corpus and the motion database.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Subcommand;
+use motion_core::corpus::screen::ScreenConfig;
+use motion_core::corpus::stats::CorpusStats;
+use motion_core::corpus::{cmu, file as corpus_file, Corpus, RawTake, Source};
 use motion_core::database::catalog::Catalog;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
+use motion_core::import::{resample, MocapClip};
 
 use crate::paths;
 
@@ -27,11 +31,29 @@ pub enum DataCommand {
         #[arg(long)]
         no_mirror: bool,
     },
-    /// Print the contents of a database.
+    /// Build the motion corpus from the shared capture: the CMU database in its 22-joint form
+    /// (`smpl22_20fps_f16.npz` and `index.tsv`), HDM05's ASF/AMC clips and the shipped clips of
+    /// a catalog. Every take is screened (glitches, frozen frames, T-poses, uneven floors are
+    /// dropped and reported), re-targeted to the rest skeleton, floored, cut into captioned
+    /// windows and split by subject; the result is one compressed file (the shipped
+    /// `fixtures/corpus/corpus.safetensors.gz` is made this way).
+    Corpus {
+        /// The shared CMU folder.
+        #[arg(long, default_value = "../shared/data/cmu")]
+        cmu: PathBuf,
+        /// The catalog of shipped clips added to the training split.
+        #[arg(long, default_value_os_t = paths::default_catalog())]
+        catalog: PathBuf,
+        /// Output corpus file.
+        #[arg(long, short, default_value = "fixtures/corpus/corpus.safetensors.gz")]
+        out: PathBuf,
+    },
+    /// Print what a corpus (hours per source, skill and split, what was dropped) or a database
+    /// (seconds per label) holds; by default the shipped corpus.
     Stats {
-        /// Database file.
-        #[arg(default_value_os_t = paths::default_database())]
-        database: PathBuf,
+        /// A corpus file (`.safetensors.gz`) or a database file (`.safetensors`).
+        #[arg(default_value_os_t = paths::default_corpus())]
+        file: PathBuf,
     },
 }
 
@@ -50,12 +72,47 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
             println!("wrote {}", out.display());
             Ok(())
         }
-        DataCommand::Stats { database } => {
-            let db = MotionDatabase::load(&database).with_context(|| format!("reading {}", database.display()))?;
-            print_stats(&db);
+        DataCommand::Corpus { cmu, catalog, out } => {
+            let mut takes: Vec<RawTake> = Vec::new();
+            eprintln!("reading {}", cmu.display());
+            takes.extend(cmu::read_cmu_folder(&cmu).context("reading the CMU capture")?.into_iter().map(RawTake::from));
+            takes.extend(shipped_takes(&catalog)?);
+            eprintln!("screening, re-targeting and captioning {} takes", takes.len());
+            let corpus = Corpus::build(takes, &ScreenConfig::default());
+            corpus_file::save(&corpus, &out).with_context(|| format!("writing {}", out.display()))?;
+            println!("{}", CorpusStats::of(&corpus));
+            println!("wrote {}", out.display());
+            Ok(())
+        }
+        DataCommand::Stats { file } => {
+            if file.extension().is_some_and(|e| e == "gz") {
+                let corpus = corpus_file::load(&file).with_context(|| format!("reading {}", file.display()))?;
+                println!("{}", CorpusStats::of(&corpus));
+            } else {
+                let db = MotionDatabase::load(&file).with_context(|| format!("reading {}", file.display()))?;
+                print_stats(&db);
+            }
             Ok(())
         }
     }
+}
+
+/// The clips of a catalog as corpus takes of the shipped source: one play-through each, cyclic
+/// clips looped as the database loops them; already on the rest skeleton, so not screened.
+fn shipped_takes(catalog: &Path) -> anyhow::Result<Vec<RawTake>> {
+    let (clips, _) = Catalog::read(catalog).and_then(|c| c.load()).context("reading the shipped clips")?;
+    let loop_seconds = DatabaseConfig::default().loop_seconds;
+    Ok(clips
+        .into_iter()
+        .map(|c| RawTake {
+            source: Source::Shipped,
+            subject: "shipped".into(),
+            description: c.label,
+            poses: resample(c.clip.as_ref(), 1.0, c.clip.is_cyclic().then_some(loop_seconds)),
+            take: c.name,
+            screen: false,
+        })
+        .collect())
 }
 
 fn print_stats(db: &MotionDatabase) {

@@ -1,0 +1,204 @@
+//! Captions that say what a window does: a sentence built from the window's measured
+//! [`MotionTags`] (the action, the direction of travel relative to facing, the turn, speed and
+//! hand states), in several phrasings so a model does not learn one template, two of them with
+//! the take's description beside it (what CMU says of the whole take: vocabulary the tags
+//! cannot give, such as "salsa" or "basketball dribble").
+//!
+//! Rules, in order: head under 0.6 m for a quarter of the window → crawls (moving) or is on the
+//! floor; sitting → sits; airborne with one foot up → hops on one foot; airborne and faster
+//! than 2 m/s → runs; airborne → jumps; one foot up for 1.5 s and slower than 0.4 m/s →
+//! balances on one leg; faster than 2 m/s → runs; faster than 0.25 m/s → walks (crouched:
+//! sneaks); otherwise stands (crouched: crouches).
+
+use super::tags::{MotionTags, TravelDirection};
+
+/// Phrasings made per window.
+pub const PHRASINGS: usize = 3;
+
+/// What the body does, the first rule that matches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Action {
+    /// Moving with the head near the floor.
+    Crawl,
+    /// Down on the floor, not moving.
+    OnFloor,
+    /// Seated.
+    Sit,
+    /// Airborne on one foot.
+    HopOneFoot,
+    /// Airborne, fast.
+    Run,
+    /// Airborne, not fast.
+    Jump,
+    /// One foot up, in place.
+    Balance,
+    /// Crouched and moving.
+    Sneak,
+    /// Moving.
+    Walk,
+    /// Crouched in place.
+    Crouch,
+    /// In place.
+    Stand,
+}
+
+impl Action {
+    /// The action of a window's tags.
+    pub fn of(tags: &MotionTags) -> Self {
+        let v = tags.speed_m_per_s;
+        if tags.on_floor {
+            return if v > 0.15 { Action::Crawl } else { Action::OnFloor };
+        }
+        if tags.sitting {
+            Action::Sit
+        } else if tags.airborne() && tags.one_foot() {
+            Action::HopOneFoot
+        } else if tags.airborne() && v > 2.0 {
+            Action::Run
+        } else if tags.airborne() {
+            Action::Jump
+        } else if tags.one_foot() && v < 0.4 {
+            Action::Balance
+        } else if v > 2.0 {
+            Action::Run
+        } else if v > 0.25 {
+            if tags.crouched {
+                Action::Sneak
+            } else {
+                Action::Walk
+            }
+        } else if tags.crouched {
+            Action::Crouch
+        } else {
+            Action::Stand
+        }
+    }
+
+    /// Verb phrases, one per phrasing.
+    fn verbs(self) -> [&'static str; PHRASINGS] {
+        match self {
+            Action::Crawl => ["crawls", "moves on all fours", "crawls on hands and knees"],
+            Action::OnFloor => ["lies on the floor", "is down on the ground", "stays low on the floor"],
+            Action::Sit => ["sits", "is seated", "sits down on something"],
+            Action::HopOneFoot => ["hops on one foot", "hops on one leg", "jumps along on one foot"],
+            Action::Run => ["runs", "jogs", "runs quickly"],
+            Action::Jump => ["jumps", "leaps", "jumps up"],
+            Action::Balance => ["balances on one leg", "stands on one foot", "holds a one-legged stance"],
+            Action::Sneak => ["sneaks in a crouch", "creeps low", "walks crouched"],
+            Action::Walk => ["walks", "steps", "strolls"],
+            Action::Crouch => ["crouches", "squats down", "stays low in a crouch"],
+            Action::Stand => ["stands", "stands in place", "stays where they are"],
+        }
+    }
+
+    /// Whether the action travels, so a direction of travel belongs to it.
+    fn travels(self) -> bool {
+        matches!(self, Action::Crawl | Action::HopOneFoot | Action::Run | Action::Jump | Action::Sneak | Action::Walk)
+    }
+}
+
+fn direction_words(direction: TravelDirection) -> [&'static str; PHRASINGS] {
+    match direction {
+        TravelDirection::Forwards => ["forward", "ahead", "forwards"],
+        TravelDirection::Backwards => ["backwards", "backward", "in reverse"],
+        TravelDirection::SidewaysLeft => ["sideways to the left", "sideways to their left", "to the left, sideways"],
+        TravelDirection::SidewaysRight => {
+            ["sideways to the right", "sideways to their right", "to the right, sideways"]
+        }
+    }
+}
+
+const SUBJECTS: [&str; PHRASINGS] = ["a person", "someone", "the person"];
+
+/// The sentence of phrasing `k` (0..[`PHRASINGS`]) for a window's tags, without the take's
+/// description: "a person walks slowly forward and turns left by about 90 degrees".
+pub fn sentence(tags: &MotionTags, k: usize) -> String {
+    let k = k % PHRASINGS;
+    let action = Action::of(tags);
+    let mut words = vec![SUBJECTS[k].to_owned(), action.verbs()[k].to_owned()];
+    if action == Action::Walk {
+        if tags.speed_m_per_s < 0.7 {
+            words.push("slowly".into());
+        } else if tags.speed_m_per_s > 1.7 {
+            words.push("briskly".into());
+        }
+    }
+    if action.travels() {
+        if let Some(d) = tags.direction {
+            words.push(direction_words(d)[k].into());
+        }
+    }
+    let mut s = words.join(" ");
+    if let Some(left) = tags.turn_left() {
+        let side = if left { "left" } else { "right" };
+        let degrees = (tags.turn_deg.abs() / 45.0).round() as i64 * 45;
+        s += &match k {
+            0 if degrees >= 90 => format!(" and turns {side} by about {degrees} degrees"),
+            1 => format!(", turning to the {side}"),
+            _ => format!(" and turns {side}"),
+        };
+    }
+    if tags.hands_above_head() {
+        s += [" with the hands raised above the head", ", raising both hands", " with the arms up over the head"][k];
+    }
+    if tags.hands_together() {
+        s += [" with the hands together", ", holding the hands together", " with the hands joined"][k];
+    }
+    s
+}
+
+/// Every phrasing of a window: the bare sentence, then the take's description with the
+/// sentence in two forms (when the take has a description).
+pub fn captions(tags: &MotionTags, description: &str) -> Vec<String> {
+    let description = description.trim();
+    (0..PHRASINGS)
+        .map(|k| match k {
+            0 => sentence(tags, 0),
+            _ if description.is_empty() => sentence(tags, k),
+            1 => format!("{}: {}", description, sentence(tags, 1)),
+            _ => format!("{} (a take of: {})", sentence(tags, k), description),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tags() -> MotionTags {
+        MotionTags {
+            speed_m_per_s: 1.2,
+            travel_m: 6.0,
+            direction: Some(TravelDirection::Forwards),
+            turn_deg: 0.0,
+            crouched: false,
+            sitting: false,
+            on_floor: false,
+            airborne_frames: 0,
+            one_foot_up_s: 0.0,
+            hands_above_head_frames: 0,
+            hands_together_frames: 0,
+        }
+    }
+
+    #[test]
+    fn captions_say_what_the_tags_measure() {
+        assert_eq!(sentence(&tags(), 0), "a person walks forward");
+        let t = MotionTags { direction: Some(TravelDirection::SidewaysRight), speed_m_per_s: 0.5, ..tags() };
+        assert_eq!(sentence(&t, 0), "a person walks slowly sideways to the right");
+        let t = MotionTags { crouched: true, turn_deg: 95.0, ..tags() };
+        assert_eq!(sentence(&t, 0), "a person sneaks in a crouch forward and turns left by about 90 degrees");
+        assert_eq!(sentence(&t, 1), "someone creeps low ahead, turning to the left");
+        let t = MotionTags { airborne_frames: 6, one_foot_up_s: 2.0, speed_m_per_s: 0.8, ..tags() };
+        assert_eq!(Action::of(&t), Action::HopOneFoot);
+        let t = MotionTags { one_foot_up_s: 2.0, speed_m_per_s: 0.1, direction: None, ..tags() };
+        assert_eq!(sentence(&t, 0), "a person balances on one leg");
+        let t = MotionTags { hands_above_head_frames: 30, speed_m_per_s: 0.0, direction: None, ..tags() };
+        assert_eq!(sentence(&t, 0), "a person stands with the hands raised above the head");
+        let all = captions(&tags(), "walk, stop, sit down");
+        assert_eq!(all.len(), PHRASINGS);
+        assert_eq!(all[1], "walk, stop, sit down: someone steps ahead");
+        assert_eq!(all[2], "the person strolls forwards (a take of: walk, stop, sit down)");
+        assert_eq!(captions(&tags(), " ")[2], "the person strolls forwards");
+    }
+}

@@ -1,0 +1,193 @@
+//! The corpus as one compact file (`fixtures/corpus/corpus.safetensors.gz`): a gzip-compressed
+//! safetensors file whose one tensor `joints_mm_delta` (i16, `[66, frames]`: joint-coordinate
+//! major, x y z of each of the 22 joints) holds every clip's joint positions in whole
+//! millimetres, each clip's first frame as is and the others as the change from the frame
+//! before (small numbers, which compress about 2.6× better than positions); the clips, windows
+//! (tags and captions) and the drop report are JSON in the header metadata under `corpus`.
+//! Positions are rounded to 1 mm (the shared CMU form is float16: 1–4 mm steps).
+
+use std::collections::HashMap;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use super::{Corpus, CorpusClip, CorpusWindow, DropReport};
+use crate::limits::{read_bytes, MOCAP_FILE_BYTES};
+use crate::skeleton::{Pose, FPS, NUM_JOINTS};
+
+/// Version of the layout, checked on load.
+const FORMAT_VERSION: u32 = 1;
+/// Name of the joint tensor.
+const JOINTS: &str = "joints_mm_delta";
+/// Channels per frame: x, y, z of each joint.
+const CHANNELS: usize = 3 * NUM_JOINTS;
+
+/// Errors reading or writing a corpus file; each names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum CorpusFileError {
+    /// The file could not be read or written.
+    #[error("{path}: {message}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// The file is not a corpus file of this version, or is damaged.
+    #[error("{path}: {message}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+#[derive(Serialize, Deserialize)]
+struct Header {
+    format_version: u32,
+    fps: f64,
+    clips: Vec<CorpusClip>,
+    windows: Vec<CorpusWindow>,
+    drops: DropReport,
+}
+
+/// Writes the corpus to `path` (through a temporary file and a rename).
+pub fn save(corpus: &Corpus, path: &Path) -> Result<(), CorpusFileError> {
+    let format = |message: String| CorpusFileError::Format { path: path.into(), message };
+    let frames = corpus.joints.len();
+    let mut channels = vec![0i16; CHANNELS * frames];
+    for clip in &corpus.clips {
+        let mut previous = [0i64; CHANNELS];
+        for (t, pose) in corpus.clip_joints(clip).iter().enumerate() {
+            let row = clip.offset + t;
+            for (c, value) in pose.iter().flat_map(|v| v.to_array()).enumerate() {
+                let mm = (value * 1000.0).round() as i64;
+                let stored = if t == 0 { mm } else { mm - previous[c] };
+                channels[c * frames + row] = i16::try_from(stored).map_err(|_| {
+                    format(format!("clip {}, frame {t}: {value} m or its change does not fit 16 bits of mm", clip.name))
+                })?;
+                previous[c] = mm;
+            }
+        }
+    }
+    let header = Header {
+        format_version: FORMAT_VERSION,
+        fps: FPS,
+        clips: corpus.clips.clone(),
+        windows: corpus.windows.clone(),
+        drops: corpus.drops.clone(),
+    };
+    let json = serde_json::to_string(&header).map_err(|e| format(e.to_string()))?;
+    let bytes: Vec<u8> = channels.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let view = safetensors::tensor::TensorView::new(safetensors::Dtype::I16, vec![CHANNELS, frames], &bytes)
+        .map_err(|e| format(e.to_string()))?;
+    let st = safetensors::tensor::serialize(vec![(JOINTS, view)], Some(HashMap::from([("corpus".to_owned(), json)])))
+        .map_err(|e| format(e.to_string()))?;
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+    gz.write_all(&st).and_then(|_| gz.finish()).map_err(|e| format(e.to_string())).and_then(|packed| {
+        crate::export::write_atomically(path, &packed)
+            .map_err(|e| CorpusFileError::Io { path: path.into(), message: e.to_string() })
+    })
+}
+
+/// Reads a corpus written by [`save`], checking that every clip and window lies inside the
+/// joints and every value is finite.
+pub fn load(path: &Path) -> Result<Corpus, CorpusFileError> {
+    let format = |message: String| CorpusFileError::Format { path: path.into(), message };
+    let packed = read_bytes(path, &MOCAP_FILE_BYTES)
+        .map_err(|e| CorpusFileError::Io { path: path.into(), message: e.to_string() })?;
+    let mut bytes = Vec::new();
+    flate2::read::GzDecoder::new(packed.as_slice())
+        .take(MOCAP_FILE_BYTES.max)
+        .read_to_end(&mut bytes)
+        .map_err(|e| format(format!("not a gzip file: {e}")))?;
+    let st =
+        safetensors::SafeTensors::deserialize(&bytes).map_err(|e| format(format!("not a safetensors file: {e}")))?;
+    let meta = crate::tensor_file::read_metadata(&bytes).map_err(format)?;
+    let json = meta.get("corpus").ok_or_else(|| format("no `corpus` in the header metadata".into()))?;
+    let header: Header = serde_json::from_str(json).map_err(|e| format(format!("bad corpus header: {e}")))?;
+    if header.format_version != FORMAT_VERSION {
+        return Err(format(format!("format version {} (expected {FORMAT_VERSION})", header.format_version)));
+    }
+    if header.fps != FPS {
+        return Err(format(format!("{} fps (expected {FPS})", header.fps)));
+    }
+    let frames: usize = header.clips.iter().map(|c| c.frames).sum();
+    let tensor = st.tensor(JOINTS).map_err(|e| format(format!("tensor `{JOINTS}`: {e}")))?;
+    if tensor.dtype() != safetensors::Dtype::I16 || tensor.shape() != [CHANNELS, frames] {
+        return Err(format(format!(
+            "tensor `{JOINTS}` is {:?} {:?}, expected I16 [{CHANNELS}, {frames}]",
+            tensor.dtype(),
+            tensor.shape()
+        )));
+    }
+    let values: Vec<i16> = tensor.data().chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]])).collect();
+    let mut joints = vec![[DVec3::ZERO; NUM_JOINTS]; frames];
+    let mut offset = 0;
+    for (i, clip) in header.clips.iter().enumerate() {
+        if clip.offset != offset || clip.frames == 0 {
+            return Err(format(format!(
+                "clip {i} ({}) starts at frame {} (expected {offset})",
+                clip.name, clip.offset
+            )));
+        }
+        for c in 0..CHANNELS {
+            let mut mm = 0i64;
+            for t in 0..clip.frames {
+                let row = clip.offset + t;
+                let stored = i64::from(values[c * frames + row]);
+                mm = if t == 0 { stored } else { mm + stored };
+                joints[row][c / 3][c % 3] = mm as f64 / 1000.0;
+            }
+        }
+        offset += clip.frames;
+    }
+    for (i, w) in header.windows.iter().enumerate() {
+        let inside = header.clips.get(w.clip).is_some_and(|c| w.frames > 0 && w.start + w.frames <= c.frames);
+        if !inside {
+            return Err(format(format!("window {i} lies outside its clip")));
+        }
+    }
+    Ok(Corpus { clips: header.clips, joints, windows: header.windows, drops: header.drops })
+}
+
+/// Joints of a pose as the file stores them (rounded to whole millimetres).
+pub fn rounded(pose: &Pose) -> Pose {
+    pose.map(|v| (v * 1000.0).round() / 1000.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::corpus::screen::ScreenConfig;
+    use crate::corpus::{RawTake, Source};
+    use crate::motion::test_support::walking_poses;
+
+    #[test]
+    fn a_corpus_survives_the_file_to_the_millimetre_and_damage_is_named() {
+        let take = |id: &str, turn| RawTake {
+            source: Source::Cmu,
+            take: id.into(),
+            subject: id[..2].into(),
+            description: "walk".into(),
+            poses: walking_poses(130, turn),
+            screen: true,
+        };
+        let corpus = Corpus::build(vec![take("01_01", 0.0), take("02_01", 0.5)], &ScreenConfig::default());
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("corpus.safetensors.gz");
+        save(&corpus, &path).unwrap();
+        let back = load(&path).unwrap();
+        assert_eq!(back.clips, corpus.clips);
+        assert_eq!(back.windows, corpus.windows);
+        for (a, b) in back.joints.iter().zip(&corpus.joints) {
+            assert_eq!(*a, rounded(b));
+        }
+        std::fs::write(&path, b"not gzip").unwrap();
+        let e = load(&path).err().unwrap().to_string();
+        assert!(e.contains("corpus.safetensors.gz") && e.contains("gzip"), "{e}");
+    }
+}
