@@ -288,8 +288,8 @@ impl Asf {
                         root.rotation_order = rotation_order(tok)
                             .ok_or_else(|| at(format!("unknown rotation order `{tok}` (expected e.g. XYZ)")))?;
                     }
-                    "position" => root.position = DVec3::from_array(numbers(&mut tokens, "position", &at)?),
-                    "orientation" => root.orientation = numbers(&mut tokens, "orientation", &at)?,
+                    "position" => root.position = DVec3::from_array(numbers(&mut tokens, "position", at)?),
+                    "orientation" => root.orientation = numbers(&mut tokens, "orientation", at)?,
                     other => return Err(at(format!("unknown root field `{other}`"))),
                 },
                 Section::Bonedata => {
@@ -337,7 +337,7 @@ impl Asf {
                             draft.name = Some(name.to_owned());
                         }
                         "direction" => {
-                            let d = DVec3::from_array(numbers(&mut tokens, "direction", &at)?);
+                            let d = DVec3::from_array(numbers(&mut tokens, "direction", at)?);
                             let unit = d.try_normalize().ok_or_else(|| at("direction is zero".into()))?;
                             draft.direction = Some(unit);
                         }
@@ -518,12 +518,12 @@ fn resolve_hierarchy(
             index.get(name).copied().ok_or_else(|| invalid(path, *line, Some(name), "not defined in `:bonedata`"))
         };
         let Some((parent, children)) = names.split_first() else { continue };
-        let p = find(*parent)?;
+        let p = find(parent)?;
         if children.is_empty() {
             return Err(invalid(path, *line, Some(*parent), "a hierarchy line without children"));
         }
         for child in children {
-            let c = find(*child)?;
+            let c = find(child)?;
             if c == 0 {
                 return Err(invalid(path, *line, Some(*child), "the root cannot be a child"));
             }
