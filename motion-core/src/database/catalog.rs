@@ -1,11 +1,13 @@
 //! The catalog of source clips a database is built from: a JSON file listing each clip's file,
 //! format and text label (`fixtures/mocap/catalog.json` for the shipped mocap). An entry may
-//! also name a HumanML3D folder, whose clips bring their own captions.
+//! also name a HumanML3D folder, whose clips bring their own captions, or an AMC motion with the
+//! ASF skeleton it is recorded on.
 
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::import::asf_amc::{AsfAmcClip, AsfAmcOptions};
 use crate::import::bvh::{BvhClip, BvhOptions};
 use crate::import::deepmimic::DeepMimicClip;
 use crate::import::humanml3d::HumanMl3dFolder;
@@ -21,6 +23,9 @@ pub enum SourceFormat {
     Deepmimic,
     /// Biovision hierarchy file (units, up axis and rig detected).
     Bvh,
+    /// Acclaim AMC motion (CMU, HDM05) at 120 fps, on the ASF skeleton named by the entry's
+    /// `skeleton`.
+    AsfAmc,
     /// Isaac Lab AMP humanoid motion (NumPy archive, z up).
     IsaaclabAmp,
     /// A HumanML3D dataset folder (`new_joint_vecs/`, `texts/`, `Mean.npy`, `Std.npy`): every
@@ -40,6 +45,10 @@ pub struct CatalogEntry {
     /// [`SourceFormat::Humanml3d`], whose clips are labelled by their captions.
     #[serde(default)]
     pub label: Option<String>,
+    /// The ASF skeleton file of an [`SourceFormat::AsfAmc`] entry, relative to the catalog file;
+    /// required for that format and refused for the others.
+    #[serde(default)]
+    pub skeleton: Option<PathBuf>,
 }
 
 /// A list of source clips with labels.
@@ -82,7 +91,14 @@ impl Catalog {
                 (_, None) => Some("no label"),
                 (_, Some(label)) if label.trim().is_empty() => Some("empty label"),
                 (_, Some(_)) => None,
-            };
+            }
+            .or(match (entry.format, &entry.skeleton) {
+                (SourceFormat::AsfAmc, None) => {
+                    Some("an asf_amc entry needs `skeleton`, the ASF file of its AMC motion")
+                }
+                (SourceFormat::AsfAmc, Some(_)) | (_, None) => None,
+                (_, Some(_)) => Some("only asf_amc entries take `skeleton`"),
+            });
             if let Some(message) = problem {
                 return Err(ImportError::Invalid {
                     path: path.into(),
@@ -106,6 +122,10 @@ impl Catalog {
                 SourceFormat::Deepmimic => keep(DeepMimicClip::read(&path)?, &mut warnings),
                 SourceFormat::Bvh => keep(BvhClip::read(&path, &BvhOptions::default())?, &mut warnings),
                 SourceFormat::IsaaclabAmp => keep(IsaacAmpClip::read(&path)?, &mut warnings),
+                SourceFormat::AsfAmc => {
+                    let asf = self.base.join(entry.skeleton.as_deref().unwrap_or(Path::new("")));
+                    keep(AsfAmcClip::read(&asf, &path, &AsfAmcOptions::default())?, &mut warnings)
+                }
                 SourceFormat::Humanml3d => {
                     clips.extend(humanml3d_clips(&path, &name)?);
                     continue;
@@ -185,5 +205,30 @@ mod tests {
         assert!(e.to_string().contains("clips[0]") && e.to_string().contains("texts/"), "{e}");
         let e = catalog(dir.path(), r#"{"file": "a.bvh", "format": "bvh"}"#).unwrap_err();
         assert!(e.to_string().contains("clips[0]") && e.to_string().contains("label"), "{e}");
+    }
+
+    #[test]
+    fn an_amc_entry_names_its_asf_skeleton() {
+        let hdm05 = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/hdm05");
+        let dir = tempfile::tempdir().unwrap();
+        for file in ["HDM_bk.asf", "HDM_bk_hopBothLegs1hops_020_120.amc"] {
+            std::fs::copy(hdm05.join(file), dir.path().join(file)).unwrap();
+        }
+        let amc = r#""file": "HDM_bk_hopBothLegs1hops_020_120.amc", "format": "asf_amc", "label": "a person hops""#;
+        let entry = format!(r#"{{{amc}, "skeleton": "HDM_bk.asf"}}"#);
+        let (sources, warnings) = catalog(dir.path(), &entry).unwrap().load().unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(
+            (sources[0].name.as_str(), sources[0].label.as_str()),
+            ("HDM_bk_hopBothLegs1hops_020_120", "a person hops")
+        );
+        assert!((sources[0].clip.duration_s() - 55.0 / 120.0).abs() < 1e-12);
+
+        let e = catalog(dir.path(), &format!("{{{amc}}}")).unwrap_err().to_string();
+        assert!(e.contains("clips[0]") && e.contains("needs `skeleton`"), "{e}");
+        let e = catalog(dir.path(), r#"{"file": "a.bvh", "format": "bvh", "label": "x", "skeleton": "a.asf"}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("clips[0]") && e.contains("only asf_amc entries take `skeleton`"), "{e}");
     }
 }

@@ -4,6 +4,7 @@
 //! so resampling to 20 fps and time-warping interpolate the source's own rotations rather than
 //! joint positions (bone lengths stay exact).
 
+pub mod asf_amc;
 pub mod bvh;
 pub mod deepmimic;
 pub mod humanml3d;

@@ -1,0 +1,571 @@
+//! [`Asf`]: an Acclaim skeleton file (bones, their rest directions and local axes, dofs and the
+//! hierarchy).
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use glam::{DQuat, DVec3};
+
+use super::{invalid, numbered_lines, parse_finite};
+use crate::import::bvh::Axis;
+use crate::import::{short_number, ImportError, ImportWarning};
+use crate::limits::{read_bytes, MOCAP_FILE_BYTES, RIG_JOINTS};
+
+/// Metres per inch: an ASF length unit is `0.0254 / length` m.
+const METRES_PER_INCH: f64 = 0.0254;
+
+/// A degree of freedom of a bone (its AMC values come in the order of the bone's `dof` line).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dof {
+    /// `rx`, `ry`, `rz`: a rotation about an axis of the bone's local frame, degrees or radians.
+    Rotation(Axis),
+    /// `tx`, `ty`, `tz`: a translation along an axis of the bone's local frame (the root's is in
+    /// world axes), ASF length units.
+    Translation(Axis),
+    /// `l`: a change of the bone's length, ASF length units.
+    Length,
+}
+
+impl Dof {
+    /// Parses a dof name (`rx`, `TX`, `l`, …; ASCII case-insensitive).
+    fn from_name(s: &str) -> Option<Dof> {
+        let lower = s.to_ascii_lowercase();
+        let axis = |c: u8| match c {
+            b'x' => Some(Axis::X),
+            b'y' => Some(Axis::Y),
+            b'z' => Some(Axis::Z),
+            _ => None,
+        };
+        match lower.as_bytes() {
+            [b'l'] => Some(Dof::Length),
+            [b'r', c] => axis(*c).map(Dof::Rotation),
+            [b't', c] => axis(*c).map(Dof::Translation),
+            _ => None,
+        }
+    }
+
+    /// The name as written in ASF files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Dof::Rotation(Axis::X) => "rx",
+            Dof::Rotation(Axis::Y) => "ry",
+            Dof::Rotation(Axis::Z) => "rz",
+            Dof::Translation(Axis::X) => "tx",
+            Dof::Translation(Axis::Y) => "ty",
+            Dof::Translation(Axis::Z) => "tz",
+            Dof::Length => "l",
+        }
+    }
+}
+
+/// A bone of an [`Asf`]; bone 0 is the root (no direction or length; its dofs are the root's
+/// `order`, its axis the root's `orientation`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AsfBone {
+    /// The name as written (`lfemur`; `root` for the root).
+    pub name: String,
+    /// Index of the parent bone; `None` for the root.
+    pub parent: Option<usize>,
+    /// Unit direction from the bone's start to its end at rest, world axes.
+    pub direction: DVec3,
+    /// Length, ASF units.
+    pub length: f64,
+    /// The bone's local frame `C` in world axes (from its `axis` line).
+    pub axis: DQuat,
+    /// Dofs in the order of their AMC values.
+    pub dofs: Vec<Dof>,
+    /// 1-based line of its `begin` (of `:root` for the root).
+    pub line: usize,
+}
+
+/// A parsed ASF file: lengths in file units, rotations as quaternions.
+#[derive(Debug, Clone)]
+pub struct Asf {
+    bones: Vec<AsfBone>,
+    /// Every bone index, parents before children.
+    order: Vec<usize>,
+    /// Order in which the root's rotation values are applied (its `axis`).
+    root_rotation_order: [Axis; 3],
+    /// The root's `position`, ASF units.
+    root_position: DVec3,
+    /// Metres per ASF length unit (`0.0254 / length`).
+    metres_per_unit: f64,
+    /// Whether `:units angle` is `deg` (the default).
+    degrees: bool,
+}
+
+/// A `begin` … `end` block of `:bonedata` while it is read.
+struct Draft {
+    line: usize,
+    name: Option<String>,
+    direction: Option<DVec3>,
+    length: Option<f64>,
+    /// `axis` angles (file unit) and order.
+    axis: ([f64; 3], [Axis; 3]),
+    dofs: Vec<Dof>,
+}
+
+/// A `:root` section while it is read.
+struct RootDraft {
+    line: usize,
+    order: Vec<Dof>,
+    rotation_order: [Axis; 3],
+    position: DVec3,
+    orientation: [f64; 3],
+}
+
+/// Which section the lines belong to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Section {
+    Preamble,
+    Version,
+    Name,
+    Units,
+    Documentation,
+    Root,
+    Bonedata,
+    Hierarchy,
+}
+
+/// A rotation order such as `XYZ`.
+fn rotation_order(tok: &str) -> Option<[Axis; 3]> {
+    let axes: Vec<Axis> = tok
+        .bytes()
+        .map(|c| match c.to_ascii_uppercase() {
+            b'X' => Some(Axis::X),
+            b'Y' => Some(Axis::Y),
+            b'Z' => Some(Axis::Z),
+            _ => None,
+        })
+        .collect::<Option<_>>()?;
+    match axes[..] {
+        [a, b, c] if a != b && b != c && a != c => Some([a, b, c]),
+        _ => None,
+    }
+}
+
+/// The rotation of Euler angles (radians, indexed by axis x, y, z) applied about fixed axes in
+/// `order`, the first first: `XYZ` is `R_z · R_y · R_x`.
+pub(super) fn euler(order: &[Axis], angles: [f64; 3]) -> DQuat {
+    order.iter().fold(DQuat::IDENTITY, |q, axis| axis_rotation(*axis, angles[*axis as usize]) * q)
+}
+
+/// A rotation of `radians` about a coordinate axis.
+pub(super) fn axis_rotation(axis: Axis, radians: f64) -> DQuat {
+    match axis {
+        Axis::X => DQuat::from_rotation_x(radians),
+        Axis::Y => DQuat::from_rotation_y(radians),
+        Axis::Z => DQuat::from_rotation_z(radians),
+    }
+}
+
+/// `n` finite numbers from `tokens`, or an error naming `what` and the offending token.
+fn numbers<const N: usize>(
+    tokens: &mut std::str::SplitWhitespace<'_>,
+    what: &str,
+    at: impl Fn(String) -> ImportError,
+) -> Result<[f64; N], ImportError> {
+    let mut out = [0.0; N];
+    for (k, slot) in out.iter_mut().enumerate() {
+        let tok = tokens.next().unwrap_or("end of line");
+        *slot = parse_finite(tok).ok_or_else(|| at(format!("{what} value {k}: `{tok}` is not a finite number")))?;
+    }
+    if let Some(extra) = tokens.next() {
+        return Err(at(format!("{what}: unexpected `{extra}` after {N} values")));
+    }
+    Ok(out)
+}
+
+impl Asf {
+    /// Reads a file of at most [`MOCAP_FILE_BYTES`] (bytes that are not UTF-8 are replaced, so
+    /// only comments and names can suffer).
+    pub fn read(path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
+        let bytes = read_bytes(path, &MOCAP_FILE_BYTES)?;
+        Self::parse(&String::from_utf8_lossy(&bytes), path)
+    }
+
+    /// Parses ASF text; `path` is only used in messages. Bones are refused past [`RIG_JOINTS`].
+    /// Warns about an ASF without `:units length` (inches are assumed).
+    pub fn parse(text: &str, path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
+        let mut section = Section::Preamble;
+        let mut seen: Vec<Section> = Vec::new();
+        let mut length_scale: Option<f64> = None;
+        let mut degrees = true;
+        let mut root = RootDraft {
+            line: 1,
+            order: ["tx", "ty", "tz", "rx", "ry", "rz"].into_iter().filter_map(Dof::from_name).collect(),
+            rotation_order: [Axis::X, Axis::Y, Axis::Z],
+            position: DVec3::ZERO,
+            orientation: [0.0; 3],
+        };
+        let mut drafts: Vec<Draft> = Vec::new();
+        let mut open: Option<Draft> = None;
+        // Hierarchy lines (line, parent, children), resolved once every bone is known.
+        let mut links: Vec<(usize, Vec<&str>)> = Vec::new();
+        let mut hierarchy_state = 0; // 0: before `begin`, 1: inside, 2: after `end`
+        let mut last_line = 1;
+        for (line, content) in numbered_lines(text) {
+            last_line = line;
+            let mut tokens = content.split_whitespace();
+            let Some(first) = tokens.next() else { continue };
+            let bone = open.as_ref().and_then(|d| d.name.clone());
+            let at = |message: String| invalid(path, line, bone.as_deref(), message);
+            if let Some(keyword) = first.strip_prefix(':') {
+                let next = match keyword.to_ascii_lowercase().as_str() {
+                    "version" => Section::Version,
+                    "name" => Section::Name,
+                    "units" => Section::Units,
+                    "documentation" => Section::Documentation,
+                    "root" => Section::Root,
+                    "bonedata" => Section::Bonedata,
+                    "hierarchy" => Section::Hierarchy,
+                    _ => return Err(at(format!("unknown keyword `{first}`"))),
+                };
+                if let Some(d) = &open {
+                    return Err(invalid(path, d.line, d.name.as_deref(), "`begin` without `end`"));
+                }
+                if seen.contains(&next) {
+                    return Err(at(format!("a second `{first}`")));
+                }
+                if next == Section::Root {
+                    root.line = line;
+                }
+                if next != Section::Version && next != Section::Name && tokens.next().is_some() {
+                    return Err(at(format!("`{first}` takes no values on its line")));
+                }
+                seen.push(next);
+                section = next;
+                continue;
+            }
+            match section {
+                Section::Preamble => return Err(at(format!("expected a `:` keyword, found `{first}`"))),
+                Section::Version | Section::Name => {
+                    return Err(at(format!("unexpected `{first}` after {}", section_name(section))))
+                }
+                Section::Documentation => {}
+                Section::Units => match first.to_ascii_lowercase().as_str() {
+                    "mass" => {
+                        numbers::<1>(&mut tokens, "mass", &at)?;
+                    }
+                    "length" => {
+                        let [v] = numbers::<1>(&mut tokens, "length", &at)?;
+                        if v <= 0.0 {
+                            return Err(at(format!("length scale {} is not positive", short_number(v))));
+                        }
+                        length_scale = Some(v);
+                    }
+                    "angle" => {
+                        degrees = match tokens.next().map(str::to_ascii_lowercase).as_deref() {
+                            Some("deg") | Some("degree") | Some("degrees") => true,
+                            Some("rad") | Some("radian") | Some("radians") => false,
+                            other => {
+                                return Err(at(format!(
+                                    "angle unit must be deg or rad, found `{}`",
+                                    other.unwrap_or("nothing")
+                                )))
+                            }
+                        };
+                    }
+                    other => return Err(at(format!("unknown unit `{other}` (expected mass, length or angle)"))),
+                },
+                Section::Root => match first.to_ascii_lowercase().as_str() {
+                    "order" => {
+                        let mut order = Vec::new();
+                        for tok in tokens {
+                            match Dof::from_name(tok) {
+                                Some(d) if d != Dof::Length && !order.contains(&d) => order.push(d),
+                                _ => {
+                                    return Err(at(format!(
+                                        "root order: `{tok}` is not one of TX TY TZ RX RY RZ (each once)"
+                                    )))
+                                }
+                            }
+                        }
+                        root.order = order;
+                    }
+                    "axis" => {
+                        let tok = tokens.next().unwrap_or("nothing");
+                        root.rotation_order = rotation_order(tok)
+                            .ok_or_else(|| at(format!("unknown rotation order `{tok}` (expected e.g. XYZ)")))?;
+                    }
+                    "position" => root.position = DVec3::from_array(numbers(&mut tokens, "position", at)?),
+                    "orientation" => root.orientation = numbers(&mut tokens, "orientation", at)?,
+                    other => return Err(at(format!("unknown root field `{other}`"))),
+                },
+                Section::Bonedata => {
+                    let key = first.to_ascii_lowercase();
+                    let Some(draft) = open.as_mut() else {
+                        if key != "begin" {
+                            return Err(at(format!("expected `begin`, found `{first}`")));
+                        }
+                        RIG_JOINTS.check(
+                            drafts.len() as u64 + 2,
+                            format_args!("{}: line {line}: the skeleton", path.display()),
+                        )?;
+                        open = Some(Draft {
+                            line,
+                            name: None,
+                            direction: None,
+                            length: None,
+                            axis: ([0.0; 3], [Axis::X, Axis::Y, Axis::Z]),
+                            dofs: Vec::new(),
+                        });
+                        continue;
+                    };
+                    match key.as_str() {
+                        "begin" => return Err(at("`begin` inside a bone; is an `end` missing?".into())),
+                        "end" => {
+                            let Some(d) = open.take() else { continue };
+                            let name =
+                                d.name.clone().ok_or_else(|| invalid(path, d.line, None, "bone without `name`"))?;
+                            let need = |what: &str| invalid(path, d.line, Some(&name), format!("no `{what}`"));
+                            if d.direction.is_none() {
+                                return Err(need("direction"));
+                            }
+                            if d.length.is_none() {
+                                return Err(need("length"));
+                            }
+                            if name == "root" || drafts.iter().any(|o| o.name.as_deref() == Some(name.as_str())) {
+                                return Err(invalid(path, d.line, Some(&name), "a second bone of this name"));
+                            }
+                            drafts.push(d);
+                        }
+                        "id" | "bodymass" | "cofmass" | "limits" => {}
+                        _ if first.starts_with('(') => {}
+                        "name" => {
+                            let name = tokens.next().ok_or_else(|| at("`name` without a name".into()))?;
+                            draft.name = Some(name.to_owned());
+                        }
+                        "direction" => {
+                            let d = DVec3::from_array(numbers(&mut tokens, "direction", at)?);
+                            let unit = d.try_normalize().ok_or_else(|| at("direction is zero".into()))?;
+                            draft.direction = Some(unit);
+                        }
+                        "length" => {
+                            let [v] = numbers::<1>(&mut tokens, "length", &at)?;
+                            if v < 0.0 {
+                                return Err(at(format!("length {} is negative", short_number(v))));
+                            }
+                            draft.length = Some(v);
+                        }
+                        "axis" => {
+                            let mut angles = [0.0; 3];
+                            for (k, slot) in angles.iter_mut().enumerate() {
+                                let tok = tokens.next().unwrap_or("end of line");
+                                *slot = parse_finite(tok)
+                                    .ok_or_else(|| at(format!("axis value {k}: `{tok}` is not a finite number")))?;
+                            }
+                            let tok = tokens.next().unwrap_or("nothing");
+                            let order = rotation_order(tok)
+                                .ok_or_else(|| at(format!("unknown rotation order `{tok}` (expected e.g. XYZ)")))?;
+                            draft.axis = (angles, order);
+                        }
+                        "dof" => {
+                            let mut dofs = Vec::new();
+                            for tok in tokens {
+                                match Dof::from_name(tok) {
+                                    Some(d) if !dofs.contains(&d) => dofs.push(d),
+                                    Some(_) => return Err(at(format!("dof `{tok}` listed twice"))),
+                                    None => {
+                                        return Err(at(format!("unknown dof `{tok}` (expected rx ry rz tx ty tz l)")))
+                                    }
+                                }
+                            }
+                            draft.dofs = dofs;
+                        }
+                        _ => return Err(at(format!("unknown bone field `{first}`"))),
+                    }
+                }
+                Section::Hierarchy => match (hierarchy_state, first.to_ascii_lowercase().as_str()) {
+                    (0, "begin") => hierarchy_state = 1,
+                    (1, "end") => hierarchy_state = 2,
+                    (1, _) => links.push((line, content.split_whitespace().collect())),
+                    (0, _) => return Err(at(format!("expected `begin`, found `{first}`"))),
+                    _ => return Err(at(format!("unexpected `{first}` after the hierarchy's `end`"))),
+                },
+            }
+        }
+        if let Some(d) = &open {
+            return Err(invalid(path, d.line, d.name.as_deref(), "`begin` without `end`"));
+        }
+        if !seen.contains(&Section::Bonedata) {
+            return Err(invalid(path, last_line, None, "missing `:bonedata`"));
+        }
+        if !seen.contains(&Section::Hierarchy) {
+            return Err(invalid(path, last_line, None, "missing `:hierarchy`"));
+        }
+        if hierarchy_state != 2 {
+            return Err(invalid(path, last_line, None, "the `:hierarchy` has no `begin` … `end`"));
+        }
+        let mut warnings = Vec::new();
+        let length_scale = length_scale.unwrap_or_else(|| {
+            warnings.push(ImportWarning {
+                path: path.into(),
+                message: "no `:units length`; lengths are taken as inches".into(),
+            });
+            1.0
+        });
+        let to_radians = |a: [f64; 3]| if degrees { a.map(f64::to_radians) } else { a };
+        let mut bones = Vec::with_capacity(drafts.len() + 1);
+        bones.push(AsfBone {
+            name: "root".into(),
+            parent: None,
+            direction: DVec3::ZERO,
+            length: 0.0,
+            axis: euler(&root.rotation_order, to_radians(root.orientation)),
+            dofs: root.order,
+            line: root.line,
+        });
+        for d in drafts {
+            bones.push(AsfBone {
+                name: d.name.unwrap_or_default(),
+                parent: None,
+                direction: d.direction.unwrap_or_default(),
+                length: d.length.unwrap_or_default(),
+                axis: euler(&d.axis.1, to_radians(d.axis.0)),
+                dofs: d.dofs,
+                line: d.line,
+            });
+        }
+        let order = resolve_hierarchy(&mut bones, &links, path)?;
+        let asf = Asf {
+            bones,
+            order,
+            root_rotation_order: root.rotation_order,
+            root_position: root.position,
+            metres_per_unit: METRES_PER_INCH / length_scale,
+            degrees,
+        };
+        Ok((asf, warnings))
+    }
+
+    /// Every bone, the root first, in `:bonedata` order.
+    pub fn bones(&self) -> &[AsfBone] {
+        &self.bones
+    }
+
+    /// Index of the bone called `name` (exact match).
+    pub fn bone_index(&self, name: &str) -> Option<usize> {
+        self.bones.iter().position(|b| b.name == name)
+    }
+
+    /// Every bone index with parents before children.
+    pub fn order(&self) -> &[usize] {
+        &self.order
+    }
+
+    /// Order in which the root's rotation values are applied (the root's `axis`).
+    pub fn root_rotation_order(&self) -> [Axis; 3] {
+        self.root_rotation_order
+    }
+
+    /// The root's rest `position`, ASF units.
+    pub fn root_position(&self) -> DVec3 {
+        self.root_position
+    }
+
+    /// Metres per ASF length unit from `:units length` (`0.0254 / length`).
+    pub fn metres_per_unit(&self) -> f64 {
+        self.metres_per_unit
+    }
+
+    /// Whether the ASF's angles are degrees (`:units angle deg`, the default).
+    pub fn degrees(&self) -> bool {
+        self.degrees
+    }
+
+    /// Start and end of every bone in the rest pose (all dofs zero), ASF units, world axes.
+    pub fn rest_positions(&self) -> Vec<(DVec3, DVec3)> {
+        let mut out = vec![(self.root_position, self.root_position); self.bones.len()];
+        for &b in &self.order {
+            let bone = &self.bones[b];
+            if let Some(p) = bone.parent {
+                let start = out[p].1;
+                out[b] = (start, start + bone.direction * bone.length);
+            }
+        }
+        out
+    }
+}
+
+/// The name of a section's keyword.
+fn section_name(section: Section) -> &'static str {
+    match section {
+        Section::Preamble => "the start",
+        Section::Version => "`:version`",
+        Section::Name => "`:name`",
+        Section::Units => "`:units`",
+        Section::Documentation => "`:documentation`",
+        Section::Root => "`:root`",
+        Section::Bonedata => "`:bonedata`",
+        Section::Hierarchy => "`:hierarchy`",
+    }
+}
+
+/// Sets each bone's parent from the hierarchy lines and returns the bones parents first. Fails
+/// on an undefined bone, a bone with two parents, the root as a child, a cycle, or a bone
+/// outside the hierarchy.
+fn resolve_hierarchy(
+    bones: &mut [AsfBone],
+    links: &[(usize, Vec<&str>)],
+    path: &Path,
+) -> Result<Vec<usize>, ImportError> {
+    let index: HashMap<&str, usize> = bones.iter().enumerate().map(|(i, b)| (b.name.as_str(), i)).collect();
+    let mut parent_line: Vec<Option<usize>> = vec![None; bones.len()];
+    let mut parents: Vec<Option<usize>> = vec![None; bones.len()];
+    for (line, names) in links {
+        let find = |name: &str| {
+            index.get(name).copied().ok_or_else(|| invalid(path, *line, Some(name), "not defined in `:bonedata`"))
+        };
+        let Some((parent, children)) = names.split_first() else { continue };
+        let p = find(parent)?;
+        if children.is_empty() {
+            return Err(invalid(path, *line, Some(*parent), "a hierarchy line without children"));
+        }
+        for child in children {
+            let c = find(child)?;
+            if c == 0 {
+                return Err(invalid(path, *line, Some(*child), "the root cannot be a child"));
+            }
+            if let (Some(old), Some(old_line)) = (parents[c], parent_line[c]) {
+                return Err(invalid(
+                    path,
+                    *line,
+                    Some(*child),
+                    format!("a second parent: {} here, {} on line {old_line}", parent, bones[old].name),
+                ));
+            }
+            parents[c] = Some(p);
+            parent_line[c] = Some(*line);
+        }
+    }
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); bones.len()];
+    for (c, p) in parents.iter().enumerate() {
+        if let Some(p) = p {
+            children[*p].push(c);
+        }
+    }
+    let mut order = vec![0];
+    let mut k = 0;
+    while let Some(&b) = order.get(k) {
+        order.extend(children[b].iter().copied());
+        k += 1;
+    }
+    let mut reached = vec![false; bones.len()];
+    for &b in &order {
+        reached[b] = true;
+    }
+    if let Some(lost) = reached.iter().position(|r| !r) {
+        let bone = &bones[lost];
+        return Err(match parent_line[lost] {
+            Some(line) => {
+                invalid(path, line, Some(&bone.name), "part of a cycle in the `:hierarchy`, not connected to the root")
+            }
+            None => invalid(path, bone.line, Some(&bone.name), "not in the `:hierarchy`"),
+        });
+    }
+    for (bone, parent) in bones.iter_mut().zip(parents) {
+        bone.parent = parent;
+    }
+    Ok(order)
+}
