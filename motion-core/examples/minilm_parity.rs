@@ -3,7 +3,7 @@
 //! original f32 weights) in one batch and prints, per sentence and overall, whether the ids
 //! agree and the largest absolute difference of an embedding component.
 //!
-//! Usage: `cargo run --release -p motion-core --example minilm_parity -- MODEL_DIR [REFERENCE]`,
+//! Usage: `cargo run -p motion-core --example minilm_parity -- MODEL_DIR [REFERENCE]`,
 //! MODEL_DIR holding `model.safetensors` and `tokenizer.json`: the shipped f16
 //! `fixtures/text/all-MiniLM-L6-v2`, or the unzipped f32 upstream model (see
 //! `fixtures/text/extract.sh`). Exits non-zero when ids differ.
