@@ -9,7 +9,7 @@ use motion_core::corpus::stats::CorpusStats;
 use motion_core::corpus::{cmu, file as corpus_file, Corpus, RawTake, Source};
 use motion_core::database::catalog::Catalog;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
-use motion_core::import::{resample, MocapClip};
+use motion_core::import::resample;
 
 use crate::paths;
 
@@ -41,6 +41,9 @@ pub enum DataCommand {
         /// The shared CMU folder.
         #[arg(long, default_value = "../shared/data/cmu")]
         cmu: PathBuf,
+        /// The shared HDM05 folder (ASF/AMC).
+        #[arg(long, default_value = "../shared/data/hdm05")]
+        hdm05: PathBuf,
         /// The catalog of shipped clips added to the training split.
         #[arg(long, default_value_os_t = paths::default_catalog())]
         catalog: PathBuf,
@@ -72,10 +75,12 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
             println!("wrote {}", out.display());
             Ok(())
         }
-        DataCommand::Corpus { cmu, catalog, out } => {
+        DataCommand::Corpus { cmu, hdm05, catalog, out } => {
             let mut takes: Vec<RawTake> = Vec::new();
             eprintln!("reading {}", cmu.display());
             takes.extend(cmu::read_cmu_folder(&cmu).context("reading the CMU capture")?.into_iter().map(RawTake::from));
+            eprintln!("reading {}", hdm05.display());
+            takes.extend(motion_core::corpus::hdm05::read_hdm05_folder(&hdm05).context("reading the HDM05 capture")?);
             takes.extend(shipped_takes(&catalog)?);
             eprintln!("screening, re-targeting and captioning {} takes", takes.len());
             let corpus = Corpus::build(takes, &ScreenConfig::default());
@@ -111,6 +116,7 @@ fn shipped_takes(catalog: &Path) -> anyhow::Result<Vec<RawTake>> {
             poses: resample(c.clip.as_ref(), 1.0, c.clip.is_cyclic().then_some(loop_seconds)),
             take: c.name,
             screen: false,
+            hold_frames: 0,
         })
         .collect())
 }

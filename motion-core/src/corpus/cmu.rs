@@ -61,6 +61,7 @@ impl From<CmuTake> for RawTake {
             take: take.take,
             poses: take.poses,
             screen: true,
+            hold_frames: 0,
         }
     }
 }

@@ -175,6 +175,7 @@ mod tests {
             description: "walk".into(),
             poses: walking_poses(130, turn),
             screen: true,
+            hold_frames: 0,
         };
         let corpus = Corpus::build(vec![take("01_01", 0.0), take("02_01", 0.5)], &ScreenConfig::default());
         let dir = tempfile::tempdir().unwrap();

@@ -14,6 +14,7 @@
 pub mod caption;
 pub mod cmu;
 pub mod file;
+pub mod hdm05;
 pub mod prepare;
 pub mod screen;
 pub mod skill;
@@ -130,6 +131,9 @@ pub struct RawTake {
     /// Whether the take must be screened (`false` for clips already curated on our skeleton,
     /// such as the looped shipped clips, whose seams the screen would cut).
     pub screen: bool,
+    /// Frames of the first and last pose held around each kept stretch, at most, to bring a
+    /// short one-shot clip to the shortest segment (0: none).
+    pub hold_frames: usize,
 }
 
 /// The corpus: clips, their joints and captioned windows, and what was dropped.
@@ -169,7 +173,7 @@ impl Corpus {
             };
             // Floor each screened stretch, then drop what still lies under the floor.
             let prepared = prepare_stretches(&take.poses, &mut verdicts, config, take.screen);
-            let segments = verdicts.segments(config.min_segment_frames);
+            let segments = verdicts.segments(config.min_segment_frames.saturating_sub(2 * take.hold_frames).max(2));
             let mut lost = (0, DropReason::TooShort);
             for (reason, frames) in verdicts.counts() {
                 if frames > 0 {
@@ -197,7 +201,8 @@ impl Corpus {
             let split = splits.get(&(take.source, take.subject.clone())).copied().unwrap_or(Split::Train);
             let cut = segments.len() > 1;
             for (k, range) in segments.into_iter().enumerate() {
-                let poses = prepare::canonical_start(&prepared[range.clone()]);
+                let held = config.min_segment_frames.saturating_sub(range.len()).div_ceil(2).min(take.hold_frames);
+                let poses = prepare::canonical_start(&hold_ends(&prepared[range.clone()], held));
                 corpus.push_clip(
                     CorpusClip {
                         name: if cut { format!("{}#{k}", take.take) } else { take.take.clone() },
@@ -261,6 +266,16 @@ pub fn window_starts(frames: usize) -> Vec<(usize, usize)> {
     starts.into_iter().map(|s| (s, len)).collect()
 }
 
+/// The poses with the first and last held for `frames` frames each.
+fn hold_ends(poses: &[Pose], frames: usize) -> Vec<Pose> {
+    let (Some(first), Some(last)) = (poses.first(), poses.last()) else { return Vec::new() };
+    let mut out = Vec::with_capacity(poses.len() + 2 * frames);
+    out.extend(std::iter::repeat_n(*first, frames));
+    out.extend_from_slice(poses);
+    out.extend(std::iter::repeat_n(*last, frames));
+    out
+}
+
 fn add_drop(drops: &mut DropReport, reason: DropReason, frames: usize) {
     let entry = drops.frames.entry(reason).or_default();
     entry.0 += frames;
@@ -286,13 +301,20 @@ fn prepare_stretches(poses: &[Pose], verdicts: &mut FrameVerdicts, config: &Scre
         out[range].copy_from_slice(&floored);
     }
     if screen {
-        let mut under = FrameVerdicts::keep_all(poses.len());
-        screen::screen_floor(&out, &mut under, config);
-        for (v, u) in verdicts.0.iter_mut().zip(under.0) {
+        let mut found = FrameVerdicts::keep_all(poses.len());
+        screen::screen_floor(&out, &mut found, config);
+        screen::screen_raised_stance(&out, &mut found, config);
+        for (v, u) in verdicts.0.iter_mut().zip(found.0) {
             if v.is_none() {
                 *v = u;
             }
         }
+    } else {
+        // A curated clip is kept whole: lifted so no joint goes deeper than the screen allows
+        // (the shipped crawl's knees and hands reach below its stance toes).
+        let lowest = out.iter().flat_map(|p| p.iter().map(|v| v.y)).fold(f64::INFINITY, f64::min);
+        let lift = (-config.under_floor_m - lowest).max(0.0);
+        out.iter_mut().for_each(|p| p.iter_mut().for_each(|v| v.y += lift));
     }
     out
 }
@@ -326,6 +348,7 @@ mod tests {
             description: "walk".into(),
             poses,
             screen: true,
+            hold_frames: 0,
         }
     }
 
@@ -341,8 +364,8 @@ mod tests {
         assert_eq!(corpus.drops.duplicates, vec![("01_02".to_owned(), "01_01".to_owned())]);
         let names: Vec<&str> = corpus.clips.iter().map(|c| c.name.as_str()).collect();
         assert_eq!(names, vec!["01_01", "02_01#0", "02_01#1"]);
-        assert_eq!(corpus.clips[2].take_frame, 154);
-        assert_eq!(corpus.joints.len(), 300 + 147 + 146);
+        assert_eq!(corpus.clips[2].take_frame, 153);
+        assert_eq!(corpus.joints.len(), 300 + 148 + 147);
         // Every window of a walk is captioned as one.
         assert!(corpus.windows.iter().all(|w| w.captions[0].starts_with("a person walks")), "{:?}", corpus.windows[0]);
         assert_eq!(window_starts(300), vec![(0, 120), (40, 120), (80, 120), (120, 120), (160, 120), (180, 120)]);

@@ -28,6 +28,9 @@ pub enum DropReason {
     /// A joint more than [`ScreenConfig::under_floor_m`] below the floor under the stance feet
     /// (uneven ground: stairs, platforms, a jump down).
     UnderFloor,
+    /// Standing still with the lower toe more than [`ScreenConfig::raised_m`] above the floor
+    /// (on a step, a box, uneven terrain the capture does not show).
+    RaisedStance,
     /// A stretch left between dropped frames that is shorter than
     /// [`ScreenConfig::min_segment_frames`].
     TooShort,
@@ -35,13 +38,14 @@ pub enum DropReason {
 
 impl DropReason {
     /// Every reason, in report order.
-    pub const ALL: [DropReason; 7] = [
+    pub const ALL: [DropReason; 8] = [
         DropReason::Duplicate,
         DropReason::BoneStretch,
         DropReason::Spike,
         DropReason::Frozen,
         DropReason::TPose,
         DropReason::UnderFloor,
+        DropReason::RaisedStance,
         DropReason::TooShort,
     ];
 
@@ -54,6 +58,7 @@ impl DropReason {
             DropReason::Frozen => "the same frame repeated for 0.25 s or more",
             DropReason::TPose => "calibration T-pose",
             DropReason::UnderFloor => "a joint more than 3 cm under the floor (uneven ground)",
+            DropReason::RaisedStance => "standing on something unseen (toes 8 cm up for 0.5 s)",
             DropReason::TooShort => "stretch shorter than 2 s left between drops",
         }
     }
@@ -74,7 +79,10 @@ pub struct ScreenConfig {
     pub frozen_frames: usize,
     /// Deepest a joint may go under the floor, m (default 0.03).
     pub under_floor_m: f64,
-    /// Frames dropped on each side of a dropped frame (default 3).
+    /// Height of a standing toe above the floor that means the body stands on something, m
+    /// (default 0.08).
+    pub raised_m: f64,
+    /// Frames dropped on each side of a dropped frame (default 2: 0.1 s).
     pub margin_frames: usize,
     /// Shortest stretch kept, frames (default 40: 2 s, the shortest training window).
     pub min_segment_frames: usize,
@@ -88,7 +96,8 @@ impl Default for ScreenConfig {
             frozen_m: 0.0005,
             frozen_frames: 5,
             under_floor_m: 0.03,
-            margin_frames: 3,
+            raised_m: 0.08,
+            margin_frames: 2,
             min_segment_frames: 40,
         }
     }
@@ -159,6 +168,39 @@ pub fn screen_take(poses: &[Pose], config: &ScreenConfig) -> FrameVerdicts {
 pub fn screen_floor(poses: &[Pose], verdicts: &mut FrameVerdicts, config: &ScreenConfig) {
     let under = poses.iter().enumerate().filter(|(_, p)| p.iter().any(|v| v.y < -config.under_floor_m)).map(|(t, _)| t);
     verdicts.mark(under.collect::<Vec<_>>(), DropReason::UnderFloor, config.margin_frames);
+}
+
+/// Marks the frames of a floored take in which the body stands on something: for 10 frames
+/// (0.5 s) or more, both toes move horizontally slower than 0.3 m/s while the lower one is more
+/// than [`ScreenConfig::raised_m`] above the floor and the pelvis is higher than a seated one
+/// (70 % of its standing height).
+pub fn screen_raised_stance(poses: &[Pose], verdicts: &mut FrameVerdicts, config: &ScreenConfig) {
+    let toes = [Joint::LeftFoot.index(), Joint::RightFoot.index()];
+    let standing = super::tags::standing_pelvis_height();
+    let raised: Vec<bool> = (0..poses.len())
+        .map(|t| {
+            let (a, b) = (t.saturating_sub(1), (t + 1).min(poses.len().saturating_sub(1)));
+            let still = toes.iter().all(|&j| {
+                let d = poses[b][j] - poses[a][j];
+                ((d.x * d.x + d.z * d.z).sqrt() * crate::skeleton::FPS / (b - a).max(1) as f64) < 0.3
+            });
+            let lower = poses[t][toes[0]].y.min(poses[t][toes[1]].y);
+            still && lower > config.raised_m && poses[t][Joint::Pelvis.index()].y > 0.7 * standing
+        })
+        .collect();
+    let mut hits = Vec::new();
+    let mut t = 0;
+    while t < raised.len() {
+        let start = t;
+        while t < raised.len() && raised[t] {
+            t += 1;
+        }
+        if t - start >= 10 {
+            hits.extend(start..t);
+        }
+        t += 1;
+    }
+    verdicts.mark(hits, DropReason::RaisedStance, config.margin_frames);
 }
 
 /// Frames at which some bone is more than `limit_m` off its median length over the take.
@@ -257,8 +299,8 @@ mod tests {
         walk[50][Joint::LeftWrist.index()] += DVec3::new(0.0, 0.6, 0.0);
         let mut v = screen_take(&walk, &ScreenConfig::default());
         assert_eq!(v.0[50], Some(DropReason::BoneStretch));
-        assert_eq!(v.0[47], Some(DropReason::BoneStretch));
-        assert_eq!(v.0[46], None);
+        assert_eq!(v.0[48], Some(DropReason::BoneStretch));
+        assert_eq!(v.0[47], None);
         // Far from the stretch, an off-axis jump of the whole body by 1.2 m is a spike.
         for p in walk.iter_mut().skip(150) {
             for q in p.iter_mut() {
@@ -268,7 +310,7 @@ mod tests {
         let mut v = screen_take(&walk, &ScreenConfig::default());
         assert!(v.0[149..=150].iter().all(|r| *r == Some(DropReason::Spike)), "{:?}", &v.0[145..155]);
         let segments = v.segments(40);
-        assert_eq!(segments, vec![0..47, 54..146, 154..200]);
+        assert_eq!(segments, vec![0..48, 53..147, 153..200]);
     }
 
     #[test]
@@ -326,6 +368,6 @@ mod tests {
         let mut v = FrameVerdicts::keep_all(walk.len());
         screen_floor(&walk, &mut v, &ScreenConfig::default());
         assert_eq!(v.0[60], Some(DropReason::UnderFloor));
-        assert_eq!(v.counts().find(|(r, _)| *r == DropReason::UnderFloor).map(|c| c.1), Some(7));
+        assert_eq!(v.counts().find(|(r, _)| *r == DropReason::UnderFloor).map(|c| c.1), Some(5));
     }
 }

@@ -6,9 +6,13 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 use super::caption::Action;
+use super::prepare::STANCE_TOE_HEIGHT_M;
 use super::skill::Skill;
 use super::split::Split;
+use super::tags::TravelDirection;
 use super::{Corpus, Source};
+use crate::metrics::{foot_skate_ratio, stance_toe_height};
+use crate::motion::bone_length_spread;
 use crate::skeleton::FPS;
 
 /// Minutes and clip counts of a corpus.
@@ -30,6 +34,54 @@ pub struct CorpusStats {
     pub duplicates: usize,
     /// Windows.
     pub windows: usize,
+    /// Whether the kept motion is sound.
+    pub soundness: Soundness,
+}
+
+/// Checks of the kept motion against itself, each in natural units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Soundness {
+    /// Largest change of any bone's length within a clip, m (rigid by construction; the file's
+    /// millimetre rounding leaves up to about 2 mm).
+    pub bone_spread_max_m: f64,
+    /// Median over clips of the lower toe's median height above the floor, m.
+    pub stance_toe_median_m: f64,
+    /// Share of clips whose lower toe stands within 2 cm of [`STANCE_TOE_HEIGHT_M`] in stance.
+    pub stance_within_2cm: f64,
+    /// Deepest any joint goes under the floor, m (positive: under).
+    pub deepest_under_floor_m: f64,
+    /// GMD foot-skating ratio of straight forward walking windows, per source: (windows, mean).
+    pub walk_skate: BTreeMap<Source, (usize, f64)>,
+}
+
+impl Soundness {
+    /// Measures a corpus.
+    pub fn of(corpus: &Corpus) -> Self {
+        let mut stance: Vec<f64> = corpus.clips.iter().map(|c| stance_toe_height(corpus.clip_joints(c))).collect();
+        stance.sort_by(f64::total_cmp);
+        let within = stance.iter().filter(|h| (**h - STANCE_TOE_HEIGHT_M).abs() <= 0.02).count();
+        let mut walk_skate: BTreeMap<Source, (usize, f64)> = BTreeMap::new();
+        for w in &corpus.windows {
+            let straight = w.tags.direction == Some(TravelDirection::Forwards) && w.tags.turn_left().is_none();
+            if Action::of(&w.tags) == Action::Walk && straight {
+                let e = walk_skate.entry(corpus.clips[w.clip].source).or_default();
+                e.0 += 1;
+                e.1 += foot_skate_ratio(corpus.window_joints(w));
+            }
+        }
+        walk_skate.values_mut().for_each(|(n, sum)| *sum /= (*n).max(1) as f64);
+        Self {
+            bone_spread_max_m: corpus
+                .clips
+                .iter()
+                .map(|c| bone_length_spread(corpus.clip_joints(c)))
+                .fold(0.0, f64::max),
+            stance_toe_median_m: stance.get(stance.len() / 2).copied().unwrap_or(0.0),
+            stance_within_2cm: within as f64 / stance.len().max(1) as f64,
+            deepest_under_floor_m: -corpus.joints.iter().flat_map(|p| p.iter().map(|v| v.y)).fold(0.0, f64::min),
+            walk_skate,
+        }
+    }
 }
 
 impl CorpusStats {
@@ -84,6 +136,7 @@ impl CorpusStats {
                 .collect(),
             duplicates: corpus.drops.duplicates.len(),
             windows: corpus.windows.len(),
+            soundness: Soundness::of(corpus),
         }
     }
 
@@ -131,6 +184,24 @@ impl fmt::Display for CorpusStats {
         for (reason, frames, takes) in &self.dropped {
             writeln!(f, "  {reason:<58} {:>7.1} min {takes:>5} takes", *frames as f64 / FPS / 60.0)?;
         }
-        write!(f, "  ({} duplicate takes)", self.duplicates)
+        writeln!(f, "  ({} duplicate takes)", self.duplicates)?;
+        let s = &self.soundness;
+        writeln!(f, "\nsoundness:")?;
+        writeln!(f, "  bones: largest change of a bone's length within a clip {:.4} m", s.bone_spread_max_m)?;
+        writeln!(
+            f,
+            "  stance: lower toe {:.3} m above the floor (median over clips); {:.1} % of clips within 2 cm of {STANCE_TOE_HEIGHT_M} m",
+            s.stance_toe_median_m,
+            100.0 * s.stance_within_2cm
+        )?;
+        writeln!(f, "  floor: deepest joint {:.3} m under it", s.deepest_under_floor_m)?;
+        for (source, (n, skate)) in &s.walk_skate {
+            writeln!(
+                f,
+                "  foot skate (GMD ratio) of {n} straight forward walking windows of {}: {skate:.3}",
+                source.name()
+            )?;
+        }
+        Ok(())
     }
 }

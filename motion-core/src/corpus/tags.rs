@@ -8,7 +8,7 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::import::deepmimic::rest_pose;
-use crate::metrics::{airborne_frames, heading_change_rad};
+use crate::metrics::{heading_change_rad, AIRBORNE_M};
 use crate::representation::facing_direction;
 use crate::skeleton::{Joint, Pose, FPS};
 
@@ -60,7 +60,9 @@ pub struct MotionTags {
     pub sitting: bool,
     /// Head lower than 0.6 m for at least a quarter of the frames (crawling, lying).
     pub on_floor: bool,
-    /// Frames with both toes more than 10 cm above the floor (at least 2 make a jump or a hop).
+    /// Frames of flight: both toes more than 10 cm above the floor, in stretches of at most
+    /// [`MAX_FLIGHT_FRAMES`] (longer ones stand on something the capture does not show: a
+    /// stool, a step, uneven terrain). At least 2 make a jump or a hop.
     pub airborne_frames: usize,
     /// Longest stretch with one foot (toe and ankle) more than 10 cm above the floor while the
     /// other toe is within 5 cm of it, s.
@@ -73,6 +75,8 @@ pub struct MotionTags {
 
 /// Fewest frames of a hand state that count as doing it (0.5 s).
 pub const HAND_STATE_FRAMES: usize = 10;
+/// Longest flight of a jump or hop, frames (0.6 s: a 45 cm standing jump).
+pub const MAX_FLIGHT_FRAMES: usize = 12;
 /// Fewest airborne frames that make a jump or a hop.
 pub const AIRBORNE_MIN_FRAMES: usize = 2;
 /// Shortest one-foot stance that counts as a one-leg skill, s.
@@ -124,7 +128,7 @@ impl MotionTags {
             crouched,
             sitting,
             on_floor,
-            airborne_frames: airborne_frames(poses),
+            airborne_frames: flight_frames(poses),
             one_foot_up_s: longest_run(&one_foot) as f64 / FPS,
             hands_above_head_frames: count(&|p| {
                 let (l, r) = wrists(p);
@@ -209,6 +213,13 @@ fn travel_direction(poses: &[Pose]) -> Option<TravelDirection> {
     })
 }
 
+/// Frames in flights of at most [`MAX_FLIGHT_FRAMES`] with both toes above [`AIRBORNE_M`].
+fn flight_frames(poses: &[Pose]) -> usize {
+    let up: Vec<bool> =
+        poses.iter().map(|p| p[Joint::LeftFoot.index()].y.min(p[Joint::RightFoot.index()].y) > AIRBORNE_M).collect();
+    up.split(|u| !u).map(<[bool]>::len).filter(|&n| n <= MAX_FLIGHT_FRAMES).sum()
+}
+
 /// Length of the longest run of `true`.
 fn longest_run(flags: &[bool]) -> usize {
     let (mut best, mut run) = (0, 0);
@@ -289,7 +300,14 @@ mod tests {
             .map(|(t, p)| if (50..60).contains(&t) { p.map(|v| v + DVec3::new(0.0, 0.3, 0.0)) } else { *p })
             .collect();
         let tags = MotionTags::measure(&jump);
-        assert!(tags.airborne() && tags.airborne_frames >= 10, "{tags:?}");
+        assert!(tags.airborne() && tags.airborne_frames == 10, "{tags:?}");
+        // Standing on a step for 2 s is no flight.
+        let step: Vec<Pose> = walk
+            .iter()
+            .enumerate()
+            .map(|(t, p)| if (50..90).contains(&t) { p.map(|v| v + DVec3::new(0.0, 0.3, 0.0)) } else { *p })
+            .collect();
+        assert!(!MotionTags::measure(&step).airborne());
         assert!(!MotionTags::measure(&walk).airborne());
     }
 
