@@ -8,8 +8,9 @@ use std::path::{Path, PathBuf};
 use sha2::{Digest, Sha256};
 
 /// What the installed binary needs: the prior, the recorded LLM replies, the task programs and
-/// the mocap catalog with its clips.
-const EMBEDDED: [&str; 4] = ["model/prior.safetensors", "llm/recorded", "tasks", "mocap"];
+/// the mocap catalog with its clips, and the motion corpus.
+const EMBEDDED: [&str; 5] =
+    ["model/prior.safetensors", "llm/recorded", "tasks", "mocap", "corpus/corpus.safetensors.gz"];
 
 fn files_under(path: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
     if path.is_dir() {

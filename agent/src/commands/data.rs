@@ -51,6 +51,24 @@ pub enum DataCommand {
         #[arg(long, short, default_value = "fixtures/corpus/corpus.safetensors.gz")]
         out: PathBuf,
     },
+    /// Draw corpus windows in world coordinates to look at: `skills.png`, one window per skill
+    /// family (walk, sideways walk, sneak/creep, crawl, one-leg balance, hop, carry, sit down),
+    /// and `random_<k>.png`, randomly drawn windows ten to a picture, with `windows.md`, the
+    /// table of their takes, descriptions, captions and tags.
+    Show {
+        /// A corpus file.
+        #[arg(long, default_value_os_t = paths::default_corpus())]
+        corpus: PathBuf,
+        /// Output folder.
+        #[arg(long, short, default_value = "out/corpus")]
+        out: PathBuf,
+        /// Random windows drawn.
+        #[arg(long, default_value_t = 30)]
+        random: usize,
+        /// Seed of the random draw.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
     /// Print what a corpus (hours per source, skill and split, what was dropped) or a database
     /// (seconds per label) holds; by default the shipped corpus.
     Stats {
@@ -89,6 +107,10 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
             println!("wrote {}", out.display());
             Ok(())
         }
+        DataCommand::Show { corpus, out, random, seed } => {
+            let corpus = corpus_file::load(&corpus).with_context(|| format!("reading {}", corpus.display()))?;
+            show(&corpus, &out, random, seed)
+        }
         DataCommand::Stats { file } => {
             if file.extension().is_some_and(|e| e == "gz") {
                 let corpus = corpus_file::load(&file).with_context(|| format!("reading {}", file.display()))?;
@@ -100,6 +122,111 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// A window of each skill family, chosen where the take's description names the skill and the
+/// window's own tags show it; the first such window in corpus order.
+fn skill_windows(corpus: &Corpus) -> Vec<(&'static str, usize)> {
+    use motion_core::corpus::caption::Action;
+    use motion_core::corpus::skill::Skill;
+    use motion_core::corpus::tags::{MotionTags, TravelDirection};
+    let families: [(&str, Skill, fn(&MotionTags) -> bool); 8] = [
+        ("walk", Skill::Walk, |t| Action::of(t) == Action::Walk && t.direction == Some(TravelDirection::Forwards)),
+        ("sideways walk", Skill::Sideways, |t| {
+            matches!(t.direction, Some(TravelDirection::SidewaysLeft | TravelDirection::SidewaysRight))
+                && t.travel_m > 1.5
+        }),
+        ("sneak/creep", Skill::CrouchSneak, |t| Action::of(t) == Action::Sneak),
+        ("crawl", Skill::Crawl, |t| Action::of(t) == Action::Crawl),
+        ("one-leg balance", Skill::Balance, |t| Action::of(t) == Action::Balance),
+        ("hop", Skill::JumpHop, |t| t.airborne() && t.one_foot()),
+        ("carry", Skill::Carry, |t| Action::of(t) == Action::Walk),
+        ("sit down", Skill::Sit, |t| t.sitting),
+    ];
+    families
+        .iter()
+        .filter_map(|(name, skill, shows)| {
+            corpus
+                .windows
+                .iter()
+                .position(|w| {
+                    let clip = &corpus.clips[w.clip];
+                    skill.named_by(&clip.description) && shows(&w.tags)
+                })
+                .map(|i| (*name, i))
+        })
+        .collect()
+}
+
+/// SplitMix64's finaliser: a well-mixed 64-bit hash of `x`.
+fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+fn show(corpus: &Corpus, out: &Path, random: usize, seed: u64) -> anyhow::Result<()> {
+    use motion_core::render::{motion_strip, StripRow};
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let row = |label: String, i: usize| StripRow { label, poses: corpus.window_joints(&corpus.windows[i]) };
+    let skills = skill_windows(corpus);
+    let rows: Vec<StripRow<'_>> = skills
+        .iter()
+        .map(|(name, i)| {
+            let w = &corpus.windows[*i];
+            row(
+                format!(
+                    "{name}: {} ({}, {})",
+                    w.captions[0], corpus.clips[w.clip].take, corpus.clips[w.clip].description
+                ),
+                *i,
+            )
+        })
+        .collect();
+    motion_strip(&rows, 8, &[], &[], "one window per skill family", &out.join("skills.png"))?;
+    // A seeded draw without replacement: the windows in the order of a hash of seed and index.
+    let mut drawn: Vec<usize> = (0..corpus.windows.len()).collect();
+    drawn.sort_by_key(|&i| splitmix64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)));
+    drawn.truncate(random);
+    let mut table = String::from("| # | take (frames) | description | caption | tags |\n|---|---|---|---|---|\n");
+    for (k, chunk) in drawn.chunks(10).enumerate() {
+        let rows: Vec<StripRow<'_>> = chunk
+            .iter()
+            .enumerate()
+            .map(|(j, &i)| row(format!("{}: {}", 10 * k + j, corpus.windows[i].captions[0]), i))
+            .collect();
+        motion_strip(&rows, 8, &[], &[], "random corpus windows", &out.join(format!("random_{k}.png")))?;
+    }
+    for (n, &i) in drawn.iter().enumerate() {
+        let w = &corpus.windows[i];
+        let clip = &corpus.clips[w.clip];
+        let t = &w.tags;
+        table.push_str(&format!(
+            "| {n} | {} ({}..{}) | {} | {} | {:.2} m/s, {:.1} m, {:?}, turn {:.0}°{}{}{}{}{} |\n",
+            clip.name,
+            w.start,
+            w.start + w.frames,
+            clip.description,
+            w.captions[0],
+            t.speed_m_per_s,
+            t.travel_m,
+            t.direction,
+            t.turn_deg,
+            if t.crouched { ", crouched" } else { "" },
+            if t.sitting { ", sitting" } else { "" },
+            if t.on_floor { ", on the floor" } else { "" },
+            if t.airborne() { ", airborne" } else { "" },
+            if t.one_foot() { ", one foot up" } else { "" },
+        ));
+    }
+    std::fs::write(out.join("windows.md"), &table).with_context(|| format!("writing {}", out.display()))?;
+    for (name, i) in &skills {
+        let w = &corpus.windows[*i];
+        println!("{name}: {} ({}, frames {}..)", w.captions[0], corpus.clips[w.clip].name, w.start);
+    }
+    println!("wrote {}/{{skills.png,random_*.png,windows.md}}", out.display());
+    Ok(())
 }
 
 /// The clips of a catalog as corpus takes of the shipped source: one play-through each, cyclic

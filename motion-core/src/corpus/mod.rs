@@ -320,15 +320,22 @@ fn prepare_stretches(poses: &[Pose], verdicts: &mut FrameVerdicts, config: &Scre
 }
 
 /// Splits per (source, subject): the shipped clips train; CMU and HDM05 subjects are assigned
-/// by [`split::assign_subjects`] within their source.
+/// by [`split::assign_subjects`] within their source, with the skill families their takes'
+/// descriptions name.
 fn assign_splits(takes: &[&RawTake]) -> BTreeMap<(Source, String), Split> {
     let mut out = BTreeMap::new();
     for source in [Source::Cmu, Source::Hdm05] {
         let mut counts: BTreeMap<String, usize> = BTreeMap::new();
+        let mut skills: Vec<BTreeMap<String, usize>> = vec![BTreeMap::new(); skill::Skill::ALL.len()];
         for t in takes.iter().filter(|t| t.source == source) {
             *counts.entry(t.subject.clone()).or_default() += 1;
+            for (k, s) in skill::Skill::ALL.iter().enumerate() {
+                if s.named_by(&t.description) {
+                    *skills[k].entry(t.subject.clone()).or_default() += 1;
+                }
+            }
         }
-        for (subject, split) in split::assign_subjects(&counts) {
+        for (subject, split) in split::assign_subjects(&counts, &skills) {
             out.insert((source, subject), split);
         }
     }

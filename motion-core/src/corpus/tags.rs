@@ -67,12 +67,16 @@ pub struct MotionTags {
     /// Longest stretch with one foot (toe and ankle) more than 10 cm above the floor while the
     /// other toe is within 5 cm of it, s.
     pub one_foot_up_s: f64,
-    /// Frames with a wrist above the head (at least 10 count).
+    /// Frames with a wrist above the top of the head (the head joint plus [`HEAD_TOP_M`]; at
+    /// least 10 count).
     pub hands_above_head_frames: usize,
     /// Frames with the wrists closer than 15 cm (at least 10 count).
     pub hands_together_frames: usize,
 }
 
+/// Height of the top of the head above the head joint, m (arms held out level are not above
+/// the head).
+pub const HEAD_TOP_M: f64 = 0.1;
 /// Fewest frames of a hand state that count as doing it (0.5 s).
 pub const HAND_STATE_FRAMES: usize = 10;
 /// Longest flight of a jump or hop, frames (0.6 s: a 45 cm standing jump).
@@ -132,7 +136,7 @@ impl MotionTags {
             one_foot_up_s: longest_run(&one_foot) as f64 / FPS,
             hands_above_head_frames: count(&|p| {
                 let (l, r) = wrists(p);
-                l.y.max(r.y) > p[Joint::Head.index()].y
+                l.y.max(r.y) > p[Joint::Head.index()].y + HEAD_TOP_M
             }),
             hands_together_frames: count(&|p| {
                 let (l, r) = wrists(p);
