@@ -130,7 +130,8 @@ fn skill_windows(corpus: &Corpus) -> Vec<(&'static str, usize)> {
     use motion_core::corpus::caption::Action;
     use motion_core::corpus::skill::Skill;
     use motion_core::corpus::tags::{MotionTags, TravelDirection};
-    let families: [(&str, Skill, fn(&MotionTags) -> bool); 8] = [
+    type Family = (&'static str, Skill, fn(&MotionTags) -> bool);
+    let families: [Family; 8] = [
         ("walk", Skill::Walk, |t| Action::of(t) == Action::Walk && t.direction == Some(TravelDirection::Forwards)),
         ("sideways walk", Skill::Sideways, |t| {
             matches!(t.direction, Some(TravelDirection::SidewaysLeft | TravelDirection::SidewaysRight))

@@ -89,3 +89,43 @@ pub fn read_hdm05_folder(folder: &Path) -> Result<Vec<RawTake>, ImportError> {
     }
     Ok(takes)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shipped HDM05 clip laid out as the shared folder is: `<part>/<class>/`.
+    fn folder() -> tempfile::TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        let class = dir.path().join("train").join("4");
+        std::fs::create_dir_all(&class).unwrap();
+        let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/hdm05");
+        for name in ["HDM_bk.asf", "HDM_bk_hopBothLegs1hops_020_120.amc"] {
+            std::fs::copy(fixtures.join(name), class.join(name)).unwrap();
+        }
+        dir
+    }
+
+    #[test]
+    fn a_clip_is_read_with_its_actor_and_described_by_its_motion() {
+        let dir = folder();
+        let takes = read_hdm05_folder(dir.path()).unwrap();
+        assert_eq!(takes.len(), 1);
+        let t = &takes[0];
+        assert_eq!((t.subject.as_str(), t.description.as_str()), ("bk", "hop once on both legs"));
+        assert_eq!(t.take, "HDM_bk_hopBothLegs1hops_020_120");
+        assert_eq!(t.poses.len(), 10, "55/120 s at 20 fps");
+        assert_eq!(t.hold_frames, HOLD_FRAMES);
+    }
+
+    #[test]
+    fn a_missing_skeleton_and_an_empty_folder_are_named() {
+        let dir = folder();
+        std::fs::remove_file(dir.path().join("train/4/HDM_bk.asf")).unwrap();
+        let e = read_hdm05_folder(dir.path()).err().unwrap().to_string();
+        assert!(e.contains("HDM_bk.asf"), "{e}");
+        let empty = tempfile::tempdir().unwrap();
+        let e = read_hdm05_folder(empty.path()).err().unwrap().to_string();
+        assert!(e.contains("no frames") || e.contains(&empty.path().display().to_string()), "{e}");
+    }
+}

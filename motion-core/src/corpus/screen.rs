@@ -297,7 +297,7 @@ mod tests {
     fn a_one_frame_jump_and_a_stretched_bone_cut_the_take_with_margins() {
         let mut walk = walking_poses(200, 0.0);
         walk[50][Joint::LeftWrist.index()] += DVec3::new(0.0, 0.6, 0.0);
-        let mut v = screen_take(&walk, &ScreenConfig::default());
+        let v = screen_take(&walk, &ScreenConfig::default());
         assert_eq!(v.0[50], Some(DropReason::BoneStretch));
         assert_eq!(v.0[48], Some(DropReason::BoneStretch));
         assert_eq!(v.0[47], None);
@@ -369,5 +369,23 @@ mod tests {
         screen_floor(&walk, &mut v, &ScreenConfig::default());
         assert_eq!(v.0[60], Some(DropReason::UnderFloor));
         assert_eq!(v.counts().find(|(r, _)| *r == DropReason::UnderFloor).map(|c| c.1), Some(5));
+    }
+
+    #[test]
+    fn standing_on_a_step_is_dropped_but_a_jump_is_not() {
+        let rest = crate::import::deepmimic::rest_pose();
+        let floor = rest.iter().map(|v| v.y).fold(f64::INFINITY, f64::min);
+        let standing: Vec<Pose> = (0..60).map(|_| rest.map(|v| v - DVec3::new(0.0, floor, 0.0))).collect();
+        let mut on_step = standing.clone();
+        on_step[20..40].iter_mut().for_each(|p| p.iter_mut().for_each(|v| v.y += 0.2));
+        let mut v = FrameVerdicts::keep_all(60);
+        screen_raised_stance(&on_step, &mut v, &ScreenConfig::default());
+        assert!(v.0[20..40].iter().all(|r| *r == Some(DropReason::RaisedStance)));
+        assert_eq!(v.0[17], None);
+        let mut jump = standing;
+        jump[20..26].iter_mut().for_each(|p| p.iter_mut().for_each(|v| v.y += 0.2));
+        let mut v = FrameVerdicts::keep_all(60);
+        screen_raised_stance(&jump, &mut v, &ScreenConfig::default());
+        assert!(v.0.iter().all(Option::is_none));
     }
 }

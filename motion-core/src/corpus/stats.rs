@@ -118,7 +118,7 @@ impl CorpusStats {
         let n = corpus.windows.len().max(1) as f64;
         let mut per_action: Vec<(String, usize, f64)> =
             actions.into_iter().map(|(a, c)| (a, c, c as f64 / n)).collect();
-        per_action.sort_by(|a, b| b.1.cmp(&a.1));
+        per_action.sort_by_key(|a| std::cmp::Reverse(a.1));
         Self {
             per_source,
             per_split,

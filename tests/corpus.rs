@@ -1,0 +1,43 @@
+//! The shipped corpus (`fixtures/corpus/corpus.safetensors.gz`) loads and holds what its data
+//! card says: at least 7.5 hours after the drops, every split with whole subjects, a test split
+//! of at least 10 % of the takes, windows with captions, and sound joints.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use motion_core::corpus::stats::CorpusStats;
+use motion_core::corpus::{file, Source, Split};
+
+#[test]
+fn the_shipped_corpus_holds_its_hours_splits_and_captions() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/corpus/corpus.safetensors.gz");
+    let corpus = file::load(&path).unwrap();
+    let stats = CorpusStats::of(&corpus);
+    assert!(stats.kept_minutes() >= 7.5 * 60.0, "{:.1} min", stats.kept_minutes());
+    for source in Source::ALL {
+        assert!(stats.per_source.contains_key(&source), "{source:?}");
+    }
+    // Whole subjects per split.
+    let mut split_of: BTreeMap<(Source, &str), BTreeSet<Split>> = BTreeMap::new();
+    for c in &corpus.clips {
+        split_of.entry((c.source, c.subject.as_str())).or_default().insert(c.split);
+    }
+    assert!(split_of.values().all(|s| s.len() == 1));
+    let takes = |which: Option<Split>| {
+        let held = |c: &&motion_core::corpus::CorpusClip| which.is_none_or(|w| c.split == w);
+        corpus
+            .clips
+            .iter()
+            .filter(|c| c.source != Source::Shipped)
+            .filter(held)
+            .map(|c| &c.take)
+            .collect::<BTreeSet<_>>()
+            .len()
+    };
+    assert!(takes(Some(Split::Test)) as f64 >= 0.10 * takes(None) as f64);
+    assert!(takes(Some(Split::Validation)) > 0);
+    assert!(corpus.windows.iter().all(|w| w.captions.len() == 3 && w.captions.iter().all(|c| !c.is_empty())));
+    let s = &stats.soundness;
+    assert!(s.bone_spread_max_m < 0.005 && s.deepest_under_floor_m <= 0.0305, "{s:?}");
+    assert!((s.stance_toe_median_m - 0.015).abs() < 0.01, "{s:?}");
+}
