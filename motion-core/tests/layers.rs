@@ -4,6 +4,9 @@
 //! `test_*.rs`, inline `#[cfg(test)] mod .. { }`) may reach anywhere: its fixtures come from the
 //! importers. And no source file of the workspace grows past 700 lines.
 
+// Test helpers may unwrap: a failure is the test failing.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
