@@ -34,6 +34,7 @@ pub mod representation;
 pub mod rgdno;
 pub mod skeleton;
 mod tensor_file;
+#[cfg(any(test, feature = "testing"))]
 pub mod testing;
 pub mod text;
 pub mod training;
