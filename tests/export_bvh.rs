@@ -11,7 +11,7 @@ use motion_core::export::bvh::{write_bvh, BvhUnit};
 use motion_core::export::rotations::ANIMATED_OFFSETS;
 use motion_core::export::RotationTrack;
 use motion_core::import::bvh::{BvhClip, BvhOptions, LengthUnit, Rig};
-use motion_core::prior::Prior;
+use motion_core::prior::{Prior, Sampling};
 use motion_core::quality::joints_of;
 use motion_core::skeleton::Pose;
 
@@ -27,7 +27,19 @@ fn max_distance(a: &[Pose], b: &[Pose]) -> f64 {
 fn a_sampled_motion_comes_back_from_bvh_as_solved() {
     let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &Device::Cpu).unwrap();
     // Few DDIM steps: the test is about the file, not the motion's quality.
-    let x = prior.sample("a person walks forward", FRAMES, 1, 3, 10, Guidance::default(), &Device::Cpu).unwrap();
+    let x = prior
+        .sample(
+            &Sampling {
+                prompt: "a person walks forward",
+                frames: FRAMES,
+                batch: 1,
+                seed: 3,
+                steps: 10,
+                guidance: Guidance::default(),
+            },
+            &Device::Cpu,
+        )
+        .unwrap();
     let poses = joints_of(&prior, &x).unwrap().remove(0);
     let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
     let fk = track.forward_kinematics();

@@ -8,7 +8,7 @@ use candle_core::Device;
 use e2e_tests::fixtures;
 use motion_core::constraints::CompiledProgram;
 use motion_core::evaluation::report;
-use motion_core::generation::{generate, GenerationConfig, Method};
+use motion_core::generation::{generate, GenerationConfig, Method, Task};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
 
@@ -50,14 +50,31 @@ fn config(method: Method, steps: usize) -> GenerationConfig {
 fn every_method_runs_and_optimisers_lower_the_error() {
     let (prior, program, compiled) = setup();
     let device = Device::Cpu;
-    let unconstrained =
-        generate(&prior, &program, &compiled, &config(Method::Unconstrained, 0), &device, |_| {}).unwrap();
+    let unconstrained = generate(
+        &prior,
+        Task { program: &program, compiled: &compiled },
+        None,
+        &config(Method::Unconstrained, 0),
+        &device,
+        |_| {},
+    )
+    .unwrap()
+    .generated;
     let base = report(&program, &compiled, &unconstrained, &config(Method::Unconstrained, 0)).unwrap();
     assert_eq!(unconstrained.joints.dims(), [2, 40, 22, 3]);
     assert!(base.constraint_error > 0.0 && base.constraint_error.is_finite());
     for method in [Method::Ik, Method::IkReg, Method::Dno] {
         let mut steps = 0;
-        let run = generate(&prior, &program, &compiled, &config(method, 12), &device, |_| steps += 1).unwrap();
+        let run = generate(
+            &prior,
+            Task { program: &program, compiled: &compiled },
+            None,
+            &config(method, 12),
+            &device,
+            |_| steps += 1,
+        )
+        .unwrap()
+        .generated;
         assert_eq!(steps, 12, "{method}: one progress call per step");
         let r = report(&program, &compiled, &run, &config(method, 12)).unwrap();
         assert_eq!(r.constraints.len(), 2);
@@ -80,8 +97,26 @@ fn every_method_runs_and_optimisers_lower_the_error() {
 fn dno_is_reproducible_from_its_seed() {
     let (prior, program, compiled) = setup();
     let device = Device::Cpu;
-    let a = generate(&prior, &program, &compiled, &config(Method::Dno, 3), &device, |_| {}).unwrap();
-    let b = generate(&prior, &program, &compiled, &config(Method::Dno, 3), &device, |_| {}).unwrap();
+    let a = generate(
+        &prior,
+        Task { program: &program, compiled: &compiled },
+        None,
+        &config(Method::Dno, 3),
+        &device,
+        |_| {},
+    )
+    .unwrap()
+    .generated;
+    let b = generate(
+        &prior,
+        Task { program: &program, compiled: &compiled },
+        None,
+        &config(Method::Dno, 3),
+        &device,
+        |_| {},
+    )
+    .unwrap()
+    .generated;
     let diff = (a.joints - b.joints).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
     assert_eq!(diff, 0.0);
 }
@@ -90,15 +125,19 @@ fn dno_is_reproducible_from_its_seed() {
 fn the_foot_clean_up_runs_on_every_output_and_switches_off() {
     use motion_core::cleanup::{CONSTRAINT_TOLERANCE_ABSOLUTE, CONSTRAINT_TOLERANCE_RELATIVE};
     use motion_core::metrics::{bone_length_range, foot_skate_ratio};
-    use motion_core::quality::tensor_to_poses;
+    use motion_core::motion::tensor_to_poses;
     let (prior, program, compiled) = setup();
     let device = Device::Cpu;
     let mut on_config = config(Method::Dno, 4);
     on_config.refine.enabled = false;
-    let on = generate(&prior, &program, &compiled, &on_config, &device, |_| {}).unwrap();
+    let on = generate(&prior, Task { program: &program, compiled: &compiled }, None, &on_config, &device, |_| {})
+        .unwrap()
+        .generated;
     let mut off_config = on_config.clone();
     off_config.foot_lock.enabled = false;
-    let off = generate(&prior, &program, &compiled, &off_config, &device, |_| {}).unwrap();
+    let off = generate(&prior, Task { program: &program, compiled: &compiled }, None, &off_config, &device, |_| {})
+        .unwrap()
+        .generated;
     let max_diff = |a: &candle_core::Tensor, b: &candle_core::Tensor| {
         (a - b)
             .unwrap()
@@ -136,16 +175,20 @@ fn the_foot_clean_up_runs_on_every_output_and_switches_off() {
 #[test]
 fn the_refinement_draws_dno_motions_out_of_the_walls_keeps_bones_rigid_and_switches_off() {
     use motion_core::metrics::bone_length_range;
-    use motion_core::quality::tensor_to_poses;
+    use motion_core::motion::tensor_to_poses;
     let (prior, program, compiled) = setup();
     let device = Device::Cpu;
     let mut off_config = config(Method::Dno, 12);
     off_config.refine.enabled = false;
     off_config.foot_lock.enabled = false;
-    let off = generate(&prior, &program, &compiled, &off_config, &device, |_| {}).unwrap();
+    let off = generate(&prior, Task { program: &program, compiled: &compiled }, None, &off_config, &device, |_| {})
+        .unwrap()
+        .generated;
     let mut on_config = off_config.clone();
     on_config.refine.enabled = true;
-    let on = generate(&prior, &program, &compiled, &on_config, &device, |_| {}).unwrap();
+    let on = generate(&prior, Task { program: &program, compiled: &compiled }, None, &on_config, &device, |_| {})
+        .unwrap()
+        .generated;
     let r_off = report(&program, &compiled, &off, &off_config).unwrap();
     let r_on = report(&program, &compiled, &on, &on_config).unwrap();
     // Off: the network's motion is written as it is; on: the same motion, refined.
@@ -162,6 +205,15 @@ fn the_refinement_draws_dno_motions_out_of_the_walls_keeps_bones_rigid_and_switc
         assert!(bone_length_range(&motion) < 1e-4, "bones stretch {} m", bone_length_range(&motion));
     }
     // The unconstrained baseline is never refined.
-    let base = generate(&prior, &program, &compiled, &config(Method::Unconstrained, 0), &device, |_| {}).unwrap();
+    let base = generate(
+        &prior,
+        Task { program: &program, compiled: &compiled },
+        None,
+        &config(Method::Unconstrained, 0),
+        &device,
+        |_| {},
+    )
+    .unwrap()
+    .generated;
     assert!(base.refine.iter().all(|r| !r.applied));
 }

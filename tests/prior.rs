@@ -15,8 +15,9 @@ use motion_core::metrics::{
     bone_length_range, foot_skate_ratio, max_acceleration, mean_acceleration, pace, root_travel, spike_frames,
     stance_toe_height, toe_flicker,
 };
-use motion_core::prior::Prior;
-use motion_core::quality::{self, denoising_fidelity, joints_of, tensor_to_poses};
+use motion_core::motion::tensor_to_poses;
+use motion_core::prior::{Prior, Sampling};
+use motion_core::quality::{self, denoising_fidelity, joints_of};
 use motion_core::skeleton::{Joint, Pose};
 
 const WALK: &str = "a person walks forward";
@@ -35,9 +36,24 @@ fn database() -> MotionDatabase {
 #[test]
 fn the_same_seed_gives_the_same_motion() {
     let p = prior();
-    let a = p.sample(WALK, 60, 2, 7, 10, Guidance::default(), &Device::Cpu).unwrap();
-    let b = p.sample(WALK, 60, 2, 7, 10, Guidance::default(), &Device::Cpu).unwrap();
-    let c = p.sample(WALK, 60, 2, 8, 10, Guidance::default(), &Device::Cpu).unwrap();
+    let a = p
+        .sample(
+            &Sampling { prompt: WALK, frames: 60, batch: 2, seed: 7, steps: 10, guidance: Guidance::default() },
+            &Device::Cpu,
+        )
+        .unwrap();
+    let b = p
+        .sample(
+            &Sampling { prompt: WALK, frames: 60, batch: 2, seed: 7, steps: 10, guidance: Guidance::default() },
+            &Device::Cpu,
+        )
+        .unwrap();
+    let c = p
+        .sample(
+            &Sampling { prompt: WALK, frames: 60, batch: 2, seed: 8, steps: 10, guidance: Guidance::default() },
+            &Device::Cpu,
+        )
+        .unwrap();
     let diff = |x: &Tensor, y: &Tensor| (x - y).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
     assert_eq!(diff(&a, &b), 0.0);
     assert!(diff(&a, &c) > 0.1);
@@ -121,7 +137,12 @@ fn the_polish_starts_on_the_unit_rms_shell_and_stays_near_it() {
 
 fn walk_samples_and_data() -> (Vec<Vec<Pose>>, Vec<Vec<Pose>>) {
     let p = prior();
-    let x = p.sample(WALK, 120, 8, 0, 50, Guidance::default(), &Device::Cpu).unwrap();
+    let x = p
+        .sample(
+            &Sampling { prompt: WALK, frames: 120, batch: 8, seed: 0, steps: 50, guidance: Guidance::default() },
+            &Device::Cpu,
+        )
+        .unwrap();
     let samples = joints_of(&p, &x).unwrap();
     let db = database();
     let crops: Vec<Tensor> = db

@@ -11,8 +11,8 @@ use crate::metrics::{
     foot_skate_ratio, ground_penetration, hands_raised, head_neck_incorrect, max_acceleration, mean_acceleration, pace,
     stance_toe_height, step_count, toe_flicker,
 };
+use crate::motion::tensor_to_poses;
 use crate::program::TaskProgram;
-use crate::quality::tensor_to_poses;
 use crate::refine::RefineReport;
 use crate::skeleton::Pose;
 

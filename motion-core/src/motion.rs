@@ -1,6 +1,8 @@
 //! Whole-clip operations on joint-position motions: bone-length retargeting, mirroring,
-//! heading rotation and statistics. A motion is a `[Pose]` at 20 fps unless stated otherwise.
+//! heading rotation and statistics, and the conversion between pose lists and joint tensors
+//! `[batch, frames, 22, 3]`. A motion is a `[Pose]` at 20 fps unless stated otherwise.
 
+use candle_core::{DType, Device, Tensor};
 use glam::{DQuat, DVec3};
 
 use crate::skeleton::{bone_lengths, bones, Joint, Pose, NUM_JOINTS};
@@ -60,6 +62,34 @@ pub fn bone_length_spread(poses: &[Pose]) -> f64 {
             (0..NUM_JOINTS).map(move |j| (l[j] - l0[j]).abs())
         })
         .fold(0.0, f64::max)
+}
+
+/// `[batch, frames, 22, 3]` → per-sample pose lists.
+pub fn tensor_to_poses(joints: &Tensor) -> candle_core::Result<Vec<Vec<Pose>>> {
+    let (b, t, _, _) = joints.dims4()?;
+    let flat = joints.reshape((b, t, NUM_JOINTS * 3))?.to_dtype(DType::F32)?.to_vec3::<f32>()?;
+    Ok(flat
+        .iter()
+        .map(|m| {
+            m.iter()
+                .map(|row| {
+                    std::array::from_fn(|j| {
+                        glam::DVec3::new(f64::from(row[3 * j]), f64::from(row[3 * j + 1]), f64::from(row[3 * j + 2]))
+                    })
+                })
+                .collect()
+        })
+        .collect())
+}
+
+/// Per-sample pose lists (equal lengths) → `[batch, frames, 22, 3]` of `dtype` on `device`.
+pub fn poses_to_tensor(motions: &[Vec<Pose>], dtype: DType, device: &Device) -> candle_core::Result<Tensor> {
+    let frames = motions.first().map_or(0, Vec::len);
+    if motions.iter().any(|m| m.len() != frames) {
+        candle_core::bail!("motions of different lengths cannot form one tensor");
+    }
+    let data: Vec<f64> = motions.iter().flatten().flat_map(|pose| pose.iter().flat_map(|v| v.to_array())).collect();
+    Tensor::from_vec(data, (motions.len(), frames, NUM_JOINTS, 3), device)?.to_dtype(dtype)
 }
 
 /// Helpers that build small synthetic motions for unit tests.

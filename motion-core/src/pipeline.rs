@@ -17,17 +17,17 @@ use std::time::Instant;
 use candle_core::Device;
 
 use crate::constraints::{CompiledProgram, ConstraintError};
-use crate::database::DatabaseSource;
+use crate::database::{DatabaseError, DatabaseSource};
 use crate::evaluation::{self, TaskReport};
 use crate::export::bvh::BvhUnit;
 use crate::export::{position_targets, write_outputs, ExportError, ExportInput, ExportManifest, OutputFolder};
-use crate::generation::{generate, Generated, GenerationConfig, GenerationError, Method};
+use crate::generation::{generate, Event, GenerateError, Generated, GenerationConfig, Method, Retrieval, Task};
+use crate::motion::tensor_to_poses;
 use crate::prior::Prior;
 use crate::program::TaskProgram;
-use crate::quality::tensor_to_poses;
 use crate::render::{motion_gif, motion_strip, GifOptions, RenderError, StripRow};
-use crate::rgdno::retrieval::RetrievalCorpus;
-use crate::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
+use crate::rgdno::retrieval::{RetrievalCorpus, RetrievalError};
+use crate::rgdno::RgDnoConfig;
 use crate::skeleton::{Pose, FPS};
 
 /// How a task is run: the method and its settings, RG-DNO's stages and where it retrieves from.
@@ -47,26 +47,6 @@ pub struct TaskSettings {
     pub retry_unmet: usize,
 }
 
-/// What a running task reports.
-#[derive(Debug, Clone)]
-pub enum Event<'a> {
-    /// An optimisation step of a stage (`round` is the restart).
-    Step {
-        /// The method or RG-DNO stage.
-        stage: &'a str,
-        /// The restart.
-        round: usize,
-        /// Steps done.
-        step: usize,
-        /// Steps of the stage.
-        steps: usize,
-        /// Mean loss over the samples.
-        loss: f64,
-    },
-    /// Something the user should read: the retrieval corpus built, a fallback and its reason.
-    Note(String),
-}
-
 /// A finished run: the motions and their report.
 #[derive(Debug, Clone)]
 pub struct TaskRun {
@@ -84,10 +64,18 @@ pub enum PipelineError {
     Program(#[from] ConstraintError),
     /// Generation failed or a setting is unusable.
     #[error(transparent)]
-    Generation(#[from] GenerationError),
-    /// RG-DNO failed (a reason to fall back never reaches the caller).
+    Generation(#[from] GenerateError),
+    /// RG-DNO's retrieval corpus could not be built.
     #[error(transparent)]
-    RgDno(#[from] RgDnoError),
+    Retrieval(#[from] RetrievalError),
+    /// The retrieval database could not be opened.
+    #[error("the retrieval database ({source_name}): {error}")]
+    Database {
+        /// Where it was looked for.
+        source_name: String,
+        /// What went wrong.
+        error: Box<DatabaseError>,
+    },
     /// A tensor operation failed.
     #[error(transparent)]
     Tensor(#[from] candle_core::Error),
@@ -117,23 +105,19 @@ pub fn run_task(
     mut on: impl FnMut(Event<'_>),
 ) -> Result<TaskRun, PipelineError> {
     let compiled = CompiledProgram::compile(program, device)?;
+    let task = Task { program, compiled: &compiled };
     let mut config = settings.generation.clone();
-    let mut fallback = None;
-    let mut corpus = None;
-    if config.method == Method::RgDno {
-        match rg_dno_corpus(program, &compiled, settings, device, &mut on) {
-            Ok(built) => corpus = Some(built),
-            Err(e) => fallback = Some(fall_back(e, &mut config, &mut on)?),
-        }
-    }
-    let attempt = Attempt { prior, program, compiled: &compiled, corpus: corpus.as_ref(), settings, device };
-    let (mut generated, mut rg_report) = match attempt.run(&config, &mut on) {
-        Err(PipelineError::RgDno(e @ RgDnoError::NothingRetrieved)) => {
-            fallback = Some(fall_back(e, &mut config, &mut on)?);
-            attempt.run(&config, &mut on)?
-        }
-        done => done?,
+    // The corpus is built once for every attempt, and only when RG-DNO can use it.
+    let corpus = if config.method == Method::RgDno && program.relational_parse.is_some() {
+        Some(rg_dno_corpus(&compiled, settings, device, &mut on)?)
+    } else {
+        None
     };
+    let retrieval = corpus.as_ref().map(|corpus| Retrieval { corpus, rg_dno: &settings.rg_dno });
+    let first = generate(prior, task, retrieval, &config, device, &mut on)?;
+    // After a fallback, the report and every retry are DNO's.
+    config.method = first.method;
+    let (mut generated, mut rg_report, fallback) = (first.generated, first.rg_dno, first.fallback);
     let mut report = evaluation::report(program, &compiled, &generated, &config)?;
     let mut kept = vec![0; config.samples];
     for k in 1..=settings.retry_unmet {
@@ -149,8 +133,8 @@ pub fn run_task(
             settings.retry_unmet + 1
         )));
         let retry_config = GenerationConfig { samples: unmet.len(), seed, ..config.clone() };
-        let (retry, retry_rg) = attempt.run(&retry_config, &mut on)?;
-        let retry_report = evaluation::report(program, &compiled, &retry, &retry_config)?;
+        let retry = generate(prior, task, retrieval, &retry_config, device, &mut on)?;
+        let retry_report = evaluation::report(program, &compiled, &retry.generated, &retry_config)?;
         let mut rows = vec![None; config.samples];
         for (i, &b) in unmet.iter().enumerate() {
             if report.beaten_by(b, &retry_report, i) {
@@ -158,8 +142,8 @@ pub fn run_task(
                 kept[b] = k;
             }
         }
-        generated = generated.with_rows_from(retry, &rows)?;
-        rg_report = match (rg_report, retry_rg) {
+        generated = generated.with_rows_from(retry.generated, &rows)?;
+        rg_report = match (rg_report, retry.rg_dno) {
             (Some(own), Some(other)) => Some(own.with_rows_from(other, &rows)),
             (own, _) => own,
         };
@@ -180,41 +164,19 @@ fn retry_seed(config: &GenerationConfig, k: usize) -> u64 {
     config.seed.wrapping_add((k * config.dno.restarts.max(1)) as u64)
 }
 
-/// Switches `config` to DNO when `error` is a reason to fall back (no relational parse, nothing
-/// retrieved), telling `on` why; any other error is returned.
-fn fall_back(
-    error: RgDnoError,
-    config: &mut GenerationConfig,
-    on: &mut impl FnMut(Event<'_>),
-) -> Result<String, PipelineError> {
-    match error {
-        RgDnoError::NoParse | RgDnoError::NothingRetrieved => {
-            let why = error.to_string();
-            on(Event::Note(format!("RG-DNO falls back to DNO: {why}")));
-            config.method = Method::Dno;
-            Ok(why)
-        }
-        error => Err(error.into()),
-    }
-}
-
-/// RG-DNO's retrieval corpus for `program`: opens the database and crops its windows to the
-/// program's frame count (built once for every attempt).
+/// RG-DNO's retrieval corpus: opens the database and crops its windows to the program's frame
+/// count.
 fn rg_dno_corpus(
-    program: &TaskProgram,
     compiled: &CompiledProgram,
     settings: &TaskSettings,
     device: &Device,
     on: &mut impl FnMut(Event<'_>),
-) -> Result<RetrievalCorpus, RgDnoError> {
-    if program.relational_parse.is_none() {
-        return Err(RgDnoError::NoParse);
-    }
+) -> Result<RetrievalCorpus, PipelineError> {
     let clock = Instant::now();
     let source = &settings.database;
     let (database, warnings) = source
         .open()
-        .map_err(|error| RgDnoError::Database { source_name: source.to_string(), error: Box::new(error) })?;
+        .map_err(|error| PipelineError::Database { source_name: source.to_string(), error: Box::new(error) })?;
     let corpus = RetrievalCorpus::build(&database, compiled.frames(), &settings.rg_dno.retrieval, device)?;
     // Import warnings (quaternions normalised on read) are `mogen data build`'s to list.
     let warned = if warnings.is_empty() { String::new() } else { format!(", {} import warnings", warnings.len()) };
@@ -224,51 +186,6 @@ fn rg_dno_corpus(
         clock.elapsed().as_secs_f64()
     )));
     Ok(corpus)
-}
-
-/// One attempt at a compiled task: everything but the generation settings, which change from
-/// attempt to attempt (the samples, the seed, the method after a fallback).
-struct Attempt<'a> {
-    prior: &'a Prior,
-    program: &'a TaskProgram,
-    compiled: &'a CompiledProgram,
-    /// RG-DNO's corpus; `None` when the method is not RG-DNO.
-    corpus: Option<&'a RetrievalCorpus>,
-    settings: &'a TaskSettings,
-    device: &'a Device,
-}
-
-impl Attempt<'_> {
-    /// Generates with `config` (RG-DNO on the corpus when the method is RG-DNO).
-    fn run(
-        &self,
-        config: &GenerationConfig,
-        on: &mut impl FnMut(Event<'_>),
-    ) -> Result<(Generated, Option<RgDnoReport>), PipelineError> {
-        let Attempt { prior, program, compiled, corpus, settings, device } = *self;
-        match (config.method, corpus) {
-            (Method::RgDno, Some(corpus)) => {
-                let task = RgDnoTask { program, compiled, corpus };
-                let (generated, report) = generate_rg_dno(prior, task, config, &settings.rg_dno, device, |p| {
-                    on(Event::Step {
-                        stage: p.stage.name(),
-                        round: p.round,
-                        step: p.step,
-                        steps: p.steps,
-                        loss: p.loss,
-                    })
-                })?;
-                Ok((generated, Some(report)))
-            }
-            _ => {
-                let stage = config.method.to_string();
-                let generated = generate(prior, program, compiled, config, device, |p| {
-                    on(Event::Step { stage: &stage, round: p.round, step: p.step + 1, steps: p.steps, loss: p.loss })
-                })?;
-                Ok((generated, None))
-            }
-        }
-    }
 }
 
 /// Choices about the exported files (default: no GIF, BVH in metres).
@@ -309,19 +226,29 @@ pub fn write_task(
     motion_strip(&rows, 8, &scene, &carried, &program.text, &folder.path().join("strip.png"))?;
     folder.write("program.json", (serde_json::to_string_pretty(program)? + "\n").as_bytes())?;
     let report_json = Some(serde_json::to_value(report)?);
-    write_exports(folder, &program.text, FPS, &poses, labels, Some(program), report_json, options)
+    let motions = Motions { title: &program.text, fps: FPS, poses: &poses, labels };
+    write_exports(folder, motions, Some(program), report_json, options)
+}
+
+/// Motions to write: a title, their frame rate (fps), the poses and a label for each.
+#[derive(Debug, Clone)]
+pub struct Motions<'a> {
+    /// The title of the viewer page and the GIF.
+    pub title: &'a str,
+    /// Frames per second.
+    pub fps: f64,
+    /// The motions.
+    pub poses: &'a [Vec<Pose>],
+    /// One label per motion.
+    pub labels: Vec<String>,
 }
 
 /// Writes the BVH and GLB of every motion, the viewer page, `export.json` and, when asked,
-/// `motion.gif` into `folder` (committed by the caller). `labels` name the motions; `program`'s
-/// scene, position targets and carried objects are drawn; `report` is shown by the viewer.
-#[allow(clippy::too_many_arguments)]
+/// `motion.gif` into `folder` (committed by the caller). `program`'s scene, position targets
+/// and carried objects are drawn; `report` is shown by the viewer.
 pub fn write_exports(
     folder: &OutputFolder,
-    title: &str,
-    fps: f64,
-    motions: &[Vec<Pose>],
-    labels: Vec<String>,
+    Motions { title, fps, poses, labels }: Motions<'_>,
     program: Option<&TaskProgram>,
     report: Option<serde_json::Value>,
     options: ExportOptions,
@@ -329,7 +256,7 @@ pub fn write_exports(
     let input = ExportInput {
         title: title.to_owned(),
         fps,
-        samples: labels.into_iter().zip(motions).map(|(label, p)| (label, p.as_slice())).collect(),
+        samples: labels.into_iter().zip(poses).map(|(label, p)| (label, p.as_slice())).collect(),
         scene: program.map(TaskProgram::scene_primitives).unwrap_or_default(),
         targets: program.map(position_targets).unwrap_or_default(),
         carried: program.map(TaskProgram::carried_objects).unwrap_or_default(),

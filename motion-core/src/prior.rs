@@ -55,6 +55,24 @@ pub enum PriorError {
     },
 }
 
+/// What [`Prior::sample`] draws: `batch` motions of `frames` frames for `prompt` from the start
+/// noise of `seed`, through DDIM with `steps` steps and classifier-free guidance `guidance`.
+#[derive(Debug, Clone, Copy)]
+pub struct Sampling<'a> {
+    /// The text prompt.
+    pub prompt: &'a str,
+    /// Frames per motion (20 fps).
+    pub frames: usize,
+    /// Motions.
+    pub batch: usize,
+    /// Seed of the start noise.
+    pub seed: u64,
+    /// DDIM steps.
+    pub steps: usize,
+    /// Classifier-free guidance.
+    pub guidance: Guidance,
+}
+
 /// How the root's x/z motion is read from generated features, which carry it twice: as the
 /// root velocity and through the planted feet (root-relative foot positions plus contacts).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -214,16 +232,8 @@ impl Prior {
     /// Unconstrained samples: `batch` motions of `frames` frames for `prompt`, from seeded start
     /// noise through DDIM with `steps` steps and classifier-free guidance `guidance`. Returns
     /// normalised features `[batch, frames, 263]`.
-    pub fn sample(
-        &self,
-        prompt: &str,
-        frames: usize,
-        batch: usize,
-        seed: u64,
-        steps: usize,
-        guidance: Guidance,
-        device: &Device,
-    ) -> Result<Tensor, PriorError> {
+    pub fn sample(&self, request: &Sampling<'_>, device: &Device) -> Result<Tensor, PriorError> {
+        let Sampling { prompt, frames, batch, seed, steps, guidance } = *request;
         let fail = |e: String| PriorError::Format { path: PathBuf::from("<sampling>"), message: e };
         let sampler = DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(|e| fail(e.to_string()))?;
         let text = self.encode_text(&vec![prompt; batch], device).map_err(|e| fail(e.to_string()))?;
@@ -283,7 +293,7 @@ mod tests {
         };
         let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
         let mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
-        let rest = RestSkeleton::of_pose(&crate::import::deepmimic::rest_pose());
+        let rest = RestSkeleton::of_pose(&crate::skeleton::rest_pose());
         let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::PlantedFeet, rest: Some(rest) };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("prior.safetensors");

@@ -14,9 +14,10 @@ use crate::metrics::{
     airborne_frames, bone_length_range, foot_skate_ratio, ground_penetration, heading_change_rad, max_acceleration,
     mean_acceleration, mean_foot_acceleration, pace, root_travel, spike_frames, stance_toe_height, toe_flicker,
 };
-use crate::prior::{Prior, PriorError};
+use crate::motion::tensor_to_poses;
+use crate::prior::{Prior, PriorError, Sampling};
 use crate::representation::RIC;
-use crate::skeleton::{Joint, Pose, NUM_JOINTS};
+use crate::skeleton::{Joint, Pose};
 
 /// Means of the metrics over a set of motions (worst cases where the name says so).
 #[derive(Debug, Clone, Copy, Default, Serialize)]
@@ -150,38 +151,6 @@ pub fn joints_of(prior: &Prior, normalized: &Tensor) -> candle_core::Result<Vec<
     tensor_to_poses(&joints)
 }
 
-/// `[batch, frames, 22, 3]` → per-sample pose lists.
-pub fn tensor_to_poses(joints: &Tensor) -> candle_core::Result<Vec<Vec<Pose>>> {
-    let (b, t, _, _) = joints.dims4()?;
-    let flat = joints.reshape((b, t, NUM_JOINTS * 3))?.to_dtype(candle_core::DType::F32)?.to_vec3::<f32>()?;
-    Ok(flat
-        .iter()
-        .map(|m| {
-            m.iter()
-                .map(|row| {
-                    std::array::from_fn(|j| {
-                        glam::DVec3::new(f64::from(row[3 * j]), f64::from(row[3 * j + 1]), f64::from(row[3 * j + 2]))
-                    })
-                })
-                .collect()
-        })
-        .collect())
-}
-
-/// Per-sample pose lists (equal lengths) → `[batch, frames, 22, 3]` of `dtype` on `device`.
-pub fn poses_to_tensor(
-    motions: &[Vec<Pose>],
-    dtype: candle_core::DType,
-    device: &candle_core::Device,
-) -> candle_core::Result<Tensor> {
-    let frames = motions.first().map_or(0, Vec::len);
-    if motions.iter().any(|m| m.len() != frames) {
-        candle_core::bail!("motions of different lengths cannot form one tensor");
-    }
-    let data: Vec<f64> = motions.iter().flatten().flat_map(|pose| pose.iter().flat_map(|v| v.to_array())).collect();
-    Tensor::from_vec(data, (motions.len(), frames, NUM_JOINTS, 3), device)?.to_dtype(dtype)
-}
-
 /// Runs the report over every label of the database; `on_label` is called after each.
 pub fn quality_report(
     prior: &Prior,
@@ -212,15 +181,15 @@ pub fn quality_report(
         if !config.labels.is_empty() && !config.labels.contains(label) {
             continue;
         }
-        let x = prior.sample(
-            label,
-            t,
-            config.samples_per_label,
-            config.seed + i as u64,
-            config.ddim_steps,
-            Guidance { scale: config.guidance },
-            device,
-        )?;
+        let request = Sampling {
+            prompt: label,
+            frames: t,
+            batch: config.samples_per_label,
+            seed: config.seed + i as u64,
+            steps: config.ddim_steps,
+            guidance: Guidance { scale: config.guidance },
+        };
+        let x = prior.sample(&request, device)?;
         let raw = prior.to_features(&x).map_err(fail)?;
         let samples = tensor_to_poses(&prior.joints_of(&raw).map_err(fail)?).map_err(fail)?;
         let cleaned: Vec<Vec<Pose>> = samples

@@ -41,9 +41,9 @@ use candle_core::{DType, Result, Tensor, Var, D};
 use serde::{Deserialize, Serialize};
 
 use crate::constraints::{CompiledProgram, ConstraintError};
+use crate::optim::AdamW;
 use crate::representation::{rigid_bones, RestSkeleton};
 use crate::skeleton::{Joint, CONTACT_JOINTS};
-use crate::training::AdamW;
 
 /// The trunk's bones, by child joint: their turns are weighted by [`RefineConfig::trunk_stiffness`].
 const TRUNK: [Joint; 9] = [

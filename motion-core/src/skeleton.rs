@@ -226,9 +226,59 @@ pub fn bone_lengths(pose: &Pose) -> [f64; NUM_JOINTS] {
     out
 }
 
+/// The canonical rest pose, m: the DeepMimic humanoid's zero pose mapped to the 22 joints
+/// (scaled to SMPL stature, pelvis at the origin, arms hanging down, feet flat, facing +z), as
+/// the importer's forward kinematics gives it to the bit (a test checks it). Its bone lengths
+/// are the project's canonical skeleton.
+const REST_POSE: [[f64; 3]; NUM_JOINTS] = [
+    [-0.0, 0.0, 0.0],
+    [0.08907895061728395, 0.0, 0.0],
+    [-0.08907895061728395, 0.0, 0.0],
+    [-0.0, 0.12382716049382715, 0.0],
+    [0.08907895061728395, -0.4423630864197531, 0.0],
+    [-0.08907895061728395, -0.4423630864197531, 0.0],
+    [-0.0, 0.24781277777777777, 0.0],
+    [0.08907895061728395, -0.8724735802469135, 0.0],
+    [-0.08907895061728395, -0.8724735802469135, 0.0],
+    [-0.0, 0.4827632716049383, 0.0],
+    [0.08907895061728395, -0.9196958024691357, 0.1154320987654321],
+    [-0.08907895061728395, -0.9196958024691357, 0.1154320987654321],
+    [-0.0, 0.5457262345679014, 0.0],
+    [0.0734567901234568, 0.45768932098765436, -0.020987654320987655],
+    [-0.0734567901234568, 0.45768932098765436, -0.020987654320987655],
+    [-0.0, 0.6506645061728396, 0.0],
+    [0.19215246913580247, 0.5033374691358025, -0.02523765432098765],
+    [-0.19215246913580247, 0.5033374691358025, -0.02523765432098765],
+    [0.19215246913580247, 0.21497969135802472, -0.02523765432098765],
+    [-0.19215246913580247, 0.21497969135802472, -0.02523765432098765],
+    [0.19215246913580247, -0.05675481481481478, -0.02523765432098765],
+    [-0.19215246913580247, -0.05675481481481478, -0.02523765432098765],
+];
+
+/// The canonical rest pose ([`REST_POSE`]): what retargeting, the rigid skeleton and the
+/// exports' rotations measure bones against.
+pub fn rest_pose() -> Pose {
+    REST_POSE.map(DVec3::from_array)
+}
+
+/// Hermite ease `3x² − 2x³` of `x` clamped to [0, 1] (the blends of looping clips and of the
+/// foot clean-up's releases).
+pub fn smoothstep(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_rest_pose_is_the_deepmimic_zero_pose_to_the_bit() {
+        use crate::import::deepmimic::{smpl22_from_world, DM_JOINTS};
+        let zero = smpl22_from_world(DVec3::ZERO, &[glam::DQuat::IDENTITY; DM_JOINTS]);
+        let bits = |p: Pose| p.map(|v| v.to_array().map(f64::to_bits));
+        assert_eq!(bits(rest_pose()), bits(zero));
+    }
 
     #[test]
     fn names_round_trip_and_unknown_names_are_listed() {

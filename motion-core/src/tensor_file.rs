@@ -32,7 +32,7 @@ pub(crate) fn write_safetensors(
     let bytes = safetensors::tensor::serialize(views, Some(metadata)).map_err(|e| e.to_string())?;
     // Through a temporary file and a rename: a kill while saving a prior, a database or a
     // training checkpoint leaves the previous file whole.
-    crate::export::write_atomically(path, &bytes).map_err(|e| e.to_string())
+    crate::files::write_atomically(path, &bytes).map_err(|e| e.to_string())
 }
 
 /// The string metadata of a safetensors file's header (empty when it has none). Errors are

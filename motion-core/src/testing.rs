@@ -56,3 +56,9 @@ pub fn finite_difference_check(x: &Tensor, f: impl Fn(&Tensor) -> Result<Tensor>
     }
     Ok(())
 }
+
+/// The largest absolute element-wise difference of two tensors of one shape (any float dtype,
+/// compared in f64).
+pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> Result<f64> {
+    (a.to_dtype(DType::F64)? - b.to_dtype(DType::F64)?)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f64>()
+}

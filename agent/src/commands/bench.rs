@@ -10,9 +10,9 @@ use motion_core::diffusion::noise::gaussian;
 use motion_core::diffusion::{DdimSampler, Denoiser, Guidance, NoiseSchedule};
 use motion_core::export::write_atomically;
 use motion_core::npy::npy_bytes;
+use motion_core::optim::AdamW;
 use motion_core::prior::Prior;
 use motion_core::representation::FEATURE_DIM;
-use motion_core::training::AdamW;
 use serde::Serialize;
 
 use crate::paths;
@@ -82,7 +82,7 @@ struct Row {
 
 fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
-    let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
+    let prior = super::load::load_prior(&args.prior, &device)?;
     let cfg = prior.mdm.config();
     let sampler = DdimSampler::new(&NoiseSchedule::mdm(), args.ddim_steps)?;
     if let Some(dir) = &args.dump {

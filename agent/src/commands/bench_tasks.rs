@@ -9,13 +9,13 @@ use anyhow::Context;
 use clap::Args;
 use motion_core::constraints::CompiledProgram;
 use motion_core::evaluation::TaskReport;
-use motion_core::generation::{generate, GenerationConfig, Method};
-use motion_core::prior::Prior;
+use motion_core::generation::{generate, GenerationConfig, Method, Task};
 use serde::{Deserialize, Serialize};
 
 use motion_core::export::{write_atomically, OutputFolder};
 
-use super::run::{load_program, run_program, GenerationArgs, MethodArg};
+use super::load::{load_prior, load_program};
+use super::run::{run_program, GenerationArgs, MethodArg};
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -48,8 +48,7 @@ pub struct ResultRow {
 
 pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
-    let prior = Prior::load(&args.generation.prior, &device)
-        .with_context(|| format!("loading the prior {}", args.generation.prior.display()))?;
+    let prior = load_prior(&args.generation.prior, &device)?;
     let mut files: Vec<PathBuf> = std::fs::read_dir(&args.tasks)
         .with_context(|| format!("listing {}", args.tasks.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -236,7 +235,7 @@ pub struct BenchDnoArgs {
 
 pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
-    let prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
+    let prior = load_prior(&args.prior, &device)?;
     let program = load_program(&args.task)?;
     let compiled = CompiledProgram::compile(&program, &device)?;
     println!(
@@ -254,7 +253,9 @@ pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
         config.guidance = args.guidance;
         config.dno.steps = args.steps;
         let start = Instant::now();
-        let generated = generate(&prior, &program, &compiled, &config, &device, |_| {})?;
+        let generated =
+            generate(&prior, Task { program: &program, compiled: &compiled }, None, &config, &device, |_| {})?
+                .generated;
         let total = start.elapsed().as_secs_f64();
         let first: f64 = generated.loss_history.iter().filter_map(|h| h.first()).sum::<f64>() / batch as f64;
         let last: f64 = generated.loss_history.iter().filter_map(|h| h.last()).sum::<f64>() / batch as f64;

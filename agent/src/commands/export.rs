@@ -7,10 +7,10 @@ use anyhow::Context;
 use clap::Args;
 use motion_core::export::bvh::BvhUnit;
 use motion_core::export::{read_joints_npy, ExportManifest, OutputFolder};
-use motion_core::pipeline::{write_exports, ExportOptions};
+use motion_core::pipeline::{write_exports, ExportOptions, Motions};
 use motion_core::skeleton::FPS;
 
-use super::run::load_program;
+use super::load::load_program;
 
 #[derive(Debug, Args)]
 pub struct ExportArgs {
@@ -73,9 +73,9 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     let title = program.as_ref().map_or_else(|| joints.display().to_string(), |p| p.text.clone());
     let out = OutputFolder::create(&args.out.unwrap_or(folder))?;
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
-    let manifest =
-        write_exports(&out, &title, args.fps, &motions, labels, program.as_ref(), report, args.formats.options())
-            .with_context(|| format!("exporting into {}", out.target().display()))?;
+    let motions = Motions { title: &title, fps: args.fps, poses: &motions, labels };
+    let manifest = write_exports(&out, motions, program.as_ref(), report, args.formats.options())
+        .with_context(|| format!("exporting into {}", out.target().display()))?;
     print_exports(&out, &manifest, args.formats);
     // The folder's other files (the run's npy, report, strip) stay.
     out.keep_existing()?;

@@ -4,10 +4,8 @@
 use std::path::PathBuf;
 
 use agent::plan::PlannedTask;
-use anyhow::Context;
 use motion_core::export::OutputFolder;
 use motion_core::pipeline::TaskSettings;
-use motion_core::prior::Prior;
 
 use super::run::{print_summary, run_program};
 
@@ -27,8 +25,7 @@ pub struct RunOptions {
 /// them) and prints the report's headline figures.
 pub fn run(planned: &PlannedTask, options: &RunOptions, out: OutputFolder) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
-    let prior = Prior::load(&options.prior, &device)
-        .with_context(|| format!("loading the prior {}", options.prior.display()))?;
+    let prior = super::load::load_prior(&options.prior, &device)?;
     let report = run_program(&prior, &planned.program, &options.settings, out, options.formats)?;
     print_summary(&report);
     Ok(())

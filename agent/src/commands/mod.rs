@@ -6,6 +6,7 @@ pub mod data;
 pub mod export;
 pub mod flags;
 pub mod generate;
+pub mod load;
 pub mod report;
 pub mod retrieve;
 pub mod run;

@@ -7,7 +7,7 @@ use clap::Args;
 use motion_core::cleanup::{foot_lock, FootLockConfig};
 use motion_core::database::MotionDatabase;
 use motion_core::inversion::InversionConfig;
-use motion_core::prior::{Prior, RootDecode};
+use motion_core::prior::{RootDecode, Sampling};
 use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, MetricMeans, QualityConfig};
 use motion_core::render::{motion_strip, StripRow};
 
@@ -65,7 +65,7 @@ pub struct ReportArgs {
 
 pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
-    let mut prior = Prior::load(&args.prior, &device).with_context(|| format!("loading {}", args.prior.display()))?;
+    let mut prior = super::load::load_prior(&args.prior, &device)?;
     prior.root_decode = args.root_decode;
     let db = MotionDatabase::load(&args.database)
         .with_context(|| format!("reading {} (build it with `mogen data build`)", args.database.display()))?;
@@ -173,15 +173,15 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let mut motions = Vec::new();
     for (i, label) in strip_labels.iter().enumerate() {
         for seed in 0..2u64 {
-            let x = prior.sample(
-                label,
-                args.frames,
-                1,
-                1000 + 10 * i as u64 + seed,
-                args.steps,
-                motion_core::diffusion::Guidance { scale: args.guidance },
-                &device,
-            )?;
+            let request = Sampling {
+                prompt: label,
+                frames: args.frames,
+                batch: 1,
+                seed: 1000 + 10 * i as u64 + seed,
+                steps: args.steps,
+                guidance: motion_core::diffusion::Guidance { scale: args.guidance },
+            };
+            let x = prior.sample(&request, &device)?;
             let poses = motion_core::quality::joints_of(&prior, &x)?.remove(0);
             let cleaned = foot_lock(&poses, None, &FootLockConfig::default())?.poses;
             motions.push((format!("{label} (seed {})", 1000 + 10 * i as u64 + seed), cleaned));

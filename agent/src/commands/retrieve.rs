@@ -8,7 +8,8 @@ use clap::Args;
 use motion_core::constraints::CompiledProgram;
 use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalCorpus, RetrievalQuery};
 
-use super::run::{database_source, load_program};
+use super::load::load_program;
+use super::run::database_source;
 
 #[derive(Debug, Args)]
 pub struct RetrieveArgs {

@@ -2,20 +2,20 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use motion_core::database::DatabaseSource;
 use motion_core::evaluation::TaskReport;
 use motion_core::export::OutputFolder;
-use motion_core::generation::{GenerationConfig, Method};
-use motion_core::pipeline::{run_task, write_task, Event, TaskSettings};
+use motion_core::generation::{Event, GenerationConfig, Method};
+use motion_core::pipeline::{run_task, write_task, TaskSettings};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
 use motion_core::rgdno::RgDnoConfig;
 
 use super::export::{print_exports, ExportFormats};
 use super::flags;
+use super::load::{load_prior, load_program};
 use crate::paths;
 
 /// A generation method on the command line.
@@ -197,18 +197,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let program = load_program(&args.program)?;
     let folder = OutputFolder::create(&args.out)?;
     let device = candle_core::Device::Cpu;
-    let prior = Prior::load(&args.generation.prior, &device)
-        .with_context(|| format!("loading the prior {}", args.generation.prior.display()))?;
+    let prior = load_prior(&args.generation.prior, &device)?;
     let settings = args.generation.settings(args.method.into());
     let report = run_program(&prior, &program, &settings, folder, args.generation.formats)?;
     print_summary(&report);
     Ok(())
-}
-
-/// Reads a program file (bounded in size) and runs every check of a planned task on it; the
-/// error lists every problem with its JSON path.
-pub fn load_program(path: &Path) -> anyhow::Result<TaskProgram> {
-    Ok(agent::plan::plan_from_file(path)?.program)
 }
 
 /// Runs `program` with `settings` ([`motion_core::pipeline`]) and writes every output into

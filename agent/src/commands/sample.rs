@@ -2,15 +2,15 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clap::Args;
 use motion_core::cleanup::FootLockConfig;
 use motion_core::diffusion::Guidance;
 use motion_core::export::OutputFolder;
-use motion_core::generation::{clean_up, ensure_finite};
-use motion_core::pipeline::write_exports;
-use motion_core::prior::{Prior, RootDecode};
-use motion_core::quality::tensor_to_poses;
+use motion_core::method::ensure_finite;
+use motion_core::motion::tensor_to_poses;
+use motion_core::pipeline::{write_exports, Motions};
+use motion_core::postprocess::clean_up;
+use motion_core::prior::{RootDecode, Sampling};
 use motion_core::render::{motion_strip, StripRow};
 use motion_core::skeleton::FPS;
 
@@ -59,8 +59,7 @@ pub struct SampleArgs {
 pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     let folder = OutputFolder::create(&args.out)?;
     let device = candle_core::Device::Cpu;
-    let mut prior =
-        Prior::load(&args.prior, &device).with_context(|| format!("loading the prior {}", args.prior.display()))?;
+    let mut prior = super::load::load_prior(&args.prior, &device)?;
     prior.root_decode = args.root_decode;
     let heard = prior.encoder.known_words(&args.prompt);
     if heard.is_empty() {
@@ -68,15 +67,15 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     } else {
         eprintln!("the prior hears: {}", heard.join(" "));
     }
-    let x = prior.sample(
-        &args.prompt,
-        args.frames,
-        args.samples,
-        args.seed,
-        args.steps,
-        Guidance { scale: args.guidance },
-        &device,
-    )?;
+    let request = Sampling {
+        prompt: &args.prompt,
+        frames: args.frames,
+        batch: args.samples,
+        seed: args.seed,
+        steps: args.steps,
+        guidance: Guidance { scale: args.guidance },
+    };
+    let x = prior.sample(&request, &device)?;
     let raw = prior.to_features(&x)?;
     ensure_finite(&raw, "the prior's sampled features")?;
     let lock = FootLockConfig { enabled: !args.no_foot_lock, ..FootLockConfig::default() };
@@ -108,7 +107,8 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         .collect();
     motion_strip(&rows, 8, &[], &[], &args.prompt, &folder.path().join("strip.png"))?;
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
-    let manifest = write_exports(&folder, &args.prompt, FPS, &poses, labels, None, None, args.formats.options())?;
+    let motions = Motions { title: &args.prompt, fps: FPS, poses: &poses, labels };
+    let manifest = write_exports(&folder, motions, None, None, args.formats.options())?;
     print_exports(&folder, &manifest, args.formats);
     let out = folder.commit()?;
     println!("wrote {}/{{joints.npy,features.npy,strip.png}}", out.display());

@@ -7,7 +7,7 @@ use std::ops::Range;
 
 use glam::DVec3;
 
-use crate::import::deepmimic::smoothstep;
+use crate::skeleton::smoothstep;
 
 /// Where one joint is held during one contact.
 #[derive(Debug, Clone, PartialEq)]

@@ -9,10 +9,10 @@ use glam::DVec3;
 use super::*;
 use crate::constraints::CompiledProgram;
 use crate::database::catalog::Catalog;
-use crate::import::{deepmimic::rest_pose, resample};
+use crate::import::resample;
 use crate::metrics::{bone_length_range, max_acceleration, mean_foot_acceleration};
 use crate::program::{Expr, TaskProgram};
-use crate::skeleton::FPS;
+use crate::skeleton::{rest_pose, FPS};
 
 /// 6 s at 20 fps.
 const SIX_SECONDS: usize = 121;

@@ -164,7 +164,7 @@ impl Node {
                 })
             }
             Node::Steps { target } => {
-                let counted: Vec<f64> = crate::quality::tensor_to_poses(joints)?
+                let counted: Vec<f64> = crate::motion::tensor_to_poses(joints)?
                     .iter()
                     .map(|m| (crate::metrics::step_count(m) as f64 - target).abs())
                     .collect();

@@ -88,7 +88,7 @@ pub fn save(corpus: &Corpus, path: &Path) -> Result<(), CorpusFileError> {
         .map_err(|e| format(e.to_string()))?;
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
     gz.write_all(&st).and_then(|_| gz.finish()).map_err(|e| format(e.to_string())).and_then(|packed| {
-        crate::export::write_atomically(path, &packed)
+        crate::files::write_atomically(path, &packed)
             .map_err(|e| CorpusFileError::Io { path: path.into(), message: e.to_string() })
     })
 }

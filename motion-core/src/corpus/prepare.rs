@@ -5,9 +5,9 @@
 
 use glam::DVec3;
 
-use crate::import::deepmimic::rest_pose;
 use crate::motion::{retarget_bone_lengths, rotate_heading};
 use crate::representation::facing_direction;
+use crate::skeleton::rest_pose;
 use crate::skeleton::{bone_lengths, Joint, Pose, FPS};
 
 /// Height of the lower toe joint above the floor while it bears weight, m: the median stance

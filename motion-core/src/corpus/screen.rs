@@ -336,7 +336,7 @@ mod tests {
 
     #[test]
     fn a_t_pose_is_dropped_but_arms_raised_forward_are_not() {
-        let rest = crate::import::deepmimic::rest_pose();
+        let rest = crate::skeleton::rest_pose();
         let mut t_pose = rest;
         for (s, e, w, side) in [
             (Joint::LeftShoulder, Joint::LeftElbow, Joint::LeftWrist, 1.0),
@@ -373,7 +373,7 @@ mod tests {
 
     #[test]
     fn standing_on_a_step_is_dropped_but_a_jump_is_not() {
-        let rest = crate::import::deepmimic::rest_pose();
+        let rest = crate::skeleton::rest_pose();
         let floor = rest.iter().map(|v| v.y).fold(f64::INFINITY, f64::min);
         let standing: Vec<Pose> = (0..60).map(|_| rest.map(|v| v - DVec3::new(0.0, floor, 0.0))).collect();
         let mut on_step = standing.clone();

@@ -7,9 +7,9 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::import::deepmimic::rest_pose;
 use crate::metrics::{heading_change_rad, AIRBORNE_M};
 use crate::representation::facing_direction;
+use crate::skeleton::rest_pose;
 use crate::skeleton::{Joint, Pose, FPS};
 
 use super::prepare::STANCE_TOE_HEIGHT_M;

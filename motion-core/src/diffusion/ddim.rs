@@ -281,8 +281,9 @@ mod tests {
     use candle_core::Var;
 
     use super::*;
-    use crate::diffusion::test_denoiser::{max_abs_diff, start_noise, text, GaussianDenoiser, TEXT_DIM};
+    use crate::diffusion::test_denoiser::{start_noise, text, GaussianDenoiser, TEXT_DIM};
     use crate::testing::finite_difference_check;
+    use crate::testing::max_abs_diff;
 
     #[test]
     fn respacing_matches_mdm() -> std::result::Result<(), DiffusionError> {

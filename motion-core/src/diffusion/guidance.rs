@@ -75,7 +75,8 @@ impl Guidance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diffusion::test_denoiser::{max_abs_diff, start_noise, text, Call, GaussianDenoiser};
+    use crate::diffusion::test_denoiser::{start_noise, text, Call, GaussianDenoiser};
+    use crate::testing::max_abs_diff;
     use candle_core::Device;
 
     #[test]

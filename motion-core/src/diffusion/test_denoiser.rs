@@ -100,8 +100,3 @@ pub fn text(rows: &[[f64; TEXT_DIM]]) -> Result<Tensor> {
 pub fn start_noise(batch: usize, seed: u64) -> Result<Tensor> {
     gaussian((batch, 5, 4), seed, &Device::Cpu)?.to_dtype(DType::F64)
 }
-
-/// max |a − b| over all elements (f64 tensors).
-pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> Result<f64> {
-    (a - b)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f64>()
-}

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::regularizer::noise_regularize_1d;
 use super::{DnoConfig, Solver};
 use crate::diffusion::noise::{gaussian, gaussian_from_rng};
-use crate::training::AdamW;
+use crate::optim::AdamW;
 
 /// Floor under the norms that are divided by or differentiated (DNO has none): keeps a sample
 /// whose gradient is exactly zero, or z at z_start, from producing NaN.

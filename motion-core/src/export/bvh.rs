@@ -291,7 +291,7 @@ mod tests {
     /// A track on the rest skeleton of the canonical pose with one frame of `local` rotations
     /// (offsets at rest).
     fn one_frame(local: [DQuat; NUM_JOINTS], root: DVec3) -> RotationTrack {
-        let mut track = RotationTrack::solve(&[deepmimic::rest_pose()], 20.0, 0).unwrap();
+        let mut track = RotationTrack::solve(&[crate::skeleton::rest_pose()], 20.0, 0).unwrap();
         (track.root_m, track.local) = (vec![root], vec![local]);
         track
     }

@@ -21,6 +21,8 @@ pub mod viewer;
 
 use std::path::{Path, PathBuf};
 
+use crate::files::WriteError;
+
 pub use folder::OutputFolder;
 pub use outputs::{read_joints_npy, write_outputs, ExportInput, ExportManifest, ExportedSample, Probe};
 pub use rotations::{RigSkeleton, RotationTrack, SolveFit, ANIMATED_OFFSETS};
@@ -65,42 +67,13 @@ pub enum ExportError {
     },
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, creating
-/// the folder; on any error the temporary file is removed and `path` is untouched.
+/// [`crate::files::write_atomically`] with the export's error.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
-    let fail = |message: String| ExportError::Write { path: path.into(), message };
-    let dir = match path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        Some(dir) => dir.to_path_buf(),
-        None => PathBuf::from("."),
-    };
-    std::fs::create_dir_all(&dir).map_err(|e| fail(e.to_string()))?;
-    let name = path.file_name().ok_or_else(|| fail("not a file name".into()))?;
-    let tmp = dir.join(format!(".{}.part{}", name.to_string_lossy(), std::process::id()));
-    let written = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
-    if let Err(e) = written {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(fail(e.to_string()));
-    }
-    Ok(())
+    Ok(crate::files::write_atomically(path, bytes)?)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn atomic_write_replaces_the_file_and_leaves_no_temporary() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("sub").join("a.txt");
-        write_atomically(&path, b"one").unwrap();
-        write_atomically(&path, b"two").unwrap();
-        assert_eq!(std::fs::read(&path).unwrap(), b"two");
-        assert_eq!(std::fs::read_dir(path.parent().unwrap()).unwrap().count(), 1);
-        // A folder where the file should go: an error naming the path, nothing left behind.
-        let blocked = dir.path().join("blocked");
-        std::fs::create_dir_all(blocked.join("x")).unwrap();
-        let err = write_atomically(&blocked, b"three").unwrap_err();
-        assert!(err.to_string().contains("blocked"), "{err}");
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+impl From<WriteError> for ExportError {
+    fn from(WriteError { path, message }: WriteError) -> Self {
+        ExportError::Write { path, message }
     }
 }

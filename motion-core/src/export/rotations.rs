@@ -7,7 +7,7 @@
 //! six [`ANIMATED_OFFSETS`] joints:
 //!
 //! - **Skeleton** ([`RigSkeleton`]): each bone keeps the motion's mean length. Its rest direction
-//!   is that of the canonical rest pose ([`deepmimic::rest_pose`]: standing, arms hanging down,
+//!   is that of the canonical rest pose ([`rest_pose`]: standing, arms hanging down,
 //!   feet flat, facing +z), except for the children of the two branching joints, the pelvis
 //!   (hips, spine1) and spine3 (neck, collars), whose rest directions are their mean directions
 //!   in the branching joint's frame over the motion.
@@ -40,8 +40,7 @@
 use glam::{DMat3, DQuat, DVec3};
 
 use super::ExportError;
-use crate::import::deepmimic;
-use crate::skeleton::{Joint, Pose, NUM_JOINTS};
+use crate::skeleton::{rest_pose, Joint, Pose, NUM_JOINTS};
 
 /// Below this length (m) a direction is taken as undefined and the parent's frame is kept.
 const DEGENERATE_M: f64 = 1e-9;
@@ -263,7 +262,7 @@ fn branch_frame(branch: &Branch, pose: &Pose) -> Option<DQuat> {
 /// Bone lengths (motion means) along the canonical rest directions, the branching joints'
 /// children along their mean directions in the branch frame (refined with the fitted frames).
 fn rig_skeleton(poses: &[Pose]) -> RigSkeleton {
-    let rest = deepmimic::rest_pose();
+    let rest = rest_pose();
     let mut offsets = [DVec3::ZERO; NUM_JOINTS];
     for j in Joint::ALL.into_iter().skip(1) {
         let parent = j.parent().map_or(0, Joint::index);
@@ -421,7 +420,7 @@ pub(super) mod tests {
 
     #[test]
     fn a_known_rotation_is_recovered() {
-        let rest = deepmimic::rest_pose();
+        let rest = rest_pose();
         let skeleton = rig_skeleton(&[rest]);
         // The rest pose is its own rest: every rotation is the identity.
         let track = RotationTrack::solve(&[rest], 20.0, 0).unwrap();
@@ -514,7 +513,7 @@ pub(super) mod tests {
 
     #[test]
     fn bad_input_names_the_sample_frame_and_joint() {
-        let mut poses = vec![deepmimic::rest_pose(); 3];
+        let mut poses = vec![rest_pose(); 3];
         poses[2][Joint::LeftWrist.index()].y = f64::NAN;
         let err = RotationTrack::solve(&poses, 20.0, 4).unwrap_err().to_string();
         assert!(err.contains("sample 4") && err.contains("frame 2") && err.contains("left_wrist"), "{err}");

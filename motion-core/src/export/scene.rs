@@ -55,31 +55,23 @@ pub struct PositionTarget {
 
 /// The position targets of `program` (inside `and`, `or` and `not` too).
 pub fn position_targets(program: &TaskProgram) -> Vec<PositionTarget> {
-    fn visit(expr: &Expr, name: &str, out: &mut Vec<PositionTarget>) {
-        match expr {
-            Expr::Equal(equal) => {
-                if let Quantity::Position(position) = &equal.quantity {
-                    if position.space == Space::World {
-                        let mut coordinates_m = [None; 3];
-                        for (&axis, &value) in position.axes.indices().iter().zip(&equal.target) {
-                            coordinates_m[axis] = Some(value);
-                        }
-                        out.push(PositionTarget { name: name.to_owned(), coordinates_m });
-                    }
-                }
-            }
-            Expr::And(args) | Expr::Or(args) => args.args.iter().for_each(|a| visit(a, name, out)),
-            Expr::Not(not) => visit(&not.arg, name, out),
-            _ => {}
-        }
-    }
     let mut out = Vec::new();
     for constraint in &program.constraints {
         let name = match &constraint.description {
             Some(text) => format!("{}: {text}", constraint.id),
             None => format!("{} target", constraint.id),
         };
-        visit(&constraint.expr, &name, &mut out);
+        constraint.expr.walk("", &mut |expr, _| {
+            let Expr::Equal(equal) = expr else { return };
+            let Quantity::Position(position) = &equal.quantity else { return };
+            if position.space == Space::World {
+                let mut coordinates_m = [None; 3];
+                for (&axis, &value) in position.axes.indices().iter().zip(&equal.target) {
+                    coordinates_m[axis] = Some(value);
+                }
+                out.push(PositionTarget { name: name.clone(), coordinates_m });
+            }
+        });
     }
     out
 }

@@ -3,29 +3,10 @@
 //! of consecutive frames of the root, ric and rotation features).
 
 use candle_core::{Result, Tensor, Var, D};
-use serde::{Deserialize, Serialize};
 
+use crate::method::DirectConfig;
+use crate::optim::AdamW;
 use crate::representation::ROT;
-use crate::training::AdamW;
-
-/// Settings of the direct (IK) optimisation.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct DirectConfig {
-    /// Adam steps (ProgMoGen: 100).
-    pub steps: usize,
-    /// Constant Adam learning rate on the normalised features (ProgMoGen: 1e-2).
-    pub lr: f64,
-    /// Weight of the smoothness term of IK+Reg: mean over samples' frames of
-    /// `‖x[t+1] − x[t]‖²` on the root + ric + rotation features (normalised), per sample.
-    pub smoothness_weight: f64,
-}
-
-impl Default for DirectConfig {
-    fn default() -> Self {
-        Self { steps: 100, lr: 1e-2, smoothness_weight: 1.0 }
-    }
-}
 
 /// Optimises the features `x0` `[B, T, 263]` (normalised) to lower `criterion` `[B]`, plus
 /// `smoothness ×` the frame-difference term. Returns the features of the last forward (as DNO

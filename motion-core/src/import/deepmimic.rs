@@ -16,7 +16,8 @@ use glam::{DQuat, DVec3};
 
 use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
 use crate::limits::{read_text, MOCAP_FILE_BYTES};
-use crate::skeleton::{Pose, NUM_JOINTS};
+pub use crate::skeleton::rest_pose;
+use crate::skeleton::{smoothstep, Pose, NUM_JOINTS};
 
 /// Values per frame.
 const FRAME_WIDTH: usize = 44;
@@ -373,12 +374,6 @@ pub(crate) fn smpl22_from_world(root: DVec3, world: &[DQuat; DM_JOINTS]) -> Pose
     })
 }
 
-/// The zero pose of the DeepMimic humanoid mapped to the 22 joints, pelvis at the origin: arms
-/// hanging down, feet flat, facing +z. Its bone lengths are the project's canonical skeleton.
-pub fn rest_pose() -> Pose {
-    smpl22(&Keyframe { root: DVec3::ZERO, rot: [DQuat::IDENTITY; DM_JOINTS] })
-}
-
 /// Heading of a DeepMimic root rotation: angle about +y of the rotated forward axis (+x), rad.
 fn yaw(q: DQuat) -> f64 {
     let f = q * DVec3::X;
@@ -387,12 +382,6 @@ fn yaw(q: DQuat) -> f64 {
 
 fn wrap_angle(a: f64) -> f64 {
     (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
-}
-
-/// Hermite ease `3x² − 2x³` of `x` clamped to [0, 1].
-pub(crate) fn smoothstep(x: f64) -> f64 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
 }
 
 /// One warning per joint with non-unit quaternions: how many, which frames, the extreme norm.

@@ -9,8 +9,9 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 
 use super::*;
-use crate::nn::testing::{max_abs_diff, randn};
+use crate::nn::testing::randn;
 use crate::testing::finite_difference_check;
+use crate::testing::max_abs_diff;
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fixtures/parity").join(name)

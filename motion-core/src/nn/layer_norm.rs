@@ -118,8 +118,9 @@ impl CustomOp1 for LayerNormOp {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::testing::{max_abs_diff, randn};
+    use crate::nn::testing::randn;
     use crate::testing::finite_difference_check;
+    use crate::testing::max_abs_diff;
     use candle_core::{DType, Device, Var};
 
     fn norm(dev: &Device) -> Result<LayerNorm> {

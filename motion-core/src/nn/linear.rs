@@ -141,8 +141,9 @@ impl CustomOp1 for FrozenLinearOp {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::testing::{max_abs_diff, randn};
+    use crate::nn::testing::randn;
     use crate::testing::finite_difference_check;
+    use crate::testing::max_abs_diff;
     use candle_core::{DType, Device, IndexOp, Var};
 
     fn layer(dev: &Device, bias: bool) -> Result<Linear> {

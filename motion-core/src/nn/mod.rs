@@ -35,15 +35,6 @@ pub(crate) mod testing {
         Tensor::from_vec(v, shape, dev)
     }
 
-    /// Largest absolute element-wise difference.
-    pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> Result<f64> {
-        (a.to_dtype(candle_core::DType::F64)? - b.to_dtype(candle_core::DType::F64)?)?
-            .abs()?
-            .flatten_all()?
-            .max(0)?
-            .to_scalar::<f64>()
-    }
-
     /// One `#[test]` per `case(dev: &Device) -> Result<()>` in the parent module, on the CPU.
     macro_rules! cpu_tests {
         ($($case:ident),* $(,)?) => {

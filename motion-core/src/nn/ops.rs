@@ -105,7 +105,8 @@ mod tests {
     use crate::testing::finite_difference_check;
     use candle_core::{Device, Var};
 
-    use crate::nn::testing::{max_abs_diff, randn};
+    use crate::nn::testing::randn;
+    use crate::testing::max_abs_diff;
 
     fn softmax_matches_primitive(dev: &Device) -> Result<()> {
         let x = (randn(&[2, 3, 7], 1, dev)? * 3.0)?.to_dtype(DType::F32)?;

@@ -280,6 +280,40 @@ pub struct Events {
     pub frames: FrameSelection,
 }
 
+impl Expr {
+    /// Calls `visit` on this expression and then, depth first in order, on every expression
+    /// under its `and`, `or` and `not`, each with its JSON path: `path` for this one,
+    /// `path.args[i]` and `path.arg` below it. The one walk over the tree, for validation
+    /// and for everything a program is searched for (scene primitives, carried objects,
+    /// position targets).
+    pub fn walk<'a>(&'a self, path: &str, visit: &mut impl FnMut(&'a Expr, &str)) {
+        visit(self, path);
+        match self {
+            Expr::And(args) | Expr::Or(args) => {
+                for (i, arg) in args.args.iter().enumerate() {
+                    arg.walk(&index(&field(path, "args"), i), visit);
+                }
+            }
+            Expr::Not(not) => not.arg.walk(&field(path, "arg"), visit),
+            _ => {}
+        }
+    }
+}
+
+/// The JSON path of field `name` under `path` (`name` itself at the top).
+pub(super) fn field(path: &str, name: &str) -> String {
+    if path.is_empty() {
+        name.to_owned()
+    } else {
+        format!("{path}.{name}")
+    }
+}
+
+/// The JSON path of element `i` of the array at `path`.
+pub(super) fn index(path: &str, i: usize) -> String {
+    format!("{path}[{i}]")
+}
+
 impl Events {
     /// The hysteresis, given or the default of the signal's unit.
     pub fn hysteresis(&self) -> f64 {

@@ -135,32 +135,28 @@ impl TaskProgram {
     /// The scene primitives of every scene constraint, in program order (under `and`, `or` and
     /// `not` too): what a picture of the task draws.
     pub fn scene_primitives(&self) -> Vec<Primitive> {
-        fn visit(expr: &Expr, out: &mut Vec<Primitive>) {
-            match expr {
-                Expr::Scene(scene) => out.push(scene.primitive.clone()),
-                Expr::And(args) | Expr::Or(args) => args.args.iter().for_each(|a| visit(a, out)),
-                Expr::Not(not) => visit(&not.arg, out),
-                _ => {}
-            }
-        }
         let mut out = Vec::new();
-        self.constraints.iter().for_each(|c| visit(&c.expr, &mut out));
+        for constraint in &self.constraints {
+            constraint.expr.walk("", &mut |expr, _| {
+                if let Expr::Scene(scene) = expr {
+                    out.push(scene.primitive.clone());
+                }
+            });
+        }
         out
     }
 
     /// The objects of every `carry` constraint, in program order (under `and`, `or` and `not`
     /// too): what a picture of the task draws between the hands.
     pub fn carried_objects(&self) -> Vec<Carry> {
-        fn visit(expr: &Expr, out: &mut Vec<Carry>) {
-            match expr {
-                Expr::Carry(carry) => out.push(carry.clone()),
-                Expr::And(args) | Expr::Or(args) => args.args.iter().for_each(|a| visit(a, out)),
-                Expr::Not(not) => visit(&not.arg, out),
-                _ => {}
-            }
-        }
         let mut out = Vec::new();
-        self.constraints.iter().for_each(|c| visit(&c.expr, &mut out));
+        for constraint in &self.constraints {
+            constraint.expr.walk("", &mut |expr, _| {
+                if let Expr::Carry(carry) = expr {
+                    out.push(carry.clone());
+                }
+            });
+        }
         out
     }
 

@@ -4,7 +4,7 @@
 use std::collections::HashSet;
 
 use super::error::{Problem, ProgramError};
-use super::expr::{Airborne, Count, EventRegion, Events, Expr, FootContact, SelfCollision};
+use super::expr::{field, index, Airborne, Count, EventRegion, Events, Expr, FootContact, SelfCollision};
 use super::quantity::{CarriedLoad, Condition, FrameRange, FrameRef, FrameSelection, Point, Quantity};
 use super::scene::{JointSet, Primitive};
 use super::{RelationalParse, TaskProgram, MAX_FRAMES};
@@ -30,18 +30,6 @@ impl TaskProgram {
             Err(checker.errors)
         }
     }
-}
-
-fn field(path: &str, name: &str) -> String {
-    if path.is_empty() {
-        name.to_owned()
-    } else {
-        format!("{path}.{name}")
-    }
-}
-
-fn index(path: &str, i: usize) -> String {
-    format!("{path}[{i}]")
 }
 
 struct Checker {
@@ -160,7 +148,7 @@ impl Checker {
             if let Some(weight) = constraint.weight {
                 self.number(&field(&path, "weight"), weight, 0.0, MAX_FACTOR, "");
             }
-            self.expr(&field(&path, "expr"), &constraint.expr);
+            constraint.expr.walk(&field(&path, "expr"), &mut |expr, at| self.expr(at, expr));
         }
         if let Some(parse) = &program.relational_parse {
             self.relational_parse(parse, &ids);
@@ -362,17 +350,13 @@ impl Checker {
                     self.condition(&field(path, "when"), when);
                 }
             }
-            Expr::And(args) | Expr::Or(args) => {
-                for (i, arg) in args.args.iter().enumerate() {
-                    self.expr(&index(&field(path, "args"), i), arg);
-                }
-            }
+            // Their arguments are visited by the walk.
+            Expr::And(_) | Expr::Or(_) => {}
             Expr::Not(not) => {
                 let at = field(path, "margin");
                 if self.number(&at, not.margin, 0.0, MAX_FACTOR, "") && not.margin == 0.0 {
                     self.inconsistent(at, "a NOT margin of 0 is always satisfied");
                 }
-                self.expr(&field(path, "arg"), &not.arg);
             }
             Expr::Count(count) => self.count(path, count),
             Expr::Steps(_) => {}

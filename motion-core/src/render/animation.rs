@@ -18,7 +18,7 @@ use super::draw::disc;
 use super::font::{char_width, draw_text};
 use super::layout::{colour, motion_rgb, Layout, StripRow, LEFT_RGB, MOTION_RGB, RIGHT_RGB};
 use super::RenderError;
-use crate::export::{write_atomically, ExportError};
+use crate::files::{write_atomically, WriteError};
 use crate::program::Primitive;
 use crate::skeleton::{Joint, FPS};
 
@@ -95,10 +95,7 @@ pub fn motion_gif(
         previous = Some(indices);
     }
     let bytes = encoder.into_inner().map_err(|e| write_error(e.to_string()))?;
-    write_atomically(path, &bytes).map_err(|e| match e {
-        ExportError::Write { path, message } => RenderError::Write { path, message },
-        other => write_error(other.to_string()),
-    })
+    write_atomically(path, &bytes).map_err(|WriteError { path, message }| RenderError::Write { path, message })
 }
 
 /// Palette index that marks a pixel unchanged since the previous frame.
@@ -217,9 +214,10 @@ mod tests {
     use glam::DVec3;
 
     use super::*;
-    use crate::import::deepmimic::{rest_pose, DeepMimicClip};
+    use crate::import::deepmimic::DeepMimicClip;
     use crate::import::MocapClip;
     use crate::program::OverheadBarrier;
+    use crate::skeleton::rest_pose;
     use crate::skeleton::Pose;
 
     /// A decoded GIF: its size, each frame's delay, and each frame composited over the ones

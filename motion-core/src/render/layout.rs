@@ -372,7 +372,7 @@ fn top_boxes(p: &Primitive, z: (f64, f64), x: (f64, f64)) -> Vec<([f64; 2], [f64
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::import::deepmimic::rest_pose;
+    use crate::skeleton::rest_pose;
 
     /// A beam's drawn stretch: its extent along a horizontal direction, along the ground
     /// projection of a sloping one, or the shown z range when it is endless.

@@ -56,8 +56,8 @@ mod tests {
     use tiny_skia::Pixmap;
 
     use super::*;
-    use crate::import::deepmimic::rest_pose;
     use crate::program::OverheadBarrier;
+    use crate::skeleton::rest_pose;
     use crate::skeleton::Pose;
 
     /// The rest pose walking 3 m along +z under a barrier at 2 < z < 3 whose underside is at

@@ -94,8 +94,8 @@ fn ancestry_matrix(dtype: DType, dev: &Device) -> Result<Tensor> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::import::deepmimic::rest_pose;
     use crate::skeleton::bones;
+    use crate::skeleton::rest_pose;
     use crate::testing::finite_difference_check;
 
     fn rest() -> RestSkeleton {

@@ -2,12 +2,10 @@
 //! classifier-free-guidance condition dropout, AdamW with warm-up and cosine decay, EMA
 //! weights, and resumable checkpoints.
 
-mod adamw;
 mod batches;
 mod checkpoint;
 mod geometric;
 
-pub use adamw::AdamW;
 pub use batches::{Batch, BatchSampler};
 pub use checkpoint::TrainState;
 pub use geometric::{GeometricLoss, GeometricTerms, CONTACT_SPEED_M_PER_S};
@@ -26,6 +24,7 @@ use crate::database::MotionDatabase;
 use crate::diffusion::noise::gaussian_from_rng;
 use crate::diffusion::NoiseSchedule;
 use crate::model::{Mdm, MdmConfig, Prediction};
+use crate::optim::AdamW;
 use crate::prior::{Prior, PriorError};
 use crate::representation::{FEATURE_DIM, RIC, ROOT_Y};
 use crate::text::vocabulary::VocabularyEncoder;

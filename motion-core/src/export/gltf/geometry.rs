@@ -137,8 +137,7 @@ pub(super) fn body(bind: &Pose) -> (Geometry, Vec<u8>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::import::deepmimic;
-    use crate::skeleton::NUM_JOINTS;
+    use crate::skeleton::{rest_pose, NUM_JOINTS};
 
     /// Every triangle's face normal points the way of its vertices' normals.
     fn assert_outward(geometry: &Geometry) {
@@ -172,7 +171,7 @@ mod tests {
 
     #[test]
     fn every_body_vertex_is_bound_to_one_joint() {
-        let rest = deepmimic::rest_pose();
+        let rest = rest_pose();
         let (body, bound_to) = body(&rest);
         assert_outward(&body);
         assert_eq!(bound_to.len(), 4 * body.positions.len());

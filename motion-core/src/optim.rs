@@ -1,5 +1,6 @@
-//! AdamW (Loshchilov & Hutter 2019) whose moments can be saved and restored, which candle's
-//! optimiser does not allow.
+//! The optimiser every loop shares (training, DNO, RG-DNO's soft blend, the IK baselines, the
+//! kinematic refinement): AdamW (Loshchilov & Hutter 2019) whose moments can be saved and
+//! restored, which candle's optimiser does not allow.
 
 use candle_core::backprop::GradStore;
 use candle_core::{Result, Tensor, Var};

@@ -1,0 +1,36 @@
+//! Stage 6 (eq. 12): DNO on the whole task from the blended noise `z'`, `N2` steps.
+
+use candle_core::Tensor;
+
+use super::report::{Stage, StageProgress};
+use super::{RgDnoError, Stages};
+use crate::diffusion::Denoiser;
+use crate::dno::{self, DnoConfig, DnoResult};
+use crate::objective::program_objective;
+
+impl<M: Denoiser + ?Sized> Stages<'_, M> {
+    /// The final round from `z_blend` `[B, T, 263]` on `F_C` with the jitter guard, keeping the
+    /// best iterate: its `x` is the motion of its `z` and its `loss` that motion's `F_C`.
+    pub(super) fn final_round(
+        &self,
+        z_blend: &Tensor,
+        initial_joints: &Tensor,
+        seed: u64,
+        round: usize,
+        progress: &mut dyn FnMut(&StageProgress),
+    ) -> Result<DnoResult, RgDnoError> {
+        let Stages { prior, compiled, config, rg, solver, .. } = *self;
+        let full = program_objective(prior, compiled, initial_joints, config.jitter_weight);
+        let last = DnoConfig {
+            steps: rg.final_steps,
+            lr: rg.final_lr,
+            seed,
+            restarts: 1,
+            keep_best: true,
+            ..config.dno.clone()
+        };
+        Ok(dno::optimize(solver, &full, z_blend, &last, |s| {
+            progress(&StageProgress::of_dno(Stage::FinalRound, round, s))
+        })?)
+    }
+}

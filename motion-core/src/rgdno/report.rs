@@ -1,0 +1,166 @@
+//! What RG-DNO reports: the groups, the retrieved motions, each stage's figures per sample and
+//! seconds, and the progress of a running stage.
+
+use serde::{Deserialize, Serialize};
+
+use super::config::RgDnoConfig;
+use super::mask::MaskCandidate;
+use super::mean;
+use super::retrieval::CandidateSource;
+use crate::dno;
+use crate::method::pick_rows;
+
+/// A retrieved motion as the report gives it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RetrievedReport {
+    /// Where it comes from.
+    pub source: CandidateSource,
+    /// `Σ w_i·E_i` over `C_R`.
+    pub score: f64,
+    /// `(id, E_i)` per constraint of `C_R`.
+    pub per_constraint: Vec<(String, f64)>,
+}
+
+/// The mask chosen for one sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChosenMask {
+    /// The binary candidate.
+    pub candidate: MaskCandidate,
+    /// `F_C` of its motion.
+    pub constraint_error: f64,
+    /// `R` of its motion and noise.
+    pub reward: f64,
+}
+
+/// Seconds per stage.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageSeconds {
+    /// Scoring the corpus.
+    pub retrieval: f64,
+    /// Inverting `x_R`.
+    pub inversion: f64,
+    /// Fitting `z1` and `z2` (all restarts).
+    pub branches: f64,
+    /// Evaluating the binary masks.
+    pub masks: f64,
+    /// Optimising the soft blend.
+    pub soft_blend: f64,
+    /// The final DNO round.
+    pub final_round: f64,
+}
+
+impl StageSeconds {
+    /// The seconds of both runs, stage by stage.
+    pub(super) fn plus(&self, other: &StageSeconds) -> StageSeconds {
+        StageSeconds {
+            retrieval: self.retrieval + other.retrieval,
+            inversion: self.inversion + other.inversion,
+            branches: self.branches + other.branches,
+            masks: self.masks + other.masks,
+            soft_blend: self.soft_blend + other.soft_blend,
+            final_round: self.final_round + other.final_round,
+        }
+    }
+}
+
+impl RgDnoReport {
+    /// This report with the per-sample figures of `other` (another attempt at the same task)
+    /// where `rows[b]` is `Some(i)`, as [`crate::method::Generated::with_rows_from`]; the seconds add up.
+    pub fn with_rows_from(self, other: RgDnoReport, rows: &[Option<usize>]) -> RgDnoReport {
+        RgDnoReport {
+            z1_error: pick_rows(self.z1_error, &other.z1_error, rows),
+            z2_error: pick_rows(self.z2_error, &other.z2_error, rows),
+            masks: pick_rows(self.masks, &other.masks, rows),
+            soft_blend_objective: pick_rows(self.soft_blend_objective, &other.soft_blend_objective, rows),
+            restart: pick_rows(self.restart, &other.restart, rows),
+            final_objective: pick_rows(self.final_objective, &other.final_objective, rows),
+            seconds: self.seconds.plus(&other.seconds),
+            ..self
+        }
+    }
+}
+
+/// What each RG-DNO stage did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RgDnoReport {
+    /// `C_R`, `C1`, `C2` by id.
+    pub retrieval_set: Vec<String>,
+    /// `C1`.
+    pub random_noise_set: Vec<String>,
+    /// `C2`.
+    pub retrieved_noise_set: Vec<String>,
+    /// Candidates in the corpus (before the semantic check).
+    pub candidates: usize,
+    /// The retrieved motions, best first; the first is `x_R`.
+    pub retrieved: Vec<RetrievedReport>,
+    /// Mean joint distance of `G(z_R)` to `x_R`, m.
+    pub inversion_error_m: f64,
+    /// `F_{C1}(G(z1))` per sample.
+    pub z1_error: Vec<f64>,
+    /// `F_{C2}(G(z2))` per sample.
+    pub z2_error: Vec<f64>,
+    /// The chosen binary mask per sample.
+    pub masks: Vec<ChosenMask>,
+    /// `F_C + R` after the soft blend, per sample.
+    pub soft_blend_objective: Vec<f64>,
+    /// The restart each sample kept (all 0 with `N_S` = 1).
+    #[serde(default)]
+    pub restart: Vec<usize>,
+    /// `F_C` (with the jitter guard) of each sample's final motion, the restart criterion.
+    #[serde(default)]
+    pub final_objective: Vec<f64>,
+    /// Seconds per stage.
+    pub seconds: StageSeconds,
+    /// The settings.
+    pub config: RgDnoConfig,
+}
+
+/// A stage of RG-DNO, for progress reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// Polishing the inverted noise.
+    Inversion,
+    /// Fitting `z1` to `C1` and `z2` to `C2` (one batch).
+    Branches,
+    /// Evaluating the binary masks (step = candidates done).
+    Masks,
+    /// Optimising the soft blend.
+    SoftBlend,
+    /// The final DNO round.
+    FinalRound,
+}
+
+impl Stage {
+    /// A short name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Inversion => "inversion",
+            Stage::Branches => "z1 (random noise, C1) and z2 (retrieved noise, C2)",
+            Stage::Masks => "masks",
+            Stage::SoftBlend => "soft blend",
+            Stage::FinalRound => "final round",
+        }
+    }
+}
+
+/// Progress of a running stage.
+#[derive(Debug, Clone)]
+pub struct StageProgress {
+    /// The stage.
+    pub stage: Stage,
+    /// The restart (0 to `N_S` − 1; 0 for the inversion, which runs once).
+    pub round: usize,
+    /// Steps done.
+    pub step: usize,
+    /// Steps of the stage.
+    pub steps: usize,
+    /// Mean loss over the samples (0 where a stage has none).
+    pub loss: f64,
+}
+
+impl StageProgress {
+    /// The progress of a DNO step of `stage` in restart `round`.
+    pub(super) fn of_dno(stage: Stage, round: usize, step: &dno::DnoStep) -> Self {
+        StageProgress { stage, round, step: step.step + 1, steps: step.steps, loss: mean(&step.loss) }
+    }
+}
