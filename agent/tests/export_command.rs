@@ -16,7 +16,7 @@ fn mogen(args: &[&str]) -> Output {
 /// A standing figure drifting forward: `[samples, frames, 22, 3]` built from the canonical
 /// rest pose, with the pelvis 0.9 m up.
 fn standing(samples: usize, frames: usize) -> Vec<f32> {
-    let rest = motion_core::import::deepmimic::rest_pose();
+    let rest = motion_core::skeleton::rest_pose();
     let mut out = Vec::new();
     for s in 0..samples {
         for t in 0..frames {

@@ -30,6 +30,11 @@ pub fn retarget_bone_lengths(poses: &[Pose], target: &[f64; NUM_JOINTS]) -> Vec<
         .collect()
 }
 
+/// One pose re-targeted to `target` bone lengths ([`retarget_bone_lengths`] of a single frame).
+pub fn retarget_pose(pose: Pose, target: &[f64; NUM_JOINTS]) -> Pose {
+    retarget_bone_lengths(&[pose], target).into_iter().next().unwrap_or(pose)
+}
+
 /// Mirrors a motion left to right: x is negated and left/right joints swap.
 pub fn mirror(poses: &[Pose]) -> Vec<Pose> {
     poses

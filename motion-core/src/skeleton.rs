@@ -255,6 +255,12 @@ const REST_POSE: [[f64; 3]; NUM_JOINTS] = [
     [-0.19215246913580247, -0.05675481481481478, -0.02523765432098765],
 ];
 
+/// Bone lengths of the canonical rest pose, m, indexed by child joint: the one skeleton every
+/// importer re-targets to.
+pub fn rest_bone_lengths() -> [f64; NUM_JOINTS] {
+    bone_lengths(&rest_pose())
+}
+
 /// The canonical rest pose ([`REST_POSE`]): what retargeting, the rigid skeleton and the
 /// exports' rotations measure bones against.
 pub fn rest_pose() -> Pose {

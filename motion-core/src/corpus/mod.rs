@@ -296,7 +296,7 @@ fn prepare_stretches(poses: &[Pose], verdicts: &mut FrameVerdicts, config: &Scre
     for range in probe.segments(2) {
         let floored = prepare::put_on_floor(&crate::motion::retarget_bone_lengths(
             &poses[range.clone()],
-            &crate::skeleton::bone_lengths(&crate::skeleton::rest_pose()),
+            &crate::skeleton::rest_bone_lengths(),
         ));
         out[range].copy_from_slice(&floored);
     }

@@ -7,8 +7,8 @@ use glam::DVec3;
 
 use crate::motion::{retarget_bone_lengths, rotate_heading};
 use crate::representation::facing_direction;
-use crate::skeleton::rest_pose;
-use crate::skeleton::{bone_lengths, Joint, Pose, FPS};
+use crate::skeleton::rest_bone_lengths;
+use crate::skeleton::{Joint, Pose, FPS};
 
 /// Height of the lower toe joint above the floor while it bears weight, m: the median stance
 /// toe height of the shipped DeepMimic walks (1.5–2 cm; the toe joint sits above the sole).
@@ -23,7 +23,7 @@ const MIN_STANCE_FRAMES: usize = 10;
 
 /// Re-targets, floors and canonicalises a stretch of capture (≥ 2 frames, finite).
 pub fn prepare(poses: &[Pose]) -> Vec<Pose> {
-    let retargeted = retarget_bone_lengths(poses, &bone_lengths(&rest_pose()));
+    let retargeted = retarget_bone_lengths(poses, &rest_bone_lengths());
     let floored = put_on_floor(&retargeted);
     canonical_start(&floored)
 }
@@ -73,6 +73,7 @@ pub fn canonical_start(poses: &[Pose]) -> Vec<Pose> {
 mod tests {
     use super::*;
     use crate::motion::test_support::walking_poses;
+    use crate::skeleton::bone_lengths;
 
     #[test]
     fn a_raised_turned_walk_comes_back_to_the_floor_facing_z() {
@@ -87,7 +88,7 @@ mod tests {
         let f = facing_direction(&out[0]).unwrap();
         assert!((f - DVec3::Z).length() < 1e-9, "{f}");
         let lengths = bone_lengths(&out[40]);
-        let rest = bone_lengths(&rest_pose());
+        let rest = rest_bone_lengths();
         assert!(lengths.iter().zip(rest).all(|(a, b)| (a - b).abs() < 1e-9));
     }
 }

@@ -511,7 +511,7 @@ mod tests {
             self.cyclic
         }
         fn pose_at(&self, _t_s: f64) -> Pose {
-            crate::import::deepmimic::rest_pose()
+            crate::skeleton::rest_pose()
         }
     }
 

@@ -16,7 +16,7 @@ use glam::{DQuat, DVec3};
 
 use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
 use crate::limits::{read_text, MOCAP_FILE_BYTES};
-pub use crate::skeleton::rest_pose;
+
 use crate::skeleton::{smoothstep, Pose, NUM_JOINTS};
 
 /// Values per frame.
@@ -457,6 +457,7 @@ pub(crate) fn synthetic_walk(frames: usize, turn_rate: f64) -> Vec<Pose> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::skeleton::rest_pose;
     use crate::skeleton::{bone_lengths, Joint};
 
     #[test]

@@ -334,7 +334,7 @@ mod tests {
 
     #[test]
     fn bones_keep_the_canonical_lengths_and_stance_soles_touch_the_floor() {
-        let canonical = bone_lengths(&deepmimic::rest_pose());
+        let canonical = crate::skeleton::rest_bone_lengths();
         // (clip, least share of frames whose lowest sole point is within 1.5 cm of the floor):
         // the run is in flight for about half of its frames.
         for (name, grounded) in [("humanoid_walk", 0.95), ("humanoid_run", 0.45), ("humanoid_dance", 0.9)] {

@@ -5,10 +5,10 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::{invalid, AmcMotion, Asf};
-use crate::import::{deepmimic, short_number, ImportError, ImportWarning, MocapClip};
+use crate::import::{short_number, ImportError, ImportWarning, MocapClip};
 use crate::limits::{read_bytes, MOCAP_FILE_BYTES};
-use crate::motion::retarget_bone_lengths;
-use crate::skeleton::{bone_lengths, Pose, NUM_JOINTS};
+use crate::motion::retarget_pose;
+use crate::skeleton::{Pose, NUM_JOINTS};
 
 /// Rest statures outside this range are reported (m), as for BVH files.
 const PLAUSIBLE_STATURE_M: (f64, f64) = (1.0, 2.3);
@@ -74,7 +74,7 @@ const SOURCES: [Along; NUM_JOINTS] = [
 
 /// An ASF/AMC clip posed on the 22 joints: the source is posed by [`AmcMotion`] (slerped bone
 /// rotations, lerped root translation), [`SOURCES`] picks the 22 points, and bone lengths are
-/// retargeted to those of [`deepmimic::rest_pose`] with [`retarget_bone_lengths`] (bone
+/// retargeted to those of [`crate::skeleton::rest_pose`] with [`retarget_bone_lengths`] (bone
 /// directions kept, the root trajectory scaled by the leg-length ratio). Not cyclic.
 #[derive(Debug, Clone)]
 pub struct AsfAmcClip {
@@ -141,7 +141,7 @@ impl AsfAmcClip {
         }
         let metres_per_unit = options.metres_per_unit.unwrap_or(asf.metres_per_unit());
         let motion = AmcMotion::parse(amc_text, amc_path, &asf, metres_per_unit, 1.0 / options.fps)?;
-        let clip = Self { name: name.to_owned(), motion, map, target: bone_lengths(&deepmimic::rest_pose()) };
+        let clip = Self { name: name.to_owned(), motion, map, target: crate::skeleton::rest_bone_lengths() };
         let stature_m = clip.stature_m();
         if !(PLAUSIBLE_STATURE_M.0..=PLAUSIBLE_STATURE_M.1).contains(&stature_m) {
             warnings.push(ImportWarning {
@@ -204,13 +204,13 @@ impl MocapClip for AsfAmcClip {
     }
 
     fn pose_at(&self, t_s: f64) -> Pose {
-        let pose = self.mapped_pose_at(t_s);
-        retarget_bone_lengths(&[pose], &self.target).into_iter().next().unwrap_or(pose)
+        retarget_pose(self.mapped_pose_at(t_s), &self.target)
     }
 }
 
 #[cfg(test)]
 mod tests {
+    use crate::skeleton::bone_lengths;
     use glam::DQuat;
 
     use super::*;
@@ -254,7 +254,7 @@ mod tests {
         assert!((1.5..2.0).contains(&stature), "stature {stature}");
         let poses = resample(&c, 1.0, None);
         assert_eq!(poses.len(), 10);
-        let target = bone_lengths(&deepmimic::rest_pose());
+        let target = crate::skeleton::rest_bone_lengths();
         for p in &poses {
             assert!(bone_lengths(p).iter().zip(target).all(|(a, b)| (a - b).abs() < 1e-9));
         }
@@ -312,7 +312,7 @@ mod tests {
 
     #[test]
     fn mapped_rest_skeleton_has_a_canonical_spine_and_cmu_database_collars() {
-        let canon = deepmimic::rest_pose();
+        let canon = crate::skeleton::rest_pose();
         let rest = hdm05().mapped_rest_pose();
         for j in [
             Joint::Spine1,

@@ -5,9 +5,9 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::{invalid, Bvh, BvhAnimation, LengthUnit, Rig, UpAxis, PLAUSIBLE_STATURE_M};
-use crate::import::{deepmimic, ImportError, ImportWarning, MocapClip};
-use crate::motion::retarget_bone_lengths;
-use crate::skeleton::{bone_lengths, Pose, NUM_JOINTS};
+use crate::import::{ImportError, ImportWarning, MocapClip};
+use crate::motion::retarget_pose;
+use crate::skeleton::{Pose, NUM_JOINTS};
 
 /// How to read a BVH file into a [`BvhClip`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -22,7 +22,7 @@ pub struct BvhOptions {
 
 /// A BVH clip posed on the 22 joints: the source is posed by [`BvhAnimation`] (slerped rotations,
 /// lerped root), the rig map picks the 22 points, and bone lengths are retargeted to those of
-/// [`deepmimic::rest_pose`] with [`retarget_bone_lengths`] (bone directions kept, the root
+/// [`crate::skeleton::rest_pose`] with [`retarget_bone_lengths`] (bone directions kept, the root
 /// trajectory scaled by the leg-length ratio). Not cyclic.
 ///
 /// The project's own exports ([`Rig::Smpl`]) come back as written from
@@ -100,7 +100,7 @@ impl BvhClip {
                 })?
             }
         };
-        let target = bone_lengths(&deepmimic::rest_pose());
+        let target = crate::skeleton::rest_bone_lengths();
         Ok((Self { name: name.to_owned(), rig, animation, map, target }, warnings))
     }
 
@@ -153,13 +153,13 @@ impl MocapClip for BvhClip {
     }
 
     fn pose_at(&self, t_s: f64) -> Pose {
-        let pose = self.mapped_pose_at(t_s);
-        retarget_bone_lengths(&[pose], &self.target).into_iter().next().unwrap_or(pose)
+        retarget_pose(self.mapped_pose_at(t_s), &self.target)
     }
 }
 
 #[cfg(test)]
 mod tests {
+    use crate::skeleton::bone_lengths;
     use glam::DQuat;
 
     use super::*;
@@ -235,7 +235,7 @@ mod tests {
 
     #[test]
     fn feet_stay_near_the_floor_and_bones_keep_their_canonical_lengths() {
-        let target = bone_lengths(&deepmimic::rest_pose());
+        let target = crate::skeleton::rest_bone_lengths();
         for name in ALL {
             let c = clip(name);
             let poses = resample(&c, 1.0, None);
@@ -289,7 +289,7 @@ mod tests {
 
     #[test]
     fn mapped_rest_skeletons_have_smpl_like_torsos() {
-        let canon = deepmimic::rest_pose();
+        let canon = crate::skeleton::rest_pose();
         let torso = [
             Joint::Spine1,
             Joint::Spine2,
@@ -373,10 +373,7 @@ mod tests {
         assert!((at(&p, Joint::RightWrist) - DVec3::new(-0.71, 1.46, 0.0)).length() < 1e-9);
         assert!((at(&p, Joint::LeftFoot) - DVec3::new(0.09, 0.02, 0.12)).length() < 1e-9);
         let out = c.pose_at(0.0);
-        assert!(bone_lengths(&out)
-            .iter()
-            .zip(bone_lengths(&deepmimic::rest_pose()))
-            .all(|(a, b)| (a - b).abs() < 1e-9));
+        assert!(bone_lengths(&out).iter().zip(crate::skeleton::rest_bone_lengths()).all(|(a, b)| (a - b).abs() < 1e-9));
     }
 
     #[test]

@@ -7,10 +7,10 @@ use candle_core::{Device, Tensor};
 use glam::{DQuat, DVec3};
 
 use super::invalid;
-use crate::import::{deepmimic, in_reach, short_number, ImportError, MocapClip, MAX_POSITION_M};
+use crate::import::{in_reach, short_number, ImportError, MocapClip, MAX_POSITION_M};
 use crate::motion::retarget_bone_lengths;
 use crate::representation::{recover_from_ric, FeatureFrame, FEATURE_DIM};
-use crate::skeleton::{bone_lengths, Pose, FPS, NUM_JOINTS};
+use crate::skeleton::{Pose, FPS, NUM_JOINTS};
 
 /// Frames recovered at once: [`recover_from_ric`] builds `[frames, frames]` cumulative-sum
 /// matrices, so a long clip is recovered in pieces of this many frames (HumanML3D's longest
@@ -18,7 +18,7 @@ use crate::skeleton::{bone_lengths, Pose, FPS, NUM_JOINTS};
 const CHUNK_FRAMES: usize = 196;
 
 /// A HumanML3D clip as a [`MocapClip`]: joint positions recovered from its (un-normalised)
-/// features, bone lengths retargeted to the canonical skeleton ([`deepmimic::rest_pose`], as
+/// features, bone lengths retargeted to the canonical skeleton ([`crate::skeleton::rest_pose`], as
 /// every importer does), positions interpolated linearly between its 20 fps frames. The clip
 /// starts at the origin facing +z. Not cyclic.
 #[derive(Debug, Clone)]
@@ -65,7 +65,7 @@ impl HumanMl3dClip {
                 ));
             }
         }
-        let poses = retarget_bone_lengths(&poses, &bone_lengths(&deepmimic::rest_pose()));
+        let poses = retarget_bone_lengths(&poses, &crate::skeleton::rest_bone_lengths());
         Ok(Self { poses })
     }
 }
