@@ -61,7 +61,7 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Motion data: import mocap, build the training/retrieval database.
+    /// Motion data: the motion corpus (build, stats, pictures) and the training/retrieval database.
     #[command(subcommand)]
     Data(commands::data::DataCommand),
     /// Train the motion prior on a database (resumable; progress and loss on stderr).

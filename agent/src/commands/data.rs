@@ -31,9 +31,10 @@ pub enum DataCommand {
         #[arg(long)]
         no_mirror: bool,
     },
-    /// Build the motion corpus from the shared capture: the CMU database in its 22-joint form
-    /// (`smpl22_20fps_f16.npz` and `index.tsv`), HDM05's ASF/AMC clips and the shipped clips of
-    /// a catalog. Every take is screened (glitches, frozen frames, T-poses, uneven floors are
+    /// Build the motion corpus from the shared capture (CMU, HDM05) and the shipped clips.
+    ///
+    /// Reads the CMU database in its 22-joint form (`smpl22_20fps_f16.npz` and `index.tsv`),
+    /// HDM05's ASF/AMC clips and the shipped clips of a catalog. Every take is screened (glitches, frozen frames, T-poses, uneven floors are
     /// dropped and reported), re-targeted to the rest skeleton, floored, cut into captioned
     /// windows and split by subject; the result is one compressed file (the shipped
     /// `fixtures/corpus/corpus.safetensors.gz` is made this way).
@@ -51,7 +52,9 @@ pub enum DataCommand {
         #[arg(long, short, default_value = "fixtures/corpus/corpus.safetensors.gz")]
         out: PathBuf,
     },
-    /// Draw corpus windows in world coordinates to look at: `skills.png`, one window per skill
+    /// Draw corpus windows in world coordinates: one per skill family, and random ones.
+    ///
+    /// Writes `skills.png`, one window per skill
     /// family (walk, sideways walk, sneak/creep, crawl, one-leg balance, hop, carry, sit down),
     /// and `random_<k>.png`, randomly drawn windows ten to a picture, with `windows.md`, the
     /// table of their takes, descriptions, captions and tags.
@@ -69,8 +72,10 @@ pub enum DataCommand {
         #[arg(long, default_value_t = 0)]
         seed: u64,
     },
-    /// Print what a corpus (hours per source, skill and split, what was dropped) or a database
-    /// (seconds per label) holds; by default the shipped corpus.
+    /// Print what a corpus or a database holds (by default the shipped corpus).
+    ///
+    /// For a corpus: hours per source, skill family and split, what was dropped and why, and
+    /// soundness figures; for a database: seconds per label.
     Stats {
         /// A corpus file (`.safetensors.gz`) or a database file (`.safetensors`).
         #[arg(default_value_os_t = paths::default_corpus())]
