@@ -25,7 +25,8 @@ fn max_distance(a: &[Pose], b: &[Pose]) -> f64 {
 
 #[test]
 fn a_sampled_motion_comes_back_from_bvh_as_solved() {
-    let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &Device::Cpu).unwrap();
+    let prior =
+        Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &Device::Cpu).unwrap();
     // Few DDIM steps: the test is about the file, not the motion's quality.
     let x = prior
         .sample(

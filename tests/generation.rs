@@ -26,7 +26,7 @@ const GAP_WALK: &str = r#"{
 
 fn setup() -> (Prior, TaskProgram, CompiledProgram) {
     let device = Device::Cpu;
-    let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &device).unwrap();
+    let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &device).unwrap();
     let program = TaskProgram::from_json_validated(GAP_WALK).unwrap();
     let compiled = CompiledProgram::compile(&program, &device).unwrap();
     (prior, program, compiled)

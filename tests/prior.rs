@@ -23,7 +23,7 @@ use motion_core::skeleton::{Joint, Pose};
 const WALK: &str = "a person walks forward";
 
 fn prior() -> Prior {
-    Prior::load(&fixtures().join("model/prior.safetensors"), &Device::Cpu).unwrap()
+    Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &Device::Cpu).unwrap()
 }
 
 fn database() -> MotionDatabase {

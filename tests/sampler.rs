@@ -52,7 +52,12 @@ impl motion_core::diffusion::Denoiser for Primitive<'_> {
 #[test]
 fn the_fused_parallel_denoiser_samples_the_motion_of_the_primitive_path() {
     let dev = Device::Cpu;
-    let prior = motion_core::prior::Prior::load(&e2e_tests::fixtures().join("model/prior.safetensors"), &dev).unwrap();
+    let prior = motion_core::prior::Prior::load(
+        &e2e_tests::fixtures().join("model/prior.safetensors"),
+        &e2e_tests::fixtures().join("text"),
+        &dev,
+    )
+    .unwrap();
     let sampler = DdimSampler::new(&NoiseSchedule::mdm(), 50).unwrap();
     let text = prior.encode_text(&["a person walks forward"; 3], &dev).unwrap();
     let z = motion_core::diffusion::noise::gaussian((3, 60, 263), 0, &dev).unwrap();

@@ -126,6 +126,11 @@ pub fn default_prior() -> PathBuf {
     fixtures_dir().join("model").join("prior.safetensors")
 }
 
+/// The folder of the sentence encoders a prior may condition on (one folder per encoder).
+pub fn text_models() -> PathBuf {
+    fixtures_dir().join("text")
+}
+
 /// The recorded LLM exchanges that replay answers from.
 pub fn default_recordings() -> PathBuf {
     fixtures_dir().join("llm").join("recorded")

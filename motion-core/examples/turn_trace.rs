@@ -33,7 +33,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     };
     let (samples, steps): (usize, usize) = (samples.parse()?, steps.parse()?);
     let dev = Device::Cpu;
-    let prior = Prior::load(Path::new(prior), &dev)?;
+    let prior = Prior::load(Path::new(prior), &Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/text"), &dev)?;
     let text = prior.encode_text(&vec![label.as_str(); samples], &dev)?;
     let noise = gaussian((samples, 120, FEATURE_DIM), seed.parse()?, &dev)?;
     let t = Tensor::full(999u32, samples, &dev)?;

@@ -3,8 +3,11 @@
 //!
 //! File layout: the denoiser's tensors under their official MDM names, `normalization.mean`
 //! and `normalization.std` (`[263]`), and header metadata `mdm_config` (JSON of
-//! [`MdmConfig`]), `vocabulary` (JSON of [`VocabularyEncoder`]) and `rest_skeleton` (JSON of
-//! [`RestSkeleton`], the training data's bone lengths; absent in files written before it existed).
+//! [`MdmConfig`]), the text encoder (either `vocabulary`, JSON of
+//! [`VocabularyEncoder`](crate::text::vocabulary::VocabularyEncoder), or
+//! `sentence_encoder`, the name of a sentence encoder such as [`MINILM_NAME`], whose weights live
+//! in the text models folder, not in the prior) and `rest_skeleton` (JSON of [`RestSkeleton`], the
+//! training data's bone lengths; absent in files written before it existed).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -19,12 +22,13 @@ use crate::representation::{
     recover_from_ric, rigid_bones, root_velocity_from_planted_feet, MeanStd, NormalizationError, RestSkeleton,
 };
 use crate::tensor_file::{read_metadata, write_safetensors};
-use crate::text::vocabulary::VocabularyEncoder;
-use crate::text::TextEncoder;
+use crate::text::{ConditionEncoder, TextEncoder, MINILM_NAME};
 
 const MEAN_KEY: &str = "normalization.mean";
 const STD_KEY: &str = "normalization.std";
 const REST_KEY: &str = "rest_skeleton";
+const VOCABULARY_KEY: &str = "vocabulary";
+const SENTENCE_KEY: &str = "sentence_encoder";
 
 /// Errors loading or saving a prior.
 #[derive(Debug, thiserror::Error)]
@@ -126,7 +130,7 @@ pub struct Prior {
     /// The denoiser (frozen weights).
     pub mdm: Mdm,
     /// The text encoder it was trained with.
-    pub encoder: VocabularyEncoder,
+    pub encoder: ConditionEncoder,
     /// Normalisation of its features.
     pub mean_std: MeanStd,
     /// How generated features become a root trajectory (not stored in the file; default
@@ -138,20 +142,30 @@ pub struct Prior {
 }
 
 impl Prior {
-    /// Loads a prior file onto `device`.
-    pub fn load(path: &Path, device: &Device) -> Result<Self, PriorError> {
+    /// Loads a prior file onto `device`; a prior conditioned on a sentence encoder loads it from
+    /// `text_models`, the folder holding one folder per encoder (`fixtures/text`).
+    pub fn load(path: &Path, text_models: &Path, device: &Device) -> Result<Self, PriorError> {
         let format = |message: String| PriorError::Format { path: path.into(), message };
         let bytes = std::fs::read(path).map_err(|source| PriorError::Io { path: path.into(), source })?;
         let meta = read_metadata(&bytes).map_err(format)?;
         let get = |key: &str| meta.get(key).ok_or_else(|| format(format!("no `{key}` in the header metadata")));
         let cfg: MdmConfig =
             serde_json::from_str(get("mdm_config")?).map_err(|e| format(format!("bad mdm_config: {e}")))?;
-        let encoder: VocabularyEncoder =
-            serde_json::from_str(get("vocabulary")?).map_err(|e| format(format!("bad vocabulary: {e}")))?;
-        if TextEncoder::dim(&encoder) != cfg.text_dim {
+        let encoder = match (meta.get(VOCABULARY_KEY), meta.get(SENTENCE_KEY)) {
+            (Some(json), None) => ConditionEncoder::Vocabulary(
+                serde_json::from_str(json).map_err(|e| format(format!("bad {VOCABULARY_KEY}: {e}")))?,
+            ),
+            (None, Some(name)) => ConditionEncoder::sentence(name, text_models, device)
+                .map_err(|e| format(format!("its text encoder {name:?} (from {}): {e}", text_models.display())))?,
+            (Some(_), Some(_)) => return Err(format(format!("both `{VOCABULARY_KEY}` and `{SENTENCE_KEY}` are set"))),
+            (None, None) => {
+                return Err(format(format!("no text encoder (`{VOCABULARY_KEY}` or `{SENTENCE_KEY}`) in the metadata")))
+            }
+        };
+        if encoder.dim() != cfg.text_dim {
             return Err(format(format!(
-                "vocabulary has {} words, the model expects {}",
-                encoder.words().len(),
+                "the text encoder gives {}-d vectors, the model expects {}",
+                encoder.dim(),
                 cfg.text_dim
             )));
         }
@@ -206,7 +220,7 @@ impl Prior {
         path: &Path,
         params: &[(String, Tensor)],
         cfg: &MdmConfig,
-        encoder: &VocabularyEncoder,
+        encoder: &ConditionEncoder,
         mean_std: &MeanStd,
         rest: Option<&RestSkeleton>,
     ) -> Result<(), PriorError> {
@@ -214,9 +228,15 @@ impl Prior {
         let mut tensors: Vec<(String, Tensor)> = params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
         tensors.push((MEAN_KEY.into(), mean_std.mean().clone()));
         tensors.push((STD_KEY.into(), mean_std.std().clone()));
+        let text = match encoder {
+            ConditionEncoder::Vocabulary(v) => {
+                (VOCABULARY_KEY.to_owned(), serde_json::to_string(v).map_err(|e| format(e.to_string()))?)
+            }
+            ConditionEncoder::MiniLm(_) => (SENTENCE_KEY.to_owned(), MINILM_NAME.to_owned()),
+        };
         let mut metadata = HashMap::from([
             ("mdm_config".to_owned(), serde_json::to_string(cfg).map_err(|e| format(e.to_string()))?),
-            ("vocabulary".to_owned(), serde_json::to_string(encoder).map_err(|e| format(e.to_string()))?),
+            text,
         ]);
         if let Some(rest) = rest {
             metadata.insert(REST_KEY.to_owned(), serde_json::to_string(rest).map_err(|e| format(e.to_string()))?);
@@ -271,6 +291,7 @@ impl Prior {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::text::vocabulary::VocabularyEncoder;
 
     #[test]
     fn root_decode_names_round_trip() {
@@ -294,12 +315,19 @@ mod tests {
         let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
         let mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
         let rest = RestSkeleton::of_pose(&crate::skeleton::rest_pose());
-        let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::PlantedFeet, rest: Some(rest) };
+        let prior = Prior {
+            mdm,
+            encoder: ConditionEncoder::Vocabulary(encoder.clone()),
+            mean_std,
+            root_decode: RootDecode::PlantedFeet,
+            rest: Some(rest),
+        };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("prior.safetensors");
         prior.save(&path).unwrap();
-        let back = Prior::load(&path, &Device::Cpu).unwrap();
-        assert_eq!(back.encoder, prior.encoder);
+        let no_text = dir.path().join("no_text_models");
+        let back = Prior::load(&path, &no_text, &Device::Cpu).unwrap();
+        assert!(matches!(&back.encoder, ConditionEncoder::Vocabulary(v) if *v == encoder));
         assert_eq!(back.mdm.config(), prior.mdm.config());
         assert_eq!(back.mean_std.std().to_vec1::<f32>().unwrap()[5], 2.0);
         assert_eq!(back.root_decode, RootDecode::Velocity, "the default decode");
@@ -316,11 +344,37 @@ mod tests {
         let damaged = dir.path().join("damaged.safetensors");
         Prior::write(&damaged, &named, prior.mdm.config(), &prior.encoder, &prior.mean_std, prior.rest.as_ref())
             .unwrap();
-        let err = Prior::load(&damaged, &Device::Cpu).unwrap_err().to_string();
+        let err = Prior::load(&damaged, &no_text, &Device::Cpu).unwrap_err().to_string();
         assert!(err.contains(&format!("tensor `{name}` has 1 of")) && err.contains("damaged"), "{err}");
 
         std::fs::write(&path, b"not a prior").unwrap();
-        assert!(Prior::load(&path, &Device::Cpu).unwrap_err().to_string().contains("prior.safetensors"));
-        assert!(Prior::load(&dir.path().join("missing.safetensors"), &Device::Cpu).is_err());
+        assert!(Prior::load(&path, &no_text, &Device::Cpu).unwrap_err().to_string().contains("prior.safetensors"));
+        assert!(Prior::load(&dir.path().join("missing.safetensors"), &no_text, &Device::Cpu).is_err());
+    }
+
+    /// A sentence-conditioned prior names its encoder, loads it from the text models folder,
+    /// and says which encoder and folder are missing when they are.
+    #[test]
+    fn a_sentence_encoder_prior_names_its_encoder_and_finds_it_in_the_text_models() {
+        let text_models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/text");
+        let encoder = ConditionEncoder::sentence(MINILM_NAME, &text_models, &Device::Cpu).unwrap();
+        let cfg =
+            MdmConfig { latent_dim: 16, ff_size: 32, num_layers: 1, num_heads: 2, text_dim: 384, ..MdmConfig::small() };
+        let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
+        let mean_std = MeanStd::from_vecs(vec![0.0; 263], vec![1.0; 263], &Device::Cpu).unwrap();
+        let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::Velocity, rest: None };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("prior.safetensors");
+        prior.save(&path).unwrap();
+        let meta = read_metadata(&std::fs::read(&path).unwrap()).unwrap();
+        assert_eq!(meta.get(SENTENCE_KEY).map(String::as_str), Some(MINILM_NAME));
+        assert!(!meta.contains_key(VOCABULARY_KEY));
+        let back = Prior::load(&path, &text_models, &Device::Cpu).unwrap();
+        let a = back.encode_text(&["a person walks sideways to the left"], &Device::Cpu).unwrap();
+        let b = prior.encode_text(&["a person walks sideways to the left"], &Device::Cpu).unwrap();
+        assert_eq!(a.dims(), &[1, 384]);
+        assert_eq!(crate::testing::max_abs_diff(&a, &b).unwrap(), 0.0);
+        let err = Prior::load(&path, dir.path(), &Device::Cpu).unwrap_err().to_string();
+        assert!(err.contains(MINILM_NAME) && err.contains(&dir.path().display().to_string()), "{err}");
     }
 }

@@ -14,7 +14,9 @@ pub fn load_program(path: &Path) -> anyhow::Result<TaskProgram> {
     Ok(agent::plan::plan_from_file(path)?.program)
 }
 
-/// Loads the trained prior at `path` onto `device`.
+/// Loads the trained prior at `path` onto `device`, its sentence encoder (if it has one) from the
+/// shipped text models.
 pub fn load_prior(path: &Path, device: &Device) -> anyhow::Result<Prior> {
-    Prior::load(path, device).with_context(|| format!("loading the prior {}", path.display()))
+    Prior::load(path, &crate::paths::text_models(), device)
+        .with_context(|| format!("loading the prior {}", path.display()))
 }

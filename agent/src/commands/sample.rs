@@ -61,11 +61,12 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
     let mut prior = super::load::load_prior(&args.prior, &device)?;
     prior.root_decode = args.root_decode;
-    let heard = prior.encoder.known_words(&args.prompt);
-    if heard.is_empty() {
-        eprintln!("note: the prior knows none of the words of {:?}; sampling unconditionally", args.prompt);
-    } else {
-        eprintln!("the prior hears: {}", heard.join(" "));
+    match prior.encoder.heard_words(&args.prompt) {
+        Some(heard) if heard.is_empty() => {
+            eprintln!("note: the prior knows none of the words of {:?}; sampling unconditionally", args.prompt)
+        }
+        Some(heard) => eprintln!("the prior hears: {}", heard.join(" ")),
+        None => {}
     }
     let request = Sampling {
         prompt: &args.prompt,

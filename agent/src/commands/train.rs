@@ -1,4 +1,6 @@
-//! `mogen train`: train the motion prior on a database.
+//! `mogen train`: train the motion prior on the corpus (its train split, captions through the
+//! sentence encoder, a validation loss on its validation split) or on a database of a user's
+//! own labelled clips.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -6,18 +8,34 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use motion_core::corpus::{file as corpus_file, Split};
 use motion_core::database::MotionDatabase;
 use motion_core::model::{MdmConfig, Prediction};
-use motion_core::training::{TrainConfig, Trainer};
+use motion_core::text::{ConditionEncoder, MINILM_NAME};
+use motion_core::training::{TrainConfig, Trainer, TrainingSet};
 
 use crate::paths;
 
 #[derive(Debug, Args)]
 pub struct TrainArgs {
-    /// Database built by `mogen data build`.
-    #[arg(long, default_value_os_t = paths::default_database())]
-    database: PathBuf,
-    /// Where the trained prior (EMA weights, vocabulary, Mean/Std) is written.
+    /// Motion corpus to train on: its train split, every window's captions encoded by the
+    /// sentence encoder; the validation split gives the validation loss.
+    #[arg(long, default_value_os_t = paths::default_corpus(), conflicts_with = "database")]
+    corpus: PathBuf,
+    /// Train on a database of your own labelled clips (built by `mogen data build`) instead of
+    /// the corpus, conditioned on a vocabulary of the labels' words; no validation loss.
+    #[arg(long)]
+    database: Option<PathBuf>,
+    /// Folder of the sentence encoders (one folder per encoder) for corpus training.
+    #[arg(long, default_value_os_t = paths::text_models())]
+    text_models: PathBuf,
+    /// Steps between validation losses (EMA weights, fixed batches of the validation split).
+    #[arg(long, default_value_t = 500)]
+    validate_every: usize,
+    /// Batches per validation loss.
+    #[arg(long, default_value_t = 16)]
+    validation_batches: usize,
+    /// Where the trained prior (EMA weights, text encoder, Mean/Std) is written.
     #[arg(long, short, default_value = "out/prior.safetensors")]
     out: PathBuf,
     /// Resumable checkpoint file (written every --checkpoint-every steps; resumed if present).
@@ -61,6 +79,10 @@ pub struct TrainArgs {
     /// Weight of the planted-foot loss ((m/s)²; 0 = off).
     #[arg(long, default_value_t = TrainConfig::default().foot_contact_weight)]
     foot_contact_weight: f64,
+    /// Stop after this step (a checkpoint is written there) while the learning-rate schedule
+    /// stays --steps long: a long run done in pieces, each resumed from the checkpoint.
+    #[arg(long)]
+    stop_after: Option<usize>,
     /// Steps between checkpoints.
     #[arg(long, default_value_t = TrainConfig::default().checkpoint_every)]
     checkpoint_every: usize,
@@ -86,7 +108,8 @@ pub struct TrainArgs {
     /// x̂0 stays close to a lightly noised input).
     #[arg(long, default_value_t = MdmConfig::small().prediction)]
     prediction: Prediction,
-    /// Write the losses of every step as CSV (step,loss,velocity,foot_contact,lr,frames,seconds).
+    /// Write the losses of every step as CSV
+    /// (step,loss,velocity,foot_contact,lr,frames,seconds,validation; validation on its steps only).
     #[arg(long)]
     loss_csv: Option<PathBuf>,
 }
@@ -100,8 +123,16 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.shards > 1 && std::env::var_os("CANDLE_NUM_THREADS").is_none() {
         std::env::set_var("CANDLE_NUM_THREADS", "1");
     }
-    let db = MotionDatabase::load(&args.database)
-        .with_context(|| format!("reading {} (build it with `mogen data build`)", args.database.display()))?;
+    let device = candle_core::Device::Cpu;
+    let (data, held_out) = match &args.database {
+        Some(path) => {
+            let db = MotionDatabase::load(path)
+                .with_context(|| format!("reading {} (build it with `mogen data build`)", path.display()))?;
+            let defaults = TrainConfig::default();
+            (TrainingSet::from_database(&db, defaults.min_frames, defaults.balance_labels, &device)?, None)
+        }
+        None => corpus_sets(&args, &device)?,
+    };
     let small = MdmConfig::small();
     let model = MdmConfig {
         latent_dim: args.latent_dim.unwrap_or(small.latent_dim),
@@ -128,17 +159,17 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         shards: args.shards,
         ..TrainConfig::default()
     };
-    let device = candle_core::Device::Cpu;
-    let mut trainer = Trainer::new(&db, model, config.clone(), &device).context("setting up training")?;
+    let mut trainer = Trainer::new(data, model, config.clone(), &device).context("setting up training")?;
     if args.checkpoint.exists() {
         let state = trainer.resume(&args.checkpoint).context("resuming from the checkpoint")?;
         eprintln!("resumed {} at step {}", args.checkpoint.display(), state.step);
     }
     eprintln!(
-        "training {} parameters on {} windows ({} labels), {} steps of batch {}",
+        "training {} parameters on {:.2} h of motion ({} sequences, {} captions), {} steps of batch {}",
         trainer.model_config().parameter_count(),
-        db.windows().len(),
-        db.labels().len(),
+        trainer.data().seconds() / 3600.0,
+        trainer.data().len(),
+        trainer.data().captions(),
         config.steps,
         config.batch_size
     );
@@ -157,7 +188,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("opening {}", p.display()))?;
             if !exists {
                 use std::io::Write;
-                writeln!(f, "step,loss,velocity,foot_contact,lr,frames,seconds")?;
+                writeln!(f, "step,loss,velocity,foot_contact,lr,frames,seconds,validation")?;
             }
             Some(f)
         }
@@ -165,7 +196,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     };
     let start = Instant::now();
     let mut smoothed: Option<f64> = None;
-    trainer.run(Some(&args.checkpoint), |r| {
+    trainer.run(args.stop_after, Some(&args.checkpoint), |r, trainer| {
         let s = smoothed.map_or(r.loss, |s| 0.98 * s + 0.02 * r.loss);
         smoothed = Some(s);
         bar.set_position(r.step as u64);
@@ -182,23 +213,72 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 start.elapsed().as_secs_f64()
             );
         }
+        let validation = match &held_out {
+            Some(set)
+                if r.step % args.validate_every.max(1) == 0 || r.step == r.steps || Some(r.step) == args.stop_after =>
+            {
+                let loss = trainer.validation_loss(set, args.validation_batches, VALIDATION_SEED)?;
+                let line = format!("step {}: validation loss {loss:.4}", r.step);
+                if bar.is_hidden() {
+                    eprintln!("{line}");
+                } else {
+                    bar.println(line);
+                }
+                Some(loss)
+            }
+            _ => None,
+        };
         if let Some(f) = csv.as_mut() {
             use std::io::Write;
             let _ = writeln!(
                 f,
-                "{},{},{},{},{},{},{:.2}",
+                "{},{},{},{},{},{},{:.2},{}",
                 r.step,
                 r.loss,
                 r.velocity,
                 r.foot_contact,
                 r.lr,
                 r.frames,
-                start.elapsed().as_secs_f64()
+                start.elapsed().as_secs_f64(),
+                validation.map(|v| v.to_string()).unwrap_or_default()
             );
         }
+        Ok(())
     })?;
     bar.finish();
-    trainer.save_prior(&args.out, &db).context("writing the prior")?;
+    trainer.save_prior(&args.out).context("writing the prior")?;
     println!("wrote {} after {:.0} s", args.out.display(), start.elapsed().as_secs_f64());
     Ok(())
+}
+
+/// Seed of the validation batches: the same crops, timesteps and noise at every step and in
+/// every run, so validation losses compare across steps and model sizes.
+const VALIDATION_SEED: u64 = 20_261_127;
+
+/// The corpus's train split (with its captions encoded) and its validation split, normalised
+/// with the train split's statistics.
+fn corpus_sets(args: &TrainArgs, device: &candle_core::Device) -> anyhow::Result<(TrainingSet, Option<TrainingSet>)> {
+    let corpus =
+        corpus_file::load(&args.corpus).with_context(|| format!("reading the corpus {}", args.corpus.display()))?;
+    let encoder = ConditionEncoder::sentence(MINILM_NAME, &args.text_models, device)
+        .with_context(|| format!("loading the sentence encoder from {}", args.text_models.display()))?;
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut sets = Vec::new();
+    for split in [Split::Train, Split::Validation] {
+        bar.set_message(format!("encoding the {} captions", split.name()));
+        let mean_std = sets.first().map(TrainingSet::mean_std);
+        let set = TrainingSet::from_corpus(&corpus, split, encoder.clone(), mean_std, device, |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        })?;
+        sets.push(set);
+    }
+    bar.finish_and_clear();
+    let held_out = sets.pop();
+    let train = sets.pop().context("no train split")?;
+    Ok((train, held_out))
 }

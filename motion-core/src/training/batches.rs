@@ -1,107 +1,399 @@
-//! Random training batches: label-balanced windows, one crop length per batch.
+//! What the trainer learns from ([`TrainingSet`]) and the random batches drawn from it.
+//!
+//! A training set is a list of normalised 263-d feature sequences, the captions of their
+//! stretches as rows of one table of condition vectors, and what ships with the prior trained
+//! on it (the text encoder, the normalisation, the rest skeleton). Two sources:
+//! - a [`MotionDatabase`]: every window a sequence with its one label, a
+//!   [`VocabularyEncoder`] over the labels, batches balanced over labels;
+//! - the [`Corpus`]: every clip of a split and its left/right mirrored copy a sequence, each of
+//!   its 6 s windows a captioned stretch with all its phrasings (mirrored copies with "left" and
+//!   "right" swapped), encoded by a sentence encoder; batches drawn uniformly over all crops.
+//!
+//! A crop takes the captions of the stretch that holds its middle frame: a crop is at most
+//! [`TrainConfig::max_frames`] (9.8 s) long and windows start every 2 s, so the caption
+//! describes the crop's central seconds.
+
+use std::collections::BTreeMap;
 
 use candle_core::{Device, Tensor};
 use rand::Rng;
 
 use super::{TrainConfig, TrainError};
-use crate::database::{MotionDatabase, Window};
-use crate::representation::FEATURE_DIM;
+use crate::corpus::{Corpus, Split};
+use crate::database::{mirror_label, MotionDatabase};
+use crate::motion::mirror;
+use crate::representation::{extract_features, FeatureFrame, MeanStd, RestSkeleton, FEATURE_DIM};
+use crate::skeleton::rest_bone_lengths;
 use crate::text::vocabulary::VocabularyEncoder;
-use crate::text::TextEncoder;
+use crate::text::{ConditionEncoder, TextEncoder};
+
+/// Captions encoded per call of the text encoder.
+const ENCODE_BATCH: usize = 256;
 
 /// A batch of normalised crops with their condition vectors.
 #[derive(Debug, Clone)]
 pub struct Batch {
     /// `[batch, frames, 263]`, normalised.
     pub x0: Tensor,
-    /// `[batch, text_dim]`, the labels encoded.
+    /// `[batch, text_dim]`, the captions encoded.
     pub text: Tensor,
 }
 
-/// Draws batches from a database.
-pub struct BatchSampler {
-    /// Normalised features of every window, `[frames, 263]` each, with its label's row.
-    windows: Vec<(Tensor, usize)>,
-    /// Window indices per label.
-    by_label: Vec<Vec<usize>>,
-    /// Encoded labels `[labels, text_dim]`.
-    label_text: Tensor,
-    batch_size: usize,
-    min_frames: usize,
-    max_frames: usize,
-    balance: bool,
+/// One normalised feature sequence and the captions of its stretches.
+#[derive(Debug, Clone)]
+struct Sequence {
+    /// `[frames, 263]`, normalised.
+    features: Tensor,
+    /// `(first frame, rows of the condition table)` of each captioned stretch, by first frame;
+    /// the first starts at frame 0.
+    captions: Vec<(usize, Vec<u32>)>,
+    /// Balancing group (the label of a database window).
+    group: usize,
 }
 
-impl BatchSampler {
-    /// Normalises every window once, up front.
-    pub fn new(
+impl Sequence {
+    fn frames(&self) -> usize {
+        self.features.dims()[0]
+    }
+
+    /// The condition rows of the stretch holding `frame`.
+    fn captions_at(&self, frame: usize) -> &[u32] {
+        let i = self.captions.partition_point(|(start, _)| *start <= frame).saturating_sub(1);
+        &self.captions[i].1
+    }
+}
+
+/// What the trainer learns from; see the [module doc](self).
+#[derive(Debug, Clone)]
+pub struct TrainingSet {
+    sequences: Vec<Sequence>,
+    /// Condition vectors `[rows, text_dim]`.
+    text: Tensor,
+    encoder: ConditionEncoder,
+    mean_std: MeanStd,
+    rest: Option<RestSkeleton>,
+    /// Sequence indices per balancing group (groups with no sequence left out).
+    groups: Vec<Vec<usize>>,
+    /// Draw groups uniformly (a database's labels) instead of crops uniformly (the corpus).
+    balance: bool,
+    /// Seconds of motion, mirrored copies included.
+    seconds: f64,
+}
+
+impl TrainingSet {
+    /// Every window of `db` of at least `min_frames` frames, labelled, normalised with the
+    /// database's statistics; batches are label-balanced when `balance`.
+    pub fn from_database(
         db: &MotionDatabase,
-        encoder: &VocabularyEncoder,
-        config: &TrainConfig,
+        min_frames: usize,
+        balance: bool,
         device: &Device,
     ) -> Result<Self, TrainError> {
         let labels = db.labels();
-        let label_text = encoder.encode(&labels.iter().map(String::as_str).collect::<Vec<_>>(), device)?;
-        let mut by_label = vec![Vec::new(); labels.len()];
-        let mut windows = Vec::new();
-        let usable: Vec<&Window> = db.windows().iter().filter(|w| w.frames >= config.min_frames).collect();
-        for w in usable {
+        let vocabulary = VocabularyEncoder::from_labels(labels.iter().map(String::as_str));
+        let text = vocabulary.encode(&labels.iter().map(String::as_str).collect::<Vec<_>>(), device)?;
+        let mean_std = db.mean_std().to_device(device)?;
+        let mut sequences = Vec::new();
+        for w in db.windows().iter().filter(|w| w.frames >= min_frames) {
             let label = labels
                 .binary_search_by(|l| l.as_str().cmp(db.label(w)))
                 .map_err(|_| TrainError::Data(format!("window {w:?} has a label missing from the label list")))?;
-            let x = db.mean_std().to_device(device)?.normalize(&db.window_tensor(w, device)?)?;
-            by_label[label].push(windows.len());
-            windows.push((x, label));
+            let features = mean_std.normalize(&db.window_tensor(w, device)?)?;
+            sequences.push(Sequence { features, captions: vec![(0, vec![label as u32])], group: label });
         }
-        by_label.retain(|v| !v.is_empty());
-        if windows.is_empty() {
-            return Err(TrainError::Data(format!("no window has at least {} frames", config.min_frames)));
-        }
-        if config.min_frames > config.max_frames || config.batch_size == 0 {
-            return Err(TrainError::Data("need batch_size > 0 and min_frames <= max_frames".into()));
-        }
-        Ok(Self {
-            windows,
-            by_label,
-            label_text,
-            batch_size: config.batch_size,
-            min_frames: config.min_frames,
-            max_frames: config.max_frames,
-            balance: config.balance_labels,
-        })
+        let seconds = db.total_frames() as f64 / crate::skeleton::FPS;
+        Self::assemble(
+            sequences,
+            text,
+            ConditionEncoder::Vocabulary(vocabulary),
+            mean_std,
+            db.rest_skeleton()?,
+            balance,
+            seconds,
+        )
     }
 
-    /// One batch: a crop length uniform in [min, max] frames, then windows (label-balanced if
-    /// configured) long enough for it, each cropped at a random offset.
-    pub fn sample(&self, rng: &mut impl Rng) -> Result<Batch, TrainError> {
-        let frames = rng.random_range(self.min_frames..=self.max_frames);
-        let long_enough: Vec<Vec<usize>> = self
-            .by_label
+    /// The clips of `split` and their mirrored copies, each window's captions encoded by
+    /// `encoder`; normalised with `mean_std` or, when `None`, with the statistics of these clips
+    /// (give the training set's for a validation set). `progress(done, total)` follows the
+    /// encoding of the captions, the slow part (about 1 ms per caption on 2 cores).
+    pub fn from_corpus(
+        corpus: &Corpus,
+        split: Split,
+        encoder: ConditionEncoder,
+        mean_std: Option<&MeanStd>,
+        device: &Device,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<Self, TrainError> {
+        let mut windows_of: Vec<Vec<usize>> = vec![Vec::new(); corpus.clips.len()];
+        for (i, w) in corpus.windows.iter().enumerate() {
+            windows_of[w.clip].push(i);
+        }
+        let mut rows: BTreeMap<String, u32> = BTreeMap::new();
+        let mut raw: Vec<(Vec<FeatureFrame>, Vec<(usize, Vec<u32>)>)> = Vec::new();
+        for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == split) {
+            let poses = corpus.clip_joints(clip);
+            for mirrored in [false, true] {
+                let poses = if mirrored { mirror(poses) } else { poses.to_vec() };
+                let extracted = extract_features(&poses)
+                    .map_err(|e| TrainError::Data(format!("corpus clip {}: {e}", clip.name)))?;
+                let mut captions = Vec::new();
+                for &w in &windows_of[index] {
+                    let window = &corpus.windows[w];
+                    let ids = window
+                        .captions
+                        .iter()
+                        .map(|c| {
+                            let caption = if mirrored { mirror_label(c) } else { c.clone() };
+                            let next = rows.len() as u32;
+                            *rows.entry(caption).or_insert(next)
+                        })
+                        .collect();
+                    captions.push((window.start, ids));
+                }
+                captions.sort_by_key(|(start, _)| *start);
+                if let Some(first) = captions.first_mut() {
+                    first.0 = 0;
+                    raw.push((extracted.features, captions));
+                }
+            }
+        }
+        if raw.is_empty() {
+            return Err(TrainError::Data(format!("the corpus has no {} clip", split.name())));
+        }
+        let mean_std = match mean_std {
+            Some(m) => m.to_device(device)?,
+            None => MeanStd::from_frames(raw.iter().flat_map(|(f, _)| f))
+                .map_err(|e| TrainError::Data(e.to_string()))?
+                .to_device(device)?,
+        };
+        let frames: usize = raw.iter().map(|(f, _)| f.len()).sum();
+        let mut sequences = Vec::with_capacity(raw.len());
+        for (features, captions) in raw {
+            let n = features.len();
+            let flat: Vec<f32> = features.into_iter().flatten().collect();
+            let features = mean_std.normalize(&Tensor::from_vec(flat, (n, FEATURE_DIM), device)?)?;
+            sequences.push(Sequence { features, captions, group: 0 });
+        }
+        let mut texts: Vec<(u32, String)> = rows.into_iter().map(|(caption, row)| (row, caption)).collect();
+        texts.sort_by_key(|(row, _)| *row);
+        let mut encoded = Vec::with_capacity(texts.len().div_ceil(ENCODE_BATCH));
+        for (k, chunk) in texts.chunks(ENCODE_BATCH).enumerate() {
+            progress(k * ENCODE_BATCH, texts.len());
+            encoded.push(encoder.encode(&chunk.iter().map(|(_, c)| c.as_str()).collect::<Vec<_>>(), device)?);
+        }
+        progress(texts.len(), texts.len());
+        let text = Tensor::cat(&encoded, 0)?;
+        let rest = Some(RestSkeleton { bone_lengths_m: rest_bone_lengths() });
+        Self::assemble(sequences, text, encoder, mean_std, rest, false, frames as f64 / crate::skeleton::FPS)
+    }
+
+    fn assemble(
+        sequences: Vec<Sequence>,
+        text: Tensor,
+        encoder: ConditionEncoder,
+        mean_std: MeanStd,
+        rest: Option<RestSkeleton>,
+        balance: bool,
+        seconds: f64,
+    ) -> Result<Self, TrainError> {
+        if sequences.is_empty() {
+            return Err(TrainError::Data("no sequence to train on".into()));
+        }
+        let mut groups: Vec<Vec<usize>> = vec![Vec::new(); sequences.iter().map(|s| s.group + 1).max().unwrap_or(0)];
+        for (i, s) in sequences.iter().enumerate() {
+            groups[s.group].push(i);
+        }
+        groups.retain(|g| !g.is_empty());
+        Ok(Self { sequences, text, encoder, mean_std, rest, groups, balance, seconds })
+    }
+
+    /// The text encoder whose vectors the condition table holds.
+    pub fn encoder(&self) -> &ConditionEncoder {
+        &self.encoder
+    }
+
+    /// Normalisation statistics of the features.
+    pub fn mean_std(&self) -> &MeanStd {
+        &self.mean_std
+    }
+
+    /// Bone lengths of the motions.
+    pub fn rest(&self) -> Option<&RestSkeleton> {
+        self.rest.as_ref()
+    }
+
+    /// Number of sequences.
+    pub fn len(&self) -> usize {
+        self.sequences.len()
+    }
+
+    /// Whether there is no sequence (never true of a built set).
+    pub fn is_empty(&self) -> bool {
+        self.sequences.is_empty()
+    }
+
+    /// Distinct captions (rows of the condition table).
+    pub fn captions(&self) -> usize {
+        self.text.dims()[0]
+    }
+
+    /// Seconds of motion, mirrored copies included.
+    pub fn seconds(&self) -> f64 {
+        self.seconds
+    }
+
+    /// One batch: a crop length uniform in `[min_frames, max_frames]` (shortened to the longest
+    /// sequence when none is long enough), then `batch_size` crops of sequences at least that
+    /// long (a group drawn uniformly, then a sequence of it, when balancing; otherwise a crop
+    /// drawn uniformly among all crops of that length), each at a random offset, with one of the
+    /// phrasings of its middle frame's stretch.
+    pub fn sample(&self, config: &TrainConfig, rng: &mut impl Rng) -> Result<Batch, TrainError> {
+        if config.min_frames > config.max_frames || config.batch_size == 0 || config.min_frames < 2 {
+            return Err(TrainError::Data("need batch_size > 0 and 2 <= min_frames <= max_frames".into()));
+        }
+        let longest = self.sequences.iter().map(Sequence::frames).max().unwrap_or(0);
+        if longest < config.min_frames {
+            return Err(TrainError::Data(format!("no sequence has at least {} frames", config.min_frames)));
+        }
+        let frames = rng.random_range(config.min_frames..=config.max_frames).min(longest);
+        let long_enough = |i: &usize| self.sequences[*i].frames() >= frames;
+        let pools: Vec<Vec<usize>> = if self.balance {
+            self.groups.iter().map(|g| g.iter().copied().filter(long_enough).collect::<Vec<_>>()).collect()
+        } else {
+            vec![(0..self.sequences.len()).filter(long_enough).collect()]
+        };
+        let pools: Vec<&Vec<usize>> = pools.iter().filter(|p| !p.is_empty()).collect();
+        // Crops per sequence of the single pool, for drawing crops uniformly.
+        let cumulative: Vec<usize> = pools[0]
             .iter()
-            .map(|ids| ids.iter().copied().filter(|&i| self.windows[i].0.dims()[0] >= frames).collect::<Vec<_>>())
-            .filter(|ids: &Vec<usize>| !ids.is_empty())
+            .scan(0, |sum, &i| {
+                *sum += self.sequences[i].frames() - frames + 1;
+                Some(*sum)
+            })
             .collect();
-        // Fall back to the shortest crop every window can give when none is long enough.
-        let (frames, pools) =
-            if long_enough.is_empty() { (self.min_frames, self.by_label.clone()) } else { (frames, long_enough) };
-        let all: Vec<usize> = pools.iter().flatten().copied().collect();
-        let mut crops = Vec::with_capacity(self.batch_size);
-        let mut rows = Vec::with_capacity(self.batch_size);
-        for _ in 0..self.batch_size {
+        let mut crops = Vec::with_capacity(config.batch_size);
+        let mut rows = Vec::with_capacity(config.batch_size);
+        for _ in 0..config.batch_size {
             let i = if self.balance {
-                let pool = &pools[rng.random_range(0..pools.len())];
+                let pool = pools[rng.random_range(0..pools.len())];
                 pool[rng.random_range(0..pool.len())]
             } else {
-                all[rng.random_range(0..all.len())]
+                let crop = rng.random_range(0..*cumulative.last().unwrap_or(&1));
+                pools[0][cumulative.partition_point(|&c| c <= crop)]
             };
-            let (x, label) = &self.windows[i];
-            let offset = rng.random_range(0..=x.dims()[0] - frames);
-            crops.push(x.narrow(0, offset, frames)?);
-            rows.push(*label as u32);
+            let sequence = &self.sequences[i];
+            let offset = rng.random_range(0..=sequence.frames() - frames);
+            crops.push(sequence.features.narrow(0, offset, frames)?);
+            let phrasings = sequence.captions_at(offset + frames / 2);
+            rows.push(phrasings[rng.random_range(0..phrasings.len())]);
         }
-        let ids = Tensor::from_vec(rows, self.batch_size, self.label_text.device())?;
-        let x0 = Tensor::stack(&crops, 0)?;
-        debug_assert_eq!(x0.dims()[2], FEATURE_DIM);
-        Ok(Batch { x0, text: self.label_text.index_select(&ids, 0)? })
+        let ids = Tensor::from_vec(rows, config.batch_size, self.text.device())?;
+        Ok(Batch { x0: Tensor::stack(&crops, 0)?, text: self.text.index_select(&ids, 0)? })
+    }
+}
+
+#[cfg(test)]
+pub(super) mod tests {
+    use super::*;
+    use crate::corpus::tags::MotionTags;
+    use crate::corpus::{CorpusClip, CorpusWindow, Source};
+    use crate::skeleton::{rest_pose, Pose};
+    use rand::rngs::StdRng;
+    use rand::SeedableRng;
+
+    /// A corpus of two 200-frame clips (the first sways while drifting to +x, the second sways
+    /// in place) in the given splits, windows every 40 frames captioned
+    /// "person <start> walks to the left" and "person <start> walks slowly".
+    pub(crate) fn two_clip_corpus(splits: [Split; 2]) -> Corpus {
+        let mut corpus =
+            Corpus { clips: Vec::new(), joints: Vec::new(), windows: Vec::new(), drops: Default::default() };
+        for (c, split) in splits.into_iter().enumerate() {
+            let offset = corpus.joints.len();
+            let poses: Vec<Pose> = (0..200)
+                .map(|t| {
+                    let step = 0.02 * (t as f64) * (1 - c) as f64;
+                    let swing = 0.1 * (t as f64 * 0.3).sin();
+                    rest_pose().map(|v| glam::DVec3::new(v.x + step, v.y, v.z + swing * v.y))
+                })
+                .collect();
+            for (start, frames) in crate::corpus::window_starts(poses.len()) {
+                corpus.windows.push(CorpusWindow {
+                    clip: c,
+                    start,
+                    frames,
+                    tags: MotionTags::measure(&poses[start..start + frames]),
+                    captions: vec![format!("person {start} walks to the left"), format!("person {start} walks slowly")],
+                });
+            }
+            corpus.joints.extend(poses);
+            corpus.clips.push(CorpusClip {
+                name: format!("clip{c}"),
+                source: Source::Cmu,
+                take: format!("0{c}_01"),
+                subject: format!("0{c}"),
+                description: String::new(),
+                split,
+                take_frame: 0,
+                offset,
+                frames: 200,
+            });
+        }
+        corpus
+    }
+
+    pub(crate) fn vocabulary() -> ConditionEncoder {
+        ConditionEncoder::Vocabulary(VocabularyEncoder::from_labels(["walk left right"]))
+    }
+
+    #[test]
+    fn a_corpus_split_gives_its_clips_and_their_mirrored_copies_with_every_phrasing() {
+        let corpus = two_clip_corpus([Split::Train, Split::Test]);
+        let set = TrainingSet::from_corpus(&corpus, Split::Train, vocabulary(), None, &Device::Cpu, |_, _| {}).unwrap();
+        assert_eq!(set.len(), 2, "clip 0 and its mirror; the test clip is left out");
+        // Windows at 0, 40 and 80 (the last ending at frame 200) × 2 phrasings × (as is,
+        // mirrored), the phrasing without a side shared by both copies.
+        let windows = crate::corpus::window_starts(200).len();
+        assert_eq!(set.captions(), windows * 3);
+        assert_eq!(set.sequences[0].frames(), 199, "features have one frame fewer than poses");
+        assert!((set.seconds() - 2.0 * 199.0 / 20.0).abs() < 1e-9);
+        // A crop's captions are those of the window holding its middle frame.
+        assert_eq!(set.sequences[0].captions_at(0), set.sequences[0].captions[0].1.as_slice());
+        assert_eq!(set.sequences[0].captions_at(41), set.sequences[0].captions[1].1.as_slice());
+        // The mirrored copy's "left" caption is the original's with "right".
+        let original = &set.sequences[0].captions[0].1;
+        let mirrored = &set.sequences[1].captions[0].1;
+        assert_ne!(original[0], mirrored[0]);
+        assert_eq!(original[1], mirrored[1]);
+        let validation =
+            TrainingSet::from_corpus(&corpus, Split::Test, vocabulary(), Some(set.mean_std()), &Device::Cpu, |_, _| {})
+                .unwrap();
+        assert_eq!(
+            validation.mean_std().std().to_vec1::<f32>().unwrap(),
+            set.mean_std().std().to_vec1::<f32>().unwrap(),
+            "a held-out set is normalised with the training set's statistics"
+        );
+        let err = TrainingSet::from_corpus(&corpus, Split::Validation, vocabulary(), None, &Device::Cpu, |_, _| {})
+            .unwrap_err();
+        assert!(err.to_string().contains("no validation clip"), "{err}");
+    }
+
+    #[test]
+    fn batches_have_one_crop_length_and_encoded_captions() {
+        let corpus = two_clip_corpus([Split::Train, Split::Train]);
+        let set = TrainingSet::from_corpus(&corpus, Split::Train, vocabulary(), None, &Device::Cpu, |_, _| {}).unwrap();
+        let config = TrainConfig { batch_size: 5, min_frames: 40, max_frames: 300, ..TrainConfig::default() };
+        let mut rng = StdRng::seed_from_u64(1);
+        for _ in 0..5 {
+            let batch = set.sample(&config, &mut rng).unwrap();
+            let (b, frames, f) = batch.x0.dims3().unwrap();
+            assert_eq!((b, f), (5, FEATURE_DIM));
+            assert!((40..=199).contains(&frames));
+            assert_eq!(batch.text.dims(), &[5, set.encoder().dim()]);
+            let norms: Vec<f32> = batch.text.sqr().unwrap().sum(1).unwrap().to_vec1().unwrap();
+            assert!(norms.iter().all(|n| (n - 1.0).abs() < 1e-5), "every crop has a caption: {norms:?}");
+        }
+        let bad = TrainConfig { min_frames: 250, ..config };
+        assert!(set.sample(&bad, &mut rng).unwrap_err().to_string().contains("250 frames"));
     }
 }

@@ -1,12 +1,13 @@
-//! Training the MDM prior on a motion database: x0-prediction MSE on random diffusion steps,
+//! Training the MDM prior on a [`TrainingSet`] (the corpus's captioned clips, or a motion
+//! database's labelled windows): x0-prediction MSE on random diffusion steps,
 //! classifier-free-guidance condition dropout, AdamW with warm-up and cosine decay, EMA
-//! weights, and resumable checkpoints.
+//! weights, a fixed validation loss, and resumable checkpoints.
 
 mod batches;
 mod checkpoint;
 mod geometric;
 
-pub use batches::{Batch, BatchSampler};
+pub use batches::{Batch, TrainingSet};
 pub use checkpoint::TrainState;
 pub use geometric::{GeometricLoss, GeometricTerms, CONTACT_SPEED_M_PER_S};
 
@@ -20,14 +21,13 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::database::MotionDatabase;
 use crate::diffusion::noise::gaussian_from_rng;
 use crate::diffusion::NoiseSchedule;
 use crate::model::{Mdm, MdmConfig, Prediction};
 use crate::optim::AdamW;
 use crate::prior::{Prior, PriorError};
 use crate::representation::{FEATURE_DIM, RIC, ROOT_Y};
-use crate::text::vocabulary::VocabularyEncoder;
+use crate::text::TextEncoder;
 
 /// Training settings; every default is documented on its field.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -54,8 +54,8 @@ pub struct TrainConfig {
     pub min_frames: usize,
     /// Longest crop, frames; default 196.
     pub max_frames: usize,
-    /// Sample labels uniformly instead of by seconds of data; default true (the CMU clips
-    /// would otherwise dominate).
+    /// Sample a database's labels uniformly instead of by seconds of data; default true (its
+    /// longest clips would otherwise dominate). The corpus is always drawn by seconds of data.
     pub balance_labels: bool,
     /// Weight of the four root features (yaw velocity, x/z velocity, height) in the x0 MSE,
     /// relative to 1 for the others; default 1.0 (MDM's plain MSE). 25 matches HumanML3D's
@@ -195,37 +195,33 @@ pub struct Trainer {
     vars: Vec<(String, Var)>,
     ema: Vec<Tensor>,
     optimizer: AdamW,
-    sampler: BatchSampler,
+    data: TrainingSet,
     /// The geometric terms, absent when both of their weights are 0.
     geometric: Option<GeometricLoss>,
     /// Per-feature MSE weights `[263]`, absent when all are 1.
     feature_weights: Option<Tensor>,
-    encoder: VocabularyEncoder,
     schedule: NoiseSchedule,
     step: usize,
     device: Device,
 }
 
 impl Trainer {
-    /// A fresh run. The model's `text_dim` is set to the database's vocabulary size.
+    /// A fresh run on `data`. The model's `text_dim` is set to the width of its text encoder.
     pub fn new(
-        db: &MotionDatabase,
+        data: TrainingSet,
         model_config: MdmConfig,
         config: TrainConfig,
         device: &Device,
     ) -> Result<Self, TrainError> {
-        let labels = db.labels();
-        let encoder = VocabularyEncoder::from_labels(labels.iter().map(String::as_str));
-        let model_config = MdmConfig { text_dim: encoder.words().len(), ..model_config };
+        let model_config = MdmConfig { text_dim: data.encoder().dim(), ..model_config };
         let varmap = VarMap::new();
         let model = Mdm::init_seeded(model_config.clone(), &varmap, DType::F32, device, config.seed)?;
         let vars = named_vars(&varmap, &model)?;
         let ema =
             vars.iter().map(|(_, v)| Ok(v.as_tensor().copy()?.detach())).collect::<candle_core::Result<Vec<_>>>()?;
         let optimizer = AdamW::new(vars.iter().map(|(_, v)| v.clone()).collect(), config.weight_decay)?;
-        let sampler = BatchSampler::new(db, &encoder, &config, device)?;
         let geometric = if config.velocity_weight > 0.0 || config.foot_contact_weight > 0.0 {
-            Some(GeometricLoss::new(db.mean_std().to_device(device)?)?)
+            Some(GeometricLoss::new(data.mean_std().to_device(device)?)?)
         } else {
             None
         };
@@ -248,9 +244,8 @@ impl Trainer {
             vars,
             ema,
             optimizer,
-            sampler,
+            data,
             geometric,
-            encoder,
             schedule: NoiseSchedule::mdm(),
             step: 0,
             device: device.clone(),
@@ -267,13 +262,27 @@ impl Trainer {
         &self.model_config
     }
 
-    /// Runs until `config.steps`, calling `on_step` after each step and writing a checkpoint
-    /// to `checkpoint` every `checkpoint_every` steps and at the end.
-    pub fn run(&mut self, checkpoint: Option<&Path>, mut on_step: impl FnMut(&StepReport)) -> Result<(), TrainError> {
-        while self.step < self.config.steps {
+    /// The data it trains on.
+    pub fn data(&self) -> &TrainingSet {
+        &self.data
+    }
+
+    /// Runs until `config.steps`, or until step `pause` when that comes first (the learning-rate
+    /// schedule stays `config.steps` long, so a paused run resumes as if never stopped), calling
+    /// `on_step` with the trainer after each step (e.g. for a validation loss) and writing a
+    /// checkpoint to `checkpoint` every `checkpoint_every` steps and where it stops; an error of
+    /// `on_step` stops the run.
+    pub fn run(
+        &mut self,
+        pause: Option<usize>,
+        checkpoint: Option<&Path>,
+        mut on_step: impl FnMut(&StepReport, &Self) -> Result<(), TrainError>,
+    ) -> Result<(), TrainError> {
+        let stop = pause.map_or(self.config.steps, |p| p.min(self.config.steps));
+        while self.step < stop {
             let report = self.train_step()?;
-            on_step(&report);
-            let due = self.step % self.config.checkpoint_every.max(1) == 0 || self.step == self.config.steps;
+            on_step(&report, self)?;
+            let due = self.step % self.config.checkpoint_every.max(1) == 0 || self.step == stop;
             if let (Some(path), true) = (checkpoint, due) {
                 self.save_checkpoint(path)?;
             }
@@ -286,7 +295,7 @@ impl Trainer {
         // Every random draw of a step comes from a generator seeded by (seed, step), so a
         // resumed run continues exactly as an uninterrupted one.
         let mut rng = StdRng::seed_from_u64(self.config.seed.wrapping_mul(1_000_003).wrapping_add(self.step as u64));
-        let batch = self.sampler.sample(&mut rng)?;
+        let batch = self.data.sample(&self.config, &mut rng)?;
         let (b, frames) = (batch.x0.dim(0)?, batch.x0.dim(1)?);
         let keep: Vec<f32> =
             (0..b).map(|_| if rng.random::<f64>() < self.config.cond_drop_prob { 0.0 } else { 1.0 }).collect();
@@ -360,13 +369,37 @@ impl Trainer {
         })
     }
 
+    /// The EMA weights with their checkpoint names.
+    fn ema_parameters(&self) -> Vec<(String, Tensor)> {
+        self.vars.iter().zip(&self.ema).map(|((name, _), ema)| (name.clone(), ema.clone())).collect()
+    }
+
     /// Writes the EMA weights as a shippable prior.
-    pub fn save_prior(&self, path: &Path, db: &MotionDatabase) -> Result<(), TrainError> {
-        let params: Vec<(String, Tensor)> =
-            self.vars.iter().zip(&self.ema).map(|((name, _), ema)| (name.clone(), ema.clone())).collect();
-        let rest = db.rest_skeleton()?;
-        Prior::write(path, &params, &self.model_config, &self.encoder, db.mean_std(), rest.as_ref())?;
+    pub fn save_prior(&self, path: &Path) -> Result<(), TrainError> {
+        let data = &self.data;
+        Prior::write(path, &self.ema_parameters(), &self.model_config, data.encoder(), data.mean_std(), data.rest())?;
         Ok(())
+    }
+
+    /// The plain x0 MSE (normalised feature space) of the EMA weights on `batches` batches of
+    /// `held_out` (normalised with the training set's statistics), without dropout or condition
+    /// dropout. The batches, timesteps and noise come from `seed` alone, so the figure is
+    /// comparable across steps, runs and model sizes with the same batch settings.
+    pub fn validation_loss(&self, held_out: &TrainingSet, batches: usize, seed: u64) -> Result<f64, TrainError> {
+        let tensors = self.ema_parameters().into_iter().collect();
+        let vb = candle_nn::VarBuilder::from_tensors(tensors, DType::F32, &self.device);
+        let model = Mdm::new(self.model_config.clone(), vb)?;
+        let mut rng = StdRng::seed_from_u64(seed);
+        let mut sum = 0.0;
+        for _ in 0..batches.max(1) {
+            let batch = held_out.sample(&self.config, &mut rng)?;
+            let t = self.schedule.sample_timesteps(batch.x0.dim(0)?, 0.0, &mut rng, &self.device)?;
+            let noise = gaussian_from_rng(batch.x0.shape(), &mut rng, &self.device)?;
+            let x_t = self.schedule.q_sample(&batch.x0, &t, &noise)?;
+            let x0_hat = model.forward_eval(&x_t, &t, &batch.text)?;
+            sum += f64::from((x0_hat - &batch.x0)?.sqr()?.mean_all()?.to_scalar::<f32>()?);
+        }
+        Ok(sum / batches.max(1) as f64)
     }
 }
 
@@ -479,9 +512,9 @@ fn named_vars(varmap: &VarMap, model: &Mdm) -> Result<Vec<(String, Var)>, TrainE
 mod tests {
     use super::*;
     use crate::database::catalog::Catalog;
-    use crate::database::DatabaseConfig;
+    use crate::database::{DatabaseConfig, MotionDatabase};
 
-    fn tiny_run() -> (MotionDatabase, MdmConfig, TrainConfig) {
+    fn tiny_run() -> (TrainingSet, MdmConfig, TrainConfig) {
         let catalog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/catalog.json");
         let (sources, _) = Catalog::read(&catalog).unwrap().load().unwrap();
         let sources: Vec<_> =
@@ -500,24 +533,31 @@ mod tests {
             checkpoint_every: 2,
             ..TrainConfig::default()
         };
-        (db, model, train)
+        (TrainingSet::from_database(&db, train.min_frames, train.balance_labels, &Device::Cpu).unwrap(), model, train)
     }
 
     #[test]
     fn a_resumed_run_matches_an_uninterrupted_one_and_keeps_no_graph() {
-        let (db, model, train) = tiny_run();
+        let (data, model, train) = tiny_run();
         let dev = Device::Cpu;
-        let mut straight = Trainer::new(&db, model.clone(), train.clone(), &dev).unwrap();
-        straight.run(None, |_| {}).unwrap();
+        let mut straight = Trainer::new(data.clone(), model.clone(), train.clone(), &dev).unwrap();
+        straight.run(None, None, |_, _| Ok(())).unwrap();
 
         let dir = tempfile::tempdir().unwrap();
         let ckpt = dir.path().join("ckpt.safetensors");
-        let mut first = Trainer::new(&db, model.clone(), TrainConfig { steps: 2, ..train.clone() }, &dev).unwrap();
-        first.run(Some(&ckpt), |_| {}).unwrap();
-        let mut resumed = Trainer::new(&db, model, train, &dev).unwrap();
+        // Paused at step 2 of 4: the schedule stays 4 steps long, so the resumed run matches.
+        let mut first = Trainer::new(data.clone(), model.clone(), train.clone(), &dev).unwrap();
+        first.run(Some(2), Some(&ckpt), |_, _| Ok(())).unwrap();
+        assert_eq!(first.step(), 2);
+        let mut resumed = Trainer::new(data.clone(), model, train, &dev).unwrap();
         assert_eq!(resumed.resume(&ckpt).unwrap().step, 2);
         let mut losses = Vec::new();
-        resumed.run(None, |r| losses.push(r.loss)).unwrap();
+        resumed
+            .run(None, None, |r, _| {
+                losses.push(r.loss);
+                Ok(())
+            })
+            .unwrap();
         assert_eq!(losses.len(), 2);
         for ((a, b), (ea, eb)) in straight.vars.iter().zip(&resumed.vars).zip(straight.ema.iter().zip(&resumed.ema)) {
             let d = (a.1.as_tensor() - b.1.as_tensor())
@@ -535,8 +575,8 @@ mod tests {
             assert!(!ea.track_op(), "{}: EMA tensor tracks a graph", a.0);
         }
         let prior_path = dir.path().join("prior.safetensors");
-        resumed.save_prior(&prior_path, &db).unwrap();
-        assert!(Prior::load(&prior_path, &dev).is_ok());
+        resumed.save_prior(&prior_path).unwrap();
+        assert!(Prior::load(&prior_path, dir.path(), &dev).is_ok());
     }
 
     /// Sharding splits the batch, not the objective: without dropout (the only draw made per
@@ -544,16 +584,21 @@ mod tests {
     /// threads does not change a sharded run at all.
     #[test]
     fn shards_give_the_whole_batch_update_on_any_number_of_threads() {
-        let (db, model, train) = tiny_run();
+        let (data, model, train) = tiny_run();
         let model = MdmConfig { dropout: 0.0, ..model };
         let train = TrainConfig { batch_size: 4, steps: 3, ..train };
         let run = |shards: usize, threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
                 let config = TrainConfig { shards, ..train.clone() };
-                let mut trainer = Trainer::new(&db, model.clone(), config, &Device::Cpu).unwrap();
+                let mut trainer = Trainer::new(data.clone(), model.clone(), config, &Device::Cpu).unwrap();
                 let mut losses = Vec::new();
-                trainer.run(None, |r| losses.push(r.loss)).unwrap();
+                trainer
+                    .run(None, None, |r, _| {
+                        losses.push(r.loss);
+                        Ok(())
+                    })
+                    .unwrap();
                 let weights: Vec<Vec<f32>> =
                     trainer.vars.iter().map(|(_, v)| v.as_tensor().flatten_all().unwrap().to_vec1().unwrap()).collect();
                 (losses, weights)
@@ -572,28 +617,28 @@ mod tests {
 
     #[test]
     fn geometric_terms_are_trained_and_reported_unless_switched_off() {
-        let (db, model, train) = tiny_run();
+        let (data, model, train) = tiny_run();
         let dev = Device::Cpu;
         let on = TrainConfig { velocity_weight: 1.0, foot_contact_weight: 0.1, ..train.clone() };
-        let mut on = Trainer::new(&db, model.clone(), on, &dev).unwrap();
+        let mut on = Trainer::new(data.clone(), model.clone(), on, &dev).unwrap();
         let r = on.train_step().unwrap();
         assert!(r.velocity > 0.0 && r.foot_contact >= 0.0, "velocity {} foot contact {}", r.velocity, r.foot_contact);
         let off = TrainConfig { velocity_weight: 0.0, foot_contact_weight: 0.0, ..train };
-        let mut off = Trainer::new(&db, model, off, &dev).unwrap();
+        let mut off = Trainer::new(data.clone(), model, off, &dev).unwrap();
         let r = off.train_step().unwrap();
         assert_eq!((r.velocity, r.foot_contact), (0.0, 0.0));
     }
 
     #[test]
     fn noisier_timesteps_and_corrupted_frames_change_what_the_denoiser_sees() {
-        let (db, model, train) = tiny_run();
+        let (data, model, train) = tiny_run();
         let dev = Device::Cpu;
-        let a = Trainer::new(&db, model.clone(), train.clone(), &dev).unwrap().train_step().unwrap();
+        let a = Trainer::new(data.clone(), model.clone(), train.clone(), &dev).unwrap().train_step().unwrap();
         for (name, config) in [
             ("high-noise fraction", TrainConfig { high_noise_fraction: 1.0, ..train.clone() }),
             ("frame corruption", TrainConfig { frame_corruption: 0.5, ..train.clone() }),
         ] {
-            let b = Trainer::new(&db, model.clone(), config, &dev).unwrap().train_step().unwrap();
+            let b = Trainer::new(data.clone(), model.clone(), config, &dev).unwrap().train_step().unwrap();
             assert!(b.loss.is_finite(), "{name}");
             assert_ne!(a.loss, b.loss, "{name}: other inputs, another x0 MSE");
         }
@@ -601,8 +646,8 @@ mod tests {
 
     #[test]
     fn the_ema_forgets_the_random_initial_weights_within_a_few_steps() {
-        let (db, model, train) = tiny_run();
-        let mut t = Trainer::new(&db, model, TrainConfig { ema_decay: 0.999, ..train }, &Device::Cpu).unwrap();
+        let (data, model, train) = tiny_run();
+        let mut t = Trainer::new(data.clone(), model, TrainConfig { ema_decay: 0.999, ..train }, &Device::Cpu).unwrap();
         let flat = |x: &Tensor| x.flatten_all().unwrap().to_vec1::<f32>().unwrap();
         let init = flat(t.vars[0].1.as_tensor());
         for _ in 0..3 {
@@ -618,10 +663,10 @@ mod tests {
 
     #[test]
     fn loss_weightings_change_the_update_but_not_the_reported_mse() {
-        let (db, model, train) = tiny_run();
+        let (data, model, train) = tiny_run();
         let dev = Device::Cpu;
         let moved = |t: &Trainer| t.vars[0].1.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap();
-        let mut plain = Trainer::new(&db, model.clone(), train.clone(), &dev).unwrap();
+        let mut plain = Trainer::new(data.clone(), model.clone(), train.clone(), &dev).unwrap();
         let a = plain.train_step().unwrap();
         let weighted = [
             ("root weight", TrainConfig { root_weight: 25.0, ..train.clone() }),
@@ -629,16 +674,16 @@ mod tests {
             ("min-SNR", TrainConfig { snr_gamma: 5.0, ..train.clone() }),
         ];
         for (name, config) in weighted {
-            let mut weighted = Trainer::new(&db, model.clone(), config, &dev).unwrap();
+            let mut weighted = Trainer::new(data.clone(), model.clone(), config, &dev).unwrap();
             let b = weighted.train_step().unwrap();
             assert_eq!(a.loss, b.loss, "{name}: the same batch and weights give the same plain MSE");
             assert_ne!(moved(&plain), moved(&weighted), "{name}: the weighted loss must change the step");
         }
         // Velocity prediction: the default weighting is the v-MSE, not the x0 MSE of the same head.
         let velocity = MdmConfig { prediction: Prediction::Velocity, ..model };
-        let mut v_mse = Trainer::new(&db, velocity.clone(), train.clone(), &dev).unwrap();
+        let mut v_mse = Trainer::new(data.clone(), velocity.clone(), train.clone(), &dev).unwrap();
         let a = v_mse.train_step().unwrap();
-        let mut min_snr = Trainer::new(&db, velocity, TrainConfig { snr_gamma: 5.0, ..train }, &dev).unwrap();
+        let mut min_snr = Trainer::new(data.clone(), velocity, TrainConfig { snr_gamma: 5.0, ..train }, &dev).unwrap();
         let b = min_snr.train_step().unwrap();
         assert_eq!(a.loss, b.loss);
         assert_ne!(moved(&v_mse), moved(&min_snr), "the v-MSE must weight the steps differently");
@@ -652,5 +697,41 @@ mod tests {
         assert!((c.lr_at(100) - 1.0).abs() < 1e-12);
         assert!((c.lr_at(1000) - 0.1).abs() < 1e-12);
         assert!(c.lr_at(550) < c.lr_at(300));
+    }
+
+    /// The corpus path end to end: a split's clips train, another split's validate on the
+    /// training statistics; the validation loss depends on its seed only, and the prior written
+    /// names the encoder it was trained with.
+    #[test]
+    fn a_corpus_run_validates_on_held_out_clips_and_writes_its_encoder() {
+        use crate::corpus::Split;
+        let corpus = batches::tests::two_clip_corpus([Split::Train, Split::Validation]);
+        let dev = Device::Cpu;
+        let encoder = batches::tests::vocabulary();
+        let train_set =
+            TrainingSet::from_corpus(&corpus, Split::Train, encoder.clone(), None, &dev, |_, _| {}).unwrap();
+        let held_out =
+            TrainingSet::from_corpus(&corpus, Split::Validation, encoder, Some(train_set.mean_std()), &dev, |_, _| {})
+                .unwrap();
+        let (_, model, train) = tiny_run();
+        let mut trainer = Trainer::new(train_set, model, train, &dev).unwrap();
+        let before = trainer.validation_loss(&held_out, 2, 7).unwrap();
+        assert!(before.is_finite() && before > 0.0);
+        assert_eq!(before, trainer.validation_loss(&held_out, 2, 7).unwrap(), "fixed by the seed");
+        let mut seen = Vec::new();
+        trainer
+            .run(None, None, |r, t| {
+                seen.push((r.step, t.step()));
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(seen, vec![(1, 1), (2, 2), (3, 3), (4, 4)]);
+        assert_ne!(before, trainer.validation_loss(&held_out, 2, 7).unwrap(), "the EMA weights moved");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("prior.safetensors");
+        trainer.save_prior(&path).unwrap();
+        let prior = Prior::load(&path, dir.path(), &dev).unwrap();
+        assert!(matches!(prior.encoder, crate::text::ConditionEncoder::Vocabulary(_)));
+        assert_eq!(prior.rest.map(|r| r.bone_lengths_m), Some(crate::skeleton::rest_bone_lengths()));
     }
 }

@@ -1,5 +1,8 @@
 //! The prior quality report: unconstrained samples per label against the training data, on
-//! the motion metrics, plus a memorisation check (nearest training window).
+//! the motion metrics, plus a memorisation check (nearest training window); and per skill
+//! family against the corpus's held-out capture ([`families`]).
+
+pub mod families;
 
 use candle_core::{Device, Tensor};
 use serde::Serialize;

@@ -1,0 +1,528 @@
+//! Quality per skill family against held-out capture (issue 40, item 4): for each family, samples
+//! of its prompts beside the corpus's held-out (test-split) windows that do the same thing,
+//! decoded the same way, on the motion metrics ([`MetricMeans`]) and on the family's action
+//! detector.
+//!
+//! **Held-out windows of a family** are chosen by what their own motion does (the corpus
+//! tagger's [`MotionTags`] and the caption rule's [`Action`]), plus the take's description for
+//! carrying and sitting, whose motion alone does not say it. The test split's subjects were
+//! never trained on.
+//!
+//! **Detectors** are measurements, not judgements by eye; each says whether one motion does
+//! what its prompt asks (the thresholds are the issue's):
+//! - sideways: the body travels more sideways than forwards (the tagger's travel direction);
+//! - sneak/crouch: the mean pelvis height is at least 15 % below a standing body's;
+//! - jump, hop on one foot: at least 2 frames airborne;
+//! - one-leg balance: one foot more than 10 cm up while the other is down, for 2 s at a stretch;
+//! - sit down: the last second is seated (pelvis low, at knee height, still);
+//! - walk, run, crawl: the caption rule names the same action; walks also travel forwards;
+//! - turns: at least [`TURN_MIN_DEG`](crate::corpus::tags::TURN_MIN_DEG) the asked way.
+//!
+//! Carrying has no detector: nothing in the joints says a hand holds something.
+
+use candle_core::{DType, Device, Tensor};
+use serde::Serialize;
+
+use super::{descriptors, mean_pairwise, nearest_distances, MetricMeans};
+use crate::cleanup::{foot_lock, FootLockConfig};
+use crate::corpus::caption::Action;
+use crate::corpus::skill::Skill;
+use crate::corpus::tags::{standing_pelvis_height, MotionTags, TravelDirection};
+use crate::corpus::{Corpus, Split};
+use crate::diffusion::Guidance;
+use crate::motion::tensor_to_poses;
+use crate::prior::{Prior, PriorError, Sampling};
+use crate::representation::{extract_features, FEATURE_DIM, RIC};
+use crate::skeleton::{Joint, Pose, FPS};
+
+/// A skill family of the report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Family {
+    /// Walking forwards.
+    Walk,
+    /// Running.
+    Run,
+    /// Walking and turning left.
+    TurnLeft,
+    /// Walking and turning right.
+    TurnRight,
+    /// Walking sideways.
+    Sideways,
+    /// Walking crouched.
+    Sneak,
+    /// Jumping with both feet.
+    Jump,
+    /// Hopping on one foot.
+    HopOneFoot,
+    /// Standing on one leg.
+    Balance,
+    /// Carrying something.
+    Carry,
+    /// Sitting down.
+    SitDown,
+    /// Crawling.
+    Crawl,
+}
+
+/// Fraction of a standing body's pelvis height that a crouched walk stays below, at most.
+pub const CROUCH_PELVIS_FRACTION: f64 = 0.85;
+/// Shortest one-leg stance that passes the balance detector, s.
+pub const BALANCE_MIN_S: f64 = 2.0;
+
+impl Family {
+    /// Every family, in report order.
+    pub const ALL: [Family; 12] = [
+        Family::Walk,
+        Family::Run,
+        Family::TurnLeft,
+        Family::TurnRight,
+        Family::Sideways,
+        Family::Sneak,
+        Family::Jump,
+        Family::HopOneFoot,
+        Family::Balance,
+        Family::Carry,
+        Family::SitDown,
+        Family::Crawl,
+    ];
+
+    /// Short name for tables and `--family`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Walk => "walk",
+            Family::Run => "run",
+            Family::TurnLeft => "turn left",
+            Family::TurnRight => "turn right",
+            Family::Sideways => "sideways walk",
+            Family::Sneak => "sneak/crouch walk",
+            Family::Jump => "jump",
+            Family::HopOneFoot => "hop on one foot",
+            Family::Balance => "one-leg balance",
+            Family::Carry => "carry",
+            Family::SitDown => "sit down",
+            Family::Crawl => "crawl",
+        }
+    }
+
+    /// The prompts its samples are drawn for: a caption-like one and a paraphrase in words the
+    /// captions do not use.
+    pub fn prompts(self) -> [&'static str; 2] {
+        match self {
+            Family::Walk => ["a person walks forward", "someone strolls ahead"],
+            Family::Run => ["a person runs forward", "someone jogs ahead quickly"],
+            Family::TurnLeft => ["a person walks and turns left", "someone strolls and veers to their left"],
+            Family::TurnRight => ["a person walks and turns right", "someone strolls and veers to their right"],
+            Family::Sideways => ["a person walks sideways to the left", "a man tiptoes sideways to his right"],
+            Family::Sneak => ["a person sneaks forward crouching", "someone creeps ahead bent low"],
+            Family::Jump => ["a person jumps forward", "someone leaps ahead with both feet"],
+            Family::HopOneFoot => ["a person hops on one foot", "someone bounces along on a single leg"],
+            Family::Balance => ["a person balances on one leg", "someone stands on one foot"],
+            Family::Carry => ["a person carries a heavy box", "someone walks holding a suitcase"],
+            Family::SitDown => ["a person sits down on a chair", "someone takes a seat"],
+            Family::Crawl => ["a person crawls forward on the ground", "someone moves on hands and knees"],
+        }
+    }
+
+    /// Whether a held-out window (its poses and tags) of a take with this description is an
+    /// example of the family.
+    pub fn holds(self, poses: &[Pose], tags: &MotionTags, description: &str) -> bool {
+        let action = Action::of(tags);
+        let straight = tags.turn_left().is_none();
+        match self {
+            Family::Walk => {
+                action == Action::Walk
+                    && straight
+                    && tags.direction == Some(TravelDirection::Forwards)
+                    && !tags.crouched
+            }
+            Family::Run => action == Action::Run,
+            Family::TurnLeft => action == Action::Walk && tags.turn_left() == Some(true),
+            Family::TurnRight => action == Action::Walk && tags.turn_left() == Some(false),
+            Family::Sideways => matches!(action, Action::Walk | Action::Sneak) && sideways(tags),
+            Family::Sneak => action == Action::Sneak,
+            Family::Jump => action == Action::Jump,
+            Family::HopOneFoot => action == Action::HopOneFoot,
+            Family::Balance => action == Action::Balance,
+            Family::Carry => Skill::Carry.named_by(description) && matches!(action, Action::Walk | Action::Stand),
+            Family::SitDown => Skill::Sit.named_by(description) && self.detect(poses) == Some(true),
+            Family::Crawl => action == Action::Crawl,
+        }
+    }
+
+    /// What the detector checks, for the report; `None` where there is none.
+    pub fn detector(self) -> Option<&'static str> {
+        Some(match self {
+            Family::Walk => "walks forwards",
+            Family::Run => "runs",
+            Family::TurnLeft => "turns ≥ 45° left",
+            Family::TurnRight => "turns ≥ 45° right",
+            Family::Sideways => "travels more sideways than forwards",
+            Family::Sneak => "pelvis ≥ 15 % below standing",
+            Family::Jump | Family::HopOneFoot => "airborne ≥ 2 frames",
+            Family::Balance => "one foot up ≥ 2 s",
+            Family::Carry => return None,
+            Family::SitDown => "seated in the last second",
+            Family::Crawl => "crawls",
+        })
+    }
+
+    /// Whether a motion (joints on the floor, 20 fps) passes the family's detector; `None`
+    /// where there is none.
+    pub fn detect(self, poses: &[Pose]) -> Option<bool> {
+        let tags = MotionTags::measure(poses);
+        let action = Action::of(&tags);
+        Some(match self {
+            Family::Walk => action == Action::Walk && tags.direction == Some(TravelDirection::Forwards),
+            Family::Run => action == Action::Run,
+            Family::TurnLeft => tags.turn_left() == Some(true),
+            Family::TurnRight => tags.turn_left() == Some(false),
+            Family::Sideways => sideways(&tags),
+            Family::Sneak => {
+                let pelvis = poses.iter().map(|p| p[Joint::Pelvis.index()].y).sum::<f64>() / poses.len().max(1) as f64;
+                pelvis <= CROUCH_PELVIS_FRACTION * standing_pelvis_height()
+            }
+            Family::Jump | Family::HopOneFoot => tags.airborne(),
+            Family::Balance => tags.one_foot_up_s >= BALANCE_MIN_S,
+            Family::Carry => return None,
+            Family::SitDown => {
+                let last = poses.len().saturating_sub(FPS as usize);
+                MotionTags::measure(&poses[last..]).sitting
+            }
+            Family::Crawl => action == Action::Crawl,
+        })
+    }
+}
+
+fn sideways(tags: &MotionTags) -> bool {
+    matches!(tags.direction, Some(TravelDirection::SidewaysLeft | TravelDirection::SidewaysRight))
+}
+
+/// Share of motions passing a detector (`None` without a detector or without motions).
+fn detected_share(family: Family, motions: &[Vec<Pose>]) -> Option<f64> {
+    let hits: Vec<bool> = motions.iter().filter_map(|m| family.detect(m)).collect();
+    (!hits.is_empty()).then(|| hits.iter().filter(|h| **h).count() as f64 / hits.len() as f64)
+}
+
+/// Settings of [`family_report`].
+#[derive(Debug, Clone)]
+pub struct FamilyConfig {
+    /// Samples per family, split evenly between its prompts (default 32).
+    pub samples: usize,
+    /// Frames per sample (default 120: a corpus window).
+    pub frames: usize,
+    /// DDIM steps (default 50).
+    pub ddim_steps: usize,
+    /// Guidance scale (default 2.5).
+    pub guidance: f64,
+    /// Seed of the first family's noise; family i uses seed + 100·i (+ the prompt's index).
+    pub seed: u64,
+    /// Held-out windows per family, at most (default 64), the first in corpus order.
+    pub max_held_out: usize,
+    /// Only these families (all when empty).
+    pub families: Vec<Family>,
+}
+
+impl Default for FamilyConfig {
+    fn default() -> Self {
+        Self {
+            samples: 32,
+            frames: 120,
+            ddim_steps: 50,
+            guidance: Guidance::MDM_SCALE,
+            seed: 0,
+            max_held_out: 64,
+            families: Vec::new(),
+        }
+    }
+}
+
+/// One family's row of the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct FamilyQuality {
+    /// The family.
+    pub family: Family,
+    /// Its prompts.
+    pub prompts: Vec<String>,
+    /// The samples as the network made them.
+    pub samples: MetricMeans,
+    /// The samples after the foot clean-up (what `mogen sample` writes).
+    pub cleaned: MetricMeans,
+    /// The family's held-out windows, through the same decode (`count` 0: the test split has
+    /// none).
+    pub held_out: MetricMeans,
+    /// Shares passing the detector: samples, cleaned samples, held-out windows.
+    pub detected: [Option<f64>; 3],
+    /// Mean over samples of the RMS joint distance (root-relative, heading-free, over their
+    /// first frames) to the nearest training-split window, m. Near 0 would mean copying.
+    pub nearest_training_m: f64,
+    /// The same distance for the held-out windows: how far unseen real motion lies from the
+    /// training data, the scale the samples' figure is read against, m.
+    pub held_out_nearest_training_m: f64,
+    /// Mean RMS joint distance between the family's samples, m: how different seeds are.
+    pub sample_diversity_m: f64,
+}
+
+/// `map` of the raw features `[frames, 263]` (the poses through feature extraction) of at most
+/// `max` corpus windows of `split` that `keep` accepts, in corpus order (`map` giving `None`
+/// drops a window).
+fn window_features(
+    corpus: &Corpus,
+    split: Split,
+    max: usize,
+    keep: impl Fn(&[Pose], &MotionTags, &str) -> bool,
+    map: impl Fn(Tensor) -> candle_core::Result<Option<Tensor>>,
+    device: &Device,
+) -> candle_core::Result<Vec<Tensor>> {
+    let mut out = Vec::new();
+    for window in &corpus.windows {
+        let clip = &corpus.clips[window.clip];
+        if out.len() >= max {
+            break;
+        }
+        let poses = corpus.window_joints(window);
+        if clip.split != split || !keep(poses, &window.tags, &clip.description) {
+            continue;
+        }
+        let Ok(extracted) = extract_features(poses) else { continue };
+        let n = extracted.features.len();
+        let flat: Vec<f32> = extracted.features.into_iter().flatten().collect();
+        out.extend(map(Tensor::from_vec(flat, (n, FEATURE_DIM), device)?)?);
+    }
+    Ok(out)
+}
+
+/// Descriptors ([`descriptors`]) `[n, frames·63]` of the first `frames` frames of each motion at
+/// least that long.
+fn descriptors_of(features: &[Tensor], frames: usize, device: &Device) -> candle_core::Result<Tensor> {
+    let crops: Vec<Tensor> =
+        features.iter().filter(|f| f.dims()[0] >= frames).map(|f| f.narrow(0, 0, frames)).collect::<Result<_, _>>()?;
+    if crops.is_empty() {
+        return Tensor::zeros((0, frames * RIC.len()), DType::F32, device);
+    }
+    descriptors(&crops)
+}
+
+/// Runs the report over the families of `config` (all when empty); `on_family` is called after
+/// each with its row and its cleaned samples (for pictures).
+pub fn family_report(
+    prior: &Prior,
+    corpus: &Corpus,
+    config: &FamilyConfig,
+    device: &Device,
+    mut on_family: impl FnMut(&FamilyQuality, &[Vec<Pose>]),
+) -> Result<Vec<FamilyQuality>, PriorError> {
+    let fail = |message: String| PriorError::Format { path: "<family report>".into(), message };
+    let tensor = |e: candle_core::Error| fail(e.to_string());
+    let families = if config.families.is_empty() { Family::ALL.to_vec() } else { config.families.clone() };
+    // Descriptors compare the first frames that every motion has: samples have
+    // `config.frames`, windows one frame fewer than their poses.
+    let compared = config.frames.min(crate::corpus::WINDOW_FRAMES - 1);
+    // Each training window's descriptor as it is read (its features would take 1 GB at once).
+    let descriptor_row = |f: Tensor| -> candle_core::Result<Option<Tensor>> {
+        if f.dims()[0] < compared {
+            return Ok(None);
+        }
+        Ok(Some(descriptors_of(&[f], compared, device)?.squeeze(0)?))
+    };
+    let training =
+        window_features(corpus, Split::Train, usize::MAX, |_, _, _| true, descriptor_row, device).map_err(tensor)?;
+    let training = if training.is_empty() {
+        Tensor::zeros((0, compared * RIC.len()), DType::F32, device).map_err(tensor)?
+    } else {
+        Tensor::stack(&training, 0).map_err(tensor)?
+    };
+    let mut rows = Vec::new();
+    for (i, family) in families.into_iter().enumerate() {
+        let prompts = family.prompts();
+        let mut samples = Vec::new();
+        let mut sample_features = Vec::new();
+        for (k, prompt) in prompts.iter().enumerate() {
+            let batch = config.samples / prompts.len() + usize::from(k < config.samples % prompts.len());
+            if batch == 0 {
+                continue;
+            }
+            let request = Sampling {
+                prompt,
+                frames: config.frames,
+                batch,
+                seed: config.seed + 100 * i as u64 + k as u64,
+                steps: config.ddim_steps,
+                guidance: Guidance { scale: config.guidance },
+            };
+            let x = prior.sample(&request, device)?;
+            let raw = prior.to_features(&x).map_err(tensor)?;
+            samples.extend(tensor_to_poses(&prior.joints_of(&raw).map_err(tensor)?).map_err(tensor)?);
+            for b in 0..batch {
+                sample_features.push(raw.get(b).map_err(tensor)?);
+            }
+        }
+        let cleaned: Vec<Vec<Pose>> = samples
+            .iter()
+            .map(|m| foot_lock(m, None, &FootLockConfig::default()).map(|c| c.poses))
+            .collect::<Result<_, _>>()
+            .map_err(|e| fail(e.to_string()))?;
+        let held_out_features = window_features(
+            corpus,
+            Split::Test,
+            config.max_held_out,
+            |poses, tags, description| family.holds(poses, tags, description),
+            |f| Ok(Some(f)),
+            device,
+        )
+        .map_err(tensor)?;
+        let mut held_out = Vec::new();
+        for features in &held_out_features {
+            // The data's root goes through the same decode as the samples'.
+            let decoded = prior.root_decode.apply(&features.unsqueeze(0).map_err(tensor)?).map_err(tensor)?;
+            held_out.extend(tensor_to_poses(&prior.joints_of(&decoded).map_err(tensor)?).map_err(tensor)?);
+        }
+        let sample_descriptors = descriptors_of(&sample_features, compared, device).map_err(tensor)?;
+        let held_out_descriptors = descriptors_of(&held_out_features, compared, device).map_err(tensor)?;
+        let nearest = |d: &Tensor| -> Result<f64, PriorError> {
+            if d.dims()[0] == 0 || training.dims()[0] == 0 {
+                return Ok(f64::NAN);
+            }
+            nearest_distances(d, &training, |_, _| true).map_err(tensor)
+        };
+        let row = FamilyQuality {
+            family,
+            prompts: prompts.iter().map(|p| (*p).to_owned()).collect(),
+            samples: MetricMeans::of(&samples),
+            cleaned: MetricMeans::of(&cleaned),
+            held_out: MetricMeans::of(&held_out),
+            detected: [
+                detected_share(family, &samples),
+                detected_share(family, &cleaned),
+                detected_share(family, &held_out),
+            ],
+            nearest_training_m: nearest(&sample_descriptors)?,
+            held_out_nearest_training_m: nearest(&held_out_descriptors)?,
+            sample_diversity_m: mean_pairwise(&sample_descriptors).map_err(tensor)?,
+        };
+        on_family(&row, &cleaned);
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::skeleton::rest_pose;
+    use glam::DVec3;
+
+    /// The rest pose lowered by `drop` m (knees not bent: enough for the pelvis measures) and
+    /// moved by `velocity` m/s, for `frames` frames.
+    fn moving(frames: usize, velocity: DVec3, drop: f64) -> Vec<Pose> {
+        let floor = rest_pose().iter().map(|v| v.y).fold(f64::INFINITY, f64::min);
+        (0..frames)
+            .map(|t| {
+                let shift = velocity * (t as f64 / FPS);
+                rest_pose().map(|v| {
+                    let y = v.y - floor + crate::corpus::prepare::STANCE_TOE_HEIGHT_M;
+                    let y = if y > 0.5 { y - drop } else { y };
+                    DVec3::new(v.x + shift.x, y, v.z + shift.z)
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn detectors_measure_direction_height_and_nothing_for_carrying() {
+        let sideways = moving(120, DVec3::new(0.8, 0.0, 0.0), 0.0);
+        assert_eq!(Family::Sideways.detect(&sideways), Some(true));
+        let forwards = moving(120, DVec3::new(0.0, 0.0, 1.2), 0.0);
+        assert_eq!(Family::Sideways.detect(&forwards), Some(false));
+        let low = moving(120, DVec3::new(0.0, 0.0, 0.8), 0.25);
+        assert_eq!(Family::Sneak.detect(&low), Some(true));
+        assert_eq!(Family::Sneak.detect(&forwards), Some(false));
+        assert_eq!(Family::Jump.detect(&forwards), Some(false), "never off the ground");
+        assert_eq!(Family::Carry.detect(&forwards), None);
+        assert_eq!(detected_share(Family::Sideways, &[sideways, forwards.clone()]), Some(0.5));
+        assert_eq!(detected_share(Family::Carry, &[forwards]), None);
+        assert_eq!(detected_share(Family::Walk, &[]), None);
+    }
+
+    #[test]
+    fn every_family_has_two_prompts_and_a_name() {
+        for f in Family::ALL {
+            assert!(f.prompts().iter().all(|p| !p.is_empty()) && f.prompts()[0] != f.prompts()[1], "{f:?}");
+            assert_eq!(f.detector().is_some(), f != Family::Carry);
+        }
+        let names: std::collections::BTreeSet<_> = Family::ALL.iter().map(|f| f.name()).collect();
+        assert_eq!(names.len(), Family::ALL.len());
+    }
+
+    /// The whole report on a tiny random prior: samples of both prompts, the test split's
+    /// forward walk as the held-out reference (a training-split walk is not), the detector on
+    /// both.
+    #[test]
+    fn the_report_measures_samples_against_test_split_windows_only() {
+        use crate::corpus::{CorpusClip, CorpusWindow, Source};
+        use crate::model::{Mdm, MdmConfig};
+        use crate::prior::RootDecode;
+        use crate::representation::MeanStd;
+        use crate::text::vocabulary::VocabularyEncoder;
+        use crate::text::ConditionEncoder;
+
+        let mut corpus =
+            Corpus { clips: Vec::new(), joints: Vec::new(), windows: Vec::new(), drops: Default::default() };
+        for (c, split) in [Split::Train, Split::Test].into_iter().enumerate() {
+            let poses = moving(120, DVec3::new(0.0, 0.0, 1.2), 0.0);
+            let tags = MotionTags::measure(&poses);
+            assert!(Family::Walk.holds(&poses, &tags, "walk"), "{tags:?}");
+            corpus.windows.push(CorpusWindow { clip: c, start: 0, frames: 120, tags, captions: vec!["walks".into()] });
+            corpus.clips.push(CorpusClip {
+                name: format!("0{c}_01"),
+                source: Source::Cmu,
+                take: format!("0{c}_01"),
+                subject: format!("0{c}"),
+                description: "walk".into(),
+                split,
+                take_frame: 0,
+                offset: corpus.joints.len(),
+                frames: 120,
+            });
+            corpus.joints.extend(poses);
+        }
+        let encoder = VocabularyEncoder::from_labels(["a person walks forward"]);
+        let cfg = MdmConfig {
+            latent_dim: 16,
+            ff_size: 32,
+            num_layers: 1,
+            num_heads: 2,
+            text_dim: encoder.words().len(),
+            ..MdmConfig::small()
+        };
+        let prior = Prior {
+            mdm: Mdm::random(cfg, candle_core::DType::F32, &Device::Cpu, 1).unwrap(),
+            encoder: ConditionEncoder::Vocabulary(encoder),
+            mean_std: MeanStd::from_vecs(vec![0.0; FEATURE_DIM], vec![0.1; FEATURE_DIM], &Device::Cpu).unwrap(),
+            root_decode: RootDecode::Velocity,
+            rest: None,
+        };
+        let config = FamilyConfig {
+            samples: 3,
+            frames: 40,
+            ddim_steps: 2,
+            families: vec![Family::Walk],
+            ..FamilyConfig::default()
+        };
+        let mut seen = 0;
+        let rows = family_report(&prior, &corpus, &config, &Device::Cpu, |row, cleaned| {
+            seen += 1;
+            assert_eq!(cleaned.len(), row.samples.count);
+        })
+        .unwrap();
+        assert_eq!((seen, rows.len()), (1, 1));
+        let row = &rows[0];
+        assert_eq!(row.samples.count, 3, "2 + 1 samples of the two prompts");
+        assert_eq!(row.held_out.count, 1, "only the test split's window");
+        assert_eq!(row.detected[2], Some(1.0), "the held-out walk walks forwards");
+        assert!((row.held_out.travel_m - 1.2 * 118.0 / FPS).abs() < 0.05, "decoded travel {}", row.held_out.travel_m);
+        // The held-out walk is the training walk's twin: its nearest training window is at 0.
+        assert!(row.held_out_nearest_training_m < 1e-4, "{}", row.held_out_nearest_training_m);
+        assert!(row.nearest_training_m > 0.0 && row.sample_diversity_m > 0.0);
+    }
+}
