@@ -1,5 +1,6 @@
-//! RG-DNO end to end on the shipped catalog and prior: retrieval finds a planted crop, and a tiny
-//! configuration of the whole method runs through every stage.
+//! RG-DNO end to end on the shipped catalog, corpus and prior: retrieval finds a planted crop
+//! in a database, the shipped corpus gives a low motion for the barrier from its train split, and
+//! a tiny configuration of the whole method runs through every stage.
 
 // Test helpers may unwrap: a failure is the test failing.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
@@ -12,14 +13,16 @@ use motion_core::database::{DatabaseConfig, MotionDatabase};
 use motion_core::generation::{GenerationConfig, Method};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
+use motion_core::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
 use motion_core::rgdno::mask::MaskKind;
-use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalCorpus, RetrievalQuery};
+use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalQuery};
 use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoTask};
 
-fn database() -> MotionDatabase {
+/// The shipped catalog's clips as a retrieval database (a user's own database takes this path).
+fn database() -> RetrievalDatabase {
     let (sources, _) = Catalog::read(&fixtures().join("mocap/catalog.json")).unwrap().load().unwrap();
     let config = DatabaseConfig { speeds: vec![1.0], loop_seconds: 4.0, ..DatabaseConfig::default() };
-    MotionDatabase::build(&sources, &config).unwrap()
+    RetrievalDatabase::from_motion_database(&MotionDatabase::build(&sources, &config).unwrap()).unwrap()
 }
 
 /// A program that pins the pelvis and both wrists of `joints` `[T, 22, 3]` at four keyframes.
@@ -50,29 +53,23 @@ fn pinned_program(joints: &candle_core::Tensor, frames: usize) -> TaskProgram {
 #[test]
 fn retrieval_finds_a_planted_crop_and_the_semantic_check_filters() {
     let device = Device::Cpu;
-    let db = database();
-    let frames = 60;
+    let database = database();
+    // The looped clips of this database are 4 s: 79 frames of joints.
+    let frames = 50;
     let config = RetrievalConfig::default();
-    let corpus = RetrievalCorpus::build(&db, frames, &config, &device).unwrap();
-    assert!(corpus.len() > 100, "{} candidates", corpus.len());
-    // Plant: some crawl crop away from its sequence's start.
-    let planted = (0..corpus.len())
-        .find(|&i| {
-            let s = corpus.source(i).unwrap();
-            s.label.contains("crawl") && s.start == 20 && s.frames == frames
+    let crops = database.crops(frames, &config).unwrap();
+    assert!(crops.len() > 100, "{} candidates", crops.len());
+    // Plant: some crawl crop away from its sequence's start, played as captured.
+    let planted = crops
+        .iter()
+        .find(|c| {
+            let s = database.source(c, frames);
+            s.caption.contains("crawl") && s.start == 20 && s.frames == frames + 1 && !c.mirrored
         })
         .unwrap();
-    let source = corpus.source(planted).unwrap().clone();
-    let whole = db.sequences()[source.sequence].clone();
-    let raw = db
-        .window_slice(
-            &motion_core::database::Window { sequence: source.sequence, start: 0, frames: whole.frames },
-            20,
-            frames,
-        )
-        .unwrap()
-        .to_vec();
-    let features = candle_core::Tensor::from_vec(raw, (1, frames, 263), &device).unwrap();
+    let source = database.source(planted, frames);
+    // The pins are where the generator's features of the crop put the joints.
+    let features = database.features(planted, frames, &device).unwrap().unsqueeze(0).unwrap();
     let joints = motion_core::representation::recover_from_ric(&features).unwrap().squeeze(0).unwrap();
     let program = pinned_program(&joints, frames);
     // Every pin counts fully: the score is the sum of all twelve.
@@ -80,23 +77,48 @@ fn retrieval_finds_a_planted_crop_and_the_semantic_check_filters() {
     let compiled = CompiledProgram::compile(&program, &device).unwrap().subset(&all);
     let config = RetrievalConfig { related_weight: 1.0, ..config };
     let query = RetrievalQuery { program: &compiled, most_difficult: "c1", prompt: &program.text, counting: false };
-    let found = retrieve(&corpus, &query, &config).unwrap();
-    assert_eq!(found[0].source, source, "best: {:?}", found[0].source);
+    let found = retrieve(&database, &query, &config, &device).unwrap().retrieved;
+    assert_eq!(found[0].source, source, "best: {}", found[0].source);
     assert!(found[0].score < 1e-6, "{}", found[0].score);
     assert!(found.len() == config.top_k && found.windows(2).all(|w| w[0].score <= w[1].score));
     // The same pins with a prompt that contradicts the crawl's direction drop every forward crop.
     let backwards = RetrievalQuery { prompt: "a person crawls backwards", ..query };
-    let found = retrieve(&corpus, &backwards, &config).unwrap();
-    assert!(found.iter().all(|r| !r.source.label.contains("forward")), "{:?}", found[0].source);
+    let found = retrieve(&database, &backwards, &config, &device).unwrap().retrieved;
+    assert!(found.iter().all(|r| !r.source.caption.contains("forward")), "{}", found[0].source);
     // A threshold below every score keeps nothing.
     let strict = RetrievalConfig { threshold: Some(-1.0), ..config };
-    assert!(retrieve(&corpus, &query, &strict).unwrap().is_empty());
+    assert!(retrieve(&database, &query, &strict, &device).unwrap().retrieved.is_empty());
+}
+
+/// The default retrieval database, the shipped corpus's train split: for Task 2 (a 0.5 m barrier)
+/// the best crop keeps low (a crouch, a crawl, a dive or a roll) and comes from a train clip.
+#[test]
+fn the_shipped_corpus_retrieves_a_low_motion_from_its_train_split_for_the_barrier() {
+    let device = Device::Cpu;
+    let path = fixtures().join("corpus/corpus.safetensors.gz");
+    let (database, _) = RetrievalSource::from_path(&path).open().unwrap();
+    let corpus = motion_core::corpus::file::load(&path).unwrap();
+    let train: Vec<&str> =
+        corpus.clips.iter().filter(|c| c.split == motion_core::corpus::Split::Train).map(|c| c.name.as_str()).collect();
+    assert_eq!(database.clips(), train.len());
+    let program = TaskProgram::from_json_validated(
+        &std::fs::read_to_string(fixtures().join("tasks/rgdno_task2_low_barrier.json")).unwrap(),
+    )
+    .unwrap();
+    let groups = program.constraint_groups().unwrap();
+    let compiled = CompiledProgram::compile(&program, &device).unwrap().subset(&groups.retrieval);
+    let query = RetrievalQuery { program: &compiled, most_difficult: "c1", prompt: &program.text, counting: false };
+    let found = retrieve(&database, &query, &RetrievalConfig::default(), &device).unwrap();
+    assert!(found.consistent < found.candidates, "the walk prompt drops runs, jumps and backward walks");
+    let best = &found.retrieved[0].source;
+    assert!(found.retrieved.iter().all(|r| train.contains(&r.source.clip.as_str())));
+    assert!(["crouch", "crawl", "sneak", "creep", "roll", "floor"].iter().any(|w| best.caption.contains(w)), "{best}");
 }
 
 #[test]
 fn a_tiny_rg_dno_run_goes_through_every_stage() {
     let device = Device::Cpu;
-    let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &device).unwrap();
+    let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &device).unwrap();
     let text = std::fs::read_to_string(fixtures().join("tasks/rgdno_task2_low_barrier.json")).unwrap();
     // Task-2 shortened to 40 frames: the barrier at 0.5 < z < 1.0, the target at z = 1.5.
     let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
@@ -107,7 +129,7 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     }
     let program = TaskProgram::from_json_validated(&json.to_string()).unwrap();
     let compiled = CompiledProgram::compile(&program, &device).unwrap();
-    let db = database();
+    let database = database();
     let rg = RgDnoConfig {
         first_steps: 3,
         final_steps: 3,
@@ -121,12 +143,11 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
         },
         ..RgDnoConfig::default()
     };
-    let corpus = RetrievalCorpus::build(&db, 40, &rg.retrieval, &device).unwrap();
     let mut config = GenerationConfig::new(Method::RgDno);
     config.samples = 2;
     config.guidance = 1.0;
     let mut stages = Vec::new();
-    let task = RgDnoTask { program: &program, compiled: &compiled, corpus: &corpus };
+    let task = RgDnoTask { program: &program, compiled: &compiled, database: &database };
     let (generated, report) = generate_rg_dno(&prior, task, &config, &rg, &device, |p| {
         if stages.last() != Some(&p.stage) {
             stages.push(p.stage);
@@ -140,7 +161,7 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     assert!(values.iter().all(|v| v.is_finite()));
     // C_R is the barrier with the target; the retrieved motion keeps low under it: a crawl.
     assert_eq!(report.retrieval_set, vec!["c1".to_owned(), "c2".to_owned()]);
-    assert!(report.retrieved[0].source.label.contains("crawl"), "{:?}", report.retrieved[0].source);
+    assert!(report.retrieved[0].source.caption.contains("crawl"), "{}", report.retrieved[0].source);
     assert_eq!(report.masks.len(), 2);
     assert!(report.masks.iter().all(|m| m.candidate.kind == MaskKind::Temporal && m.candidate.bits < 4));
     assert!(report.inversion_error_m.is_finite() && report.soft_blend_objective.iter().all(|v| v.is_finite()));

@@ -72,8 +72,8 @@ enum Command {
     /// Generate motions for a constraint program file (npy, JSON report, PNG strip, BVH, GLB,
     /// viewer page).
     Run(commands::run::RunArgs),
-    /// RG-DNO's constraint-based retrieval for a program: the database crops that best satisfy
-    /// its retrieval set C_R, and the best crop of each label.
+    /// RG-DNO's constraint-based retrieval for a program: the crops of the retrieval database
+    /// (by default the corpus's train split) that best satisfy its retrieval set C_R.
     Retrieve(commands::retrieve::RetrieveArgs),
     /// Motions already made (an output folder or a joints.npy) to BVH, GLB (skinned figure and
     /// the task's scene) and the self-contained 3-D viewer page.
@@ -83,7 +83,8 @@ enum Command {
     /// Reports: `prior` compares unconstrained samples with the training data per label.
     #[command(subcommand)]
     Report(ReportCommand),
-    /// Benchmarks: `prior` (denoiser and DNO-step speed), `tasks` (results table), `dno` (full DNO run time).
+    /// Benchmarks: `prior` (denoiser and DNO-step speed), `tasks` (results table), `dno` (full DNO run time),
+    /// `retrieval` (RG-DNO's retrieval over the whole database: seconds, memory).
     #[command(subcommand)]
     Bench(BenchCommand),
 }
@@ -96,6 +97,9 @@ enum BenchCommand {
     Tasks(commands::bench_tasks::BenchTasksArgs),
     /// Wall time of a full DNO run (500 steps) at batch 1 and 8.
     Dno(commands::bench_tasks::BenchDnoArgs),
+    /// RG-DNO's retrieval for one task over the whole retrieval database (by default the
+    /// corpus's train split): seconds per query, bytes held.
+    Retrieval(commands::bench_retrieval::BenchRetrievalArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -172,6 +176,7 @@ fn run_command() -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Prior(args)) => commands::bench::run(args),
         Command::Bench(BenchCommand::Tasks(args)) => commands::bench_tasks::run_tasks(args),
         Command::Bench(BenchCommand::Dno(args)) => commands::bench_tasks::run_dno(args),
+        Command::Bench(BenchCommand::Retrieval(args)) => commands::bench_retrieval::run(args),
     }
 }
 

@@ -106,17 +106,19 @@ fn without_dry_run_the_task_becomes_motions_with_rg_dno() {
         serde_json::from_str(&std::fs::read_to_string(out.path().join("report.json")).unwrap()).unwrap();
     assert_eq!(report["config"]["method"], "rg-dno");
     assert_eq!(report["steps"]["target"], 6, "the step count is measured against the program's count");
-    // The report names the retrieved clip and the chosen mask; the database was built in memory.
+    // The report names the retrieved clip, its caption and the chosen mask; the database is the
+    // shipped corpus's train split.
     let rg = &report["rg_dno"];
-    assert!(rg["retrieved"][0]["source"]["label"].is_string(), "{rg}");
+    assert!(rg["retrieved"][0]["source"]["clip"].is_string(), "{rg}");
+    assert!(rg["retrieved"][0]["source"]["caption"].is_string(), "{rg}");
     assert_eq!(rg["masks"][0]["candidate"]["kind"], "temporal", "{rg}");
     assert_eq!(rg["config"]["final_steps"], 3, "--steps scales the stages: {rg}");
     let (stdout, stderr) = (text(&output.stdout), text(&output.stderr));
     assert!(stdout.contains("rg-dno: constraint error") && stdout.contains("retrieved "), "{stdout}");
-    assert!(stderr.contains("retrieval corpus: ") && stderr.contains("built in memory"), "{stderr}");
-    // Three steps meet nothing: the sample runs again, RG-DNO on the same corpus (built once).
+    assert!(stderr.contains("retrieval database: ") && stderr.contains("the train split of "), "{stderr}");
+    // Three steps meet nothing: the sample runs again, RG-DNO on the same database (opened once).
     assert!(stderr.contains("attempt 2 of 2: sample(s) 0 miss a constraint"), "{stderr}");
-    assert_eq!(stderr.matches("retrieval corpus: ").count(), 1, "{stderr}");
+    assert_eq!(stderr.matches("retrieval database: ").count(), 1, "{stderr}");
     assert_eq!(report["attempt"].as_array().map(Vec::len), Some(1), "{report}");
     assert_eq!(rg["masks"].as_array().map(Vec::len), Some(1), "{rg}");
 }

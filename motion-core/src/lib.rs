@@ -10,6 +10,7 @@ pub mod database;
 pub mod diffusion;
 pub mod dno;
 pub mod evaluation;
+pub mod evaluator;
 pub mod export;
 pub mod files;
 pub mod generation;

@@ -4,9 +4,10 @@
 //!
 //! RG-DNO ([`crate::rgdno`]) takes the whole plan: the program with its relational parse (the
 //! most difficult constraint and its relations, from which Algorithm 1's groups `C_R`, `C1`,
-//! `C2` are derived), and the retrieval database, opened only when RG-DNO runs (a saved file, or
-//! the catalog's clips built in memory). When the program has no relational parse, or no
-//! database motion passes the semantic check and the threshold, the run falls back to DNO; the
+//! `C2` are derived), and the retrieval database, opened only when RG-DNO runs (the corpus's
+//! train split, a saved database file, or a catalog's clips built in memory). When the program
+//! has no relational parse, or no database motion passes the semantic check and the threshold,
+//! the run falls back to DNO; the
 //! reason goes to the report's `fallback` and to the caller as an [`Event::Note`].
 //!
 //! With [`TaskSettings::retry_unmet`], the samples that miss a constraint at its tolerance are
@@ -17,7 +18,6 @@ use std::time::Instant;
 use candle_core::Device;
 
 use crate::constraints::{CompiledProgram, ConstraintError};
-use crate::database::{DatabaseError, DatabaseSource};
 use crate::evaluation::{self, TaskReport};
 use crate::export::bvh::BvhUnit;
 use crate::export::{position_targets, write_outputs, ExportError, ExportInput, ExportManifest, OutputFolder};
@@ -26,7 +26,8 @@ use crate::motion::tensor_to_poses;
 use crate::prior::Prior;
 use crate::program::TaskProgram;
 use crate::render::{motion_gif, motion_strip, GifOptions, RenderError, StripRow};
-use crate::rgdno::retrieval::{RetrievalCorpus, RetrievalError};
+use crate::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
+use crate::rgdno::retrieval::RetrievalError;
 use crate::rgdno::RgDnoConfig;
 use crate::skeleton::{Pose, FPS};
 
@@ -39,7 +40,7 @@ pub struct TaskSettings {
     /// RG-DNO's stages.
     pub rg_dno: RgDnoConfig,
     /// RG-DNO's retrieval database.
-    pub database: DatabaseSource,
+    pub database: RetrievalSource,
     /// Further attempts for the samples that miss a constraint at its tolerance: each such
     /// sample is generated again from fresh start noise (attempt k + 1 from seed + k·N_S) and
     /// keeps its best attempt (most constraints met, then the lowest constraint error), up to
@@ -65,17 +66,9 @@ pub enum PipelineError {
     /// Generation failed or a setting is unusable.
     #[error(transparent)]
     Generation(#[from] GenerateError),
-    /// RG-DNO's retrieval corpus could not be built.
+    /// RG-DNO's retrieval database could not be opened.
     #[error(transparent)]
     Retrieval(#[from] RetrievalError),
-    /// The retrieval database could not be opened.
-    #[error("the retrieval database ({source_name}): {error}")]
-    Database {
-        /// Where it was looked for.
-        source_name: String,
-        /// What went wrong.
-        error: Box<DatabaseError>,
-    },
     /// A tensor operation failed.
     #[error(transparent)]
     Tensor(#[from] candle_core::Error),
@@ -107,13 +100,13 @@ pub fn run_task(
     let compiled = CompiledProgram::compile(program, device)?;
     let task = Task { program, compiled: &compiled };
     let mut config = settings.generation.clone();
-    // The corpus is built once for every attempt, and only when RG-DNO can use it.
-    let corpus = if config.method == Method::RgDno && program.relational_parse.is_some() {
-        Some(rg_dno_corpus(&compiled, settings, device, &mut on)?)
+    // The database is opened once for every attempt, and only when RG-DNO can use it.
+    let database = if config.method == Method::RgDno && program.relational_parse.is_some() {
+        Some(rg_dno_database(settings, &mut on)?)
     } else {
         None
     };
-    let retrieval = corpus.as_ref().map(|corpus| Retrieval { corpus, rg_dno: &settings.rg_dno });
+    let retrieval = database.as_ref().map(|database| Retrieval { database, rg_dno: &settings.rg_dno });
     let first = generate(prior, task, retrieval, &config, device, &mut on)?;
     // After a fallback, the report and every retry are DNO's.
     config.method = first.method;
@@ -164,28 +157,24 @@ fn retry_seed(config: &GenerationConfig, k: usize) -> u64 {
     config.seed.wrapping_add((k * config.dno.restarts.max(1)) as u64)
 }
 
-/// RG-DNO's retrieval corpus: opens the database and crops its windows to the program's frame
-/// count.
-fn rg_dno_corpus(
-    compiled: &CompiledProgram,
+/// RG-DNO's retrieval database, opened (its crops are made per query).
+fn rg_dno_database(
     settings: &TaskSettings,
-    device: &Device,
     on: &mut impl FnMut(Event<'_>),
-) -> Result<RetrievalCorpus, PipelineError> {
+) -> Result<RetrievalDatabase, PipelineError> {
     let clock = Instant::now();
     let source = &settings.database;
-    let (database, warnings) = source
-        .open()
-        .map_err(|error| PipelineError::Database { source_name: source.to_string(), error: Box::new(error) })?;
-    let corpus = RetrievalCorpus::build(&database, compiled.frames(), &settings.rg_dno.retrieval, device)?;
+    let (database, warnings) = source.open()?;
     // Import warnings (quaternions normalised on read) are `mogen data build`'s to list.
     let warned = if warnings.is_empty() { String::new() } else { format!(", {} import warnings", warnings.len()) };
     on(Event::Note(format!(
-        "retrieval corpus: {} candidate crops of {source} ({:.1} s{warned})",
-        corpus.len(),
+        "retrieval database: {} clips ({:.2} h) of {source}, {:.0} MB held ({:.1} s{warned})",
+        database.clips(),
+        database.seconds() / 3600.0,
+        database.bytes() as f64 / 1e6,
         clock.elapsed().as_secs_f64()
     )));
-    Ok(corpus)
+    Ok(database)
 }
 
 /// Choices about the exported files (default: no GIF, BVH in metres).

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 const LAYERS: &[&[&str]] = &[
     &["pipeline"],
     &["evaluation", "quality"],
-    &["generation", "training"],
+    &["generation", "training", "evaluator"],
     &["rgdno"],
     &["postprocess"],
     &["method"],

@@ -1,6 +1,7 @@
 //! One module per subcommand group, and the task command.
 
 pub mod bench;
+pub mod bench_retrieval;
 pub mod bench_tasks;
 pub mod data;
 pub mod export;

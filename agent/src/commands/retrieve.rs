@@ -6,17 +6,18 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use motion_core::constraints::CompiledProgram;
-use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalCorpus, RetrievalQuery};
+use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalQuery, Retrieved};
 
 use super::load::load_program;
-use super::run::database_source;
+use super::run::retrieval_source;
 
 #[derive(Debug, Args)]
 pub struct RetrieveArgs {
     /// Constraint program with a relational parse (JSON).
     program: PathBuf,
-    /// Motion database file (`mogen data build`); default: the shipped catalog's clips, built in
-    /// memory.
+    /// What to retrieve from: a motion corpus (`.safetensors.gz`: its train split, with mirrored
+    /// copies), a database file of `mogen data build` (`.safetensors`) or a catalog of clips
+    /// (`.json`, built in memory); default: the train split of the shipped corpus.
     #[arg(long, value_name = "FILE")]
     database: Option<PathBuf>,
     /// Retrieved motions printed, best first.
@@ -25,9 +26,9 @@ pub struct RetrieveArgs {
     /// Weight of C_R's constraints other than the most difficult one.
     #[arg(long, default_value_t = RetrievalConfig::default().related_weight, value_parser = super::flags::weight)]
     related_weight: f64,
-    /// Also score every candidate exactly and print the best crop of each label (slower).
+    /// Also print the best crop of each clip among the exactly scored shortlist.
     #[arg(long)]
-    per_label: bool,
+    per_clip: bool,
 }
 
 pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
@@ -38,12 +39,11 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     let most_difficult = program.relational_parse.as_ref().map(|p| p.most_difficult.clone()).unwrap_or_default();
     let device = candle_core::Device::Cpu;
     let compiled = CompiledProgram::compile(&program, &device)?.subset(&groups.retrieval);
-    let source = database_source(args.database.as_deref());
-    let (db, _) = source.open().with_context(|| format!("opening the database ({source})"))?;
-    let config = RetrievalConfig { related_weight: args.related_weight, top_k: args.top, ..RetrievalConfig::default() };
+    let source = retrieval_source(args.database.as_deref());
     let clock = std::time::Instant::now();
-    let corpus = RetrievalCorpus::build(&db, compiled.frames(), &config, &device)?;
-    let built = clock.elapsed().as_secs_f64();
+    let (database, _) = source.open().with_context(|| format!("opening {source}"))?;
+    let opened = clock.elapsed().as_secs_f64();
+    let config = RetrievalConfig { related_weight: args.related_weight, top_k: args.top, ..RetrievalConfig::default() };
     let query = RetrievalQuery {
         program: &compiled,
         most_difficult: &most_difficult,
@@ -51,31 +51,33 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
         counting: !compiled.count_targets().is_empty(),
     };
     let clock = std::time::Instant::now();
-    let found = retrieve(&corpus, &query, &config)?;
+    let found = retrieve(&database, &query, &config, &device)?;
     println!(
-        "C_R = {:?} (c_D = {most_difficult}, others weighted {}); {} candidates; corpus {built:.1} s, scoring \
-         {:.2} s",
+        "C_R = {:?} (c_D = {most_difficult}, others weighted {}); {source}: {} clips, {} candidates, {} after the \
+         semantic check; opened in {opened:.1} s, scored in {:.2} s",
         groups.retrieval,
         config.related_weight,
-        corpus.len(),
+        database.clips(),
+        found.candidates,
+        found.consistent,
         clock.elapsed().as_secs_f64()
     );
-    let line = |r: &motion_core::rgdno::retrieval::Retrieved| {
+    let line = |r: &Retrieved| {
         let errors: Vec<String> = r.per_constraint.iter().map(|(id, e)| format!("{id} {e:.4}")).collect();
         format!("{:.4}  {}  {}", r.score, r.source, errors.join(", "))
     };
-    println!("best {}:", found.len());
-    for r in &found {
+    println!("best {}:", found.retrieved.len());
+    for r in &found.retrieved {
         println!("  {}", line(r));
     }
-    if args.per_label {
-        let every = RetrievalConfig { top_k: usize::MAX, ..config };
-        let mut per_label = BTreeMap::new();
-        for r in retrieve(&corpus, &query, &every)? {
-            per_label.entry(r.source.label.clone()).or_insert(r);
+    if args.per_clip {
+        let shortlist = RetrievalConfig { top_k: config.exact_shortlist, ..config };
+        let mut per_clip = BTreeMap::new();
+        for r in retrieve(&database, &query, &shortlist, &device)?.retrieved {
+            per_clip.entry(r.source.clip.clone()).or_insert(r);
         }
-        println!("best of each label:");
-        let mut best: Vec<_> = per_label.into_values().collect();
+        println!("best of each clip in the shortlist:");
+        let mut best: Vec<_> = per_clip.into_values().collect();
         best.sort_by(|a, b| a.score.total_cmp(&b.score));
         for r in &best {
             println!("  {}", line(r));

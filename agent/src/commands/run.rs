@@ -4,13 +4,13 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use motion_core::database::DatabaseSource;
 use motion_core::evaluation::TaskReport;
 use motion_core::export::OutputFolder;
 use motion_core::generation::{Event, GenerationConfig, Method};
 use motion_core::pipeline::{run_task, write_task, TaskSettings};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
+use motion_core::rgdno::candidates::RetrievalSource;
 use motion_core::rgdno::RgDnoConfig;
 
 use super::export::{print_exports, ExportFormats};
@@ -101,9 +101,11 @@ pub struct GenerationArgs {
     pub prior: PathBuf,
     #[command(flatten)]
     pub formats: ExportFormats,
-    /// Motion database file that RG-DNO retrieves from (`mogen data build`); default: the
-    /// shipped catalog's clips with every augmentation, built in memory when RG-DNO runs (about
-    /// 0.5 s).
+    /// What RG-DNO retrieves from: a motion corpus (`.safetensors.gz`: its train split, with
+    /// mirrored copies), a database file of `mogen data build` (`.safetensors`) or a catalog of
+    /// clips (`.json`, built in memory with every augmentation); default: the train split of the
+    /// shipped corpus (7.5 h of CMU and HDM05 capture; its validation and test splits are never
+    /// retrieved).
     #[arg(long, value_name = "FILE")]
     pub database: Option<PathBuf>,
     /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
@@ -117,12 +119,10 @@ pub struct GenerationArgs {
     pub rg_dno: Box<RgDnoConfig>,
 }
 
-/// The database file given on the command line, else the shipped catalog built in memory.
-pub fn database_source(file: Option<&Path>) -> DatabaseSource {
-    match file {
-        Some(file) => DatabaseSource::File(file.to_path_buf()),
-        None => DatabaseSource::catalog(paths::default_catalog()),
-    }
+/// What `--database` names ([`RetrievalSource::from_path`]), else the shipped corpus's train
+/// split.
+pub fn retrieval_source(file: Option<&Path>) -> RetrievalSource {
+    RetrievalSource::from_path(file.map_or_else(paths::default_corpus, Path::to_path_buf))
 }
 
 fn parse_rg_dno_config(text: &str) -> Result<Box<RgDnoConfig>, String> {
@@ -140,7 +140,7 @@ impl GenerationArgs {
         TaskSettings {
             generation: self.config(method),
             rg_dno,
-            database: database_source(self.database.as_deref()),
+            database: retrieval_source(self.database.as_deref()),
             retry_unmet: self.retry_unmet,
         }
     }
@@ -295,9 +295,15 @@ pub fn print_summary(report: &TaskReport) {
     if let Some(rg) = &report.rg_dno {
         if let Some(r) = rg.retrieved.first() {
             println!(
-                "  retrieved {} resized to {} frames, C_R score {:.4} of {} candidates in {:.1} s; inversion error \
-                 {:.3} m",
-                r.source, report.frames, r.score, rg.candidates, rg.seconds.retrieval, rg.inversion_error_m
+                "  retrieved {} resized to {} frames, C_R score {:.4}, best of {} candidates ({} after the semantic \
+                 check) in {:.1} s; inversion error {:.3} m",
+                r.source,
+                report.frames,
+                r.score,
+                rg.candidates,
+                rg.consistent_candidates,
+                rg.seconds.retrieval,
+                rg.inversion_error_m
             );
         }
         for (i, m) in rg.masks.iter().enumerate() {

@@ -29,6 +29,11 @@ pub struct TrainArgs {
     /// Folder of the sentence encoders (one folder per encoder) for corpus training.
     #[arg(long, default_value_os_t = paths::text_models())]
     text_models: PathBuf,
+    /// Train the text–motion evaluator (R-precision, FID) on the corpus's train split instead of
+    /// the prior, and write it to this file; --steps, --batch-size, --lr, --max-frames and
+    /// --seed apply. Reports its R-precision on the validation split at the end.
+    #[arg(long, conflicts_with = "database")]
+    evaluator: Option<PathBuf>,
     /// Steps between validation losses (EMA weights, fixed batches of the validation split).
     #[arg(long, default_value_t = 500)]
     validate_every: usize,
@@ -133,6 +138,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         None => corpus_sets(&args, &device)?,
     };
+    if let Some(out) = &args.evaluator {
+        let held_out = held_out.context("the evaluator is trained on the corpus")?;
+        return train_evaluator(&args, out, &data, &held_out, &device);
+    }
     let small = MdmConfig::small();
     let model = MdmConfig {
         latent_dim: args.latent_dim.unwrap_or(small.latent_dim),
@@ -163,6 +172,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.checkpoint.exists() {
         let state = trainer.resume(&args.checkpoint).context("resuming from the checkpoint")?;
         eprintln!("resumed {} at step {}", args.checkpoint.display(), state.step);
+        if let Some(csv) = &args.loss_csv {
+            drop_rows_after(csv, state.step)?;
+        }
     }
     eprintln!(
         "training {} parameters on {:.2} h of motion ({} sequences, {} captions), {} steps of batch {}",
@@ -281,4 +293,73 @@ fn corpus_sets(args: &TrainArgs, device: &candle_core::Device) -> anyhow::Result
     let held_out = sets.pop();
     let train = sets.pop().context("no train split")?;
     Ok((train, held_out))
+}
+
+/// Trains the evaluator on batches of the corpus's train split and reports its R-precision
+/// (top 1 and 3 of 32) on the validation split.
+fn train_evaluator(
+    args: &TrainArgs,
+    out: &std::path::Path,
+    data: &TrainingSet,
+    held_out: &TrainingSet,
+    device: &candle_core::Device,
+) -> anyhow::Result<()> {
+    use motion_core::evaluator::{r_precision, EvaluatorConfig, EvaluatorTrainer};
+    use rand::SeedableRng;
+    let batches = TrainConfig {
+        batch_size: args.batch_size,
+        max_frames: args.max_frames,
+        balance_labels: false,
+        ..TrainConfig::default()
+    };
+    let mut trainer = EvaluatorTrainer::new(EvaluatorConfig::default(), device, args.seed)?;
+    let start = Instant::now();
+    let (mut loss, mut accuracy) = (None::<f64>, 0.0);
+    let schedule = TrainConfig { steps: args.steps, lr: args.lr, ..TrainConfig::default() };
+    for step in 0..args.steps {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed.wrapping_mul(1_000_003).wrapping_add(step as u64));
+        let batch = data.sample(&batches, &mut rng)?;
+        let r = trainer.train_step(&batch.x0, &batch.text, schedule.lr_at(step))?;
+        loss = Some(loss.map_or(r.loss, |l| 0.98 * l + 0.02 * r.loss));
+        accuracy = 0.98 * accuracy + 0.02 * r.accuracy;
+        if r.step % 100 == 0 || r.step == args.steps {
+            eprintln!(
+                "evaluator step {}/{}: InfoNCE {:.3}, in-batch top-1 {:.2} ({:.0} s)",
+                r.step,
+                args.steps,
+                loss.unwrap_or(f64::NAN),
+                accuracy,
+                start.elapsed().as_secs_f64()
+            );
+        }
+    }
+    let evaluator = trainer.evaluator()?;
+    evaluator.save(out)?;
+    // R-precision on 256 validation crops of 120 frames: the pool's other texts are other crops'.
+    let fixed = TrainConfig { batch_size: 256, min_frames: 120, max_frames: 120, ..batches };
+    let batch = held_out.sample(&fixed, &mut rand::rngs::StdRng::seed_from_u64(VALIDATION_SEED))?;
+    let r = r_precision(&evaluator.embed_motion(&batch.x0)?, &evaluator.embed_text(&batch.text)?, 32, &[1, 3], 0)?;
+    println!(
+        "wrote {} after {:.0} s; validation R-precision top-1 {:.3}, top-3 {:.3} (32 per pool, 256 crops)",
+        out.display(),
+        start.elapsed().as_secs_f64(),
+        r[0],
+        r[1]
+    );
+    Ok(())
+}
+
+/// Removes the rows of a loss CSV after `step` (the steps a stopped run did past its last
+/// checkpoint, which the resumed run does again), keeping the header.
+fn drop_rows_after(csv: &std::path::Path, step: usize) -> anyhow::Result<()> {
+    let Ok(text) = std::fs::read_to_string(csv) else { return Ok(()) };
+    let kept: Vec<&str> = text
+        .lines()
+        .filter(|line| line.split(',').next().and_then(|s| s.parse::<usize>().ok()).is_none_or(|s| s <= step))
+        .collect();
+    if kept.len() < text.lines().count() {
+        motion_core::files::write_atomically(csv, (kept.join("\n") + "\n").as_bytes())
+            .with_context(|| format!("trimming {} to step {step}", csv.display()))?;
+    }
+    Ok(())
 }

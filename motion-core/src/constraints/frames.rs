@@ -14,6 +14,9 @@ pub struct Frames {
     index: Option<Tensor>,
     /// The kept frame numbers.
     kept: Vec<usize>,
+    /// Whether the selection is a span of consecutive frames (all of them, or a range), which
+    /// [`Frames::thinned`] thins; keyframes are never thinned.
+    span: bool,
 }
 
 impl Frames {
@@ -27,14 +30,31 @@ impl Frames {
                 .ok_or_else(|| candle_core::Error::Msg(format!("frame {frame:?} is outside a signal of {n} frames")))
         };
         let mut kept = match selection {
-            FrameSelection::All => return Ok(Frames { index: None, kept: (0..n).collect() }),
+            FrameSelection::All => return Ok(Frames { index: None, kept: (0..n).collect(), span: true }),
             FrameSelection::Keyframes(keys) => keys.iter().map(|&k| resolve(k)).collect::<Result<Vec<_>>>()?,
             FrameSelection::Range(range) => (resolve(range.from)?..=resolve(range.to)?).collect(),
         };
         kept.sort_unstable();
         kept.dedup();
+        let span = matches!(selection, FrameSelection::Range(_));
         let index = Tensor::from_vec(kept.iter().map(|&f| f as u32).collect::<Vec<_>>(), kept.len(), device)?;
-        Ok(Frames { index: Some(index), kept })
+        Ok(Frames { index: Some(index), kept, span })
+    }
+
+    /// A span thinned to every `step`-th of its frames, its first and last kept (a cheaper
+    /// approximation of the same selection); keyframes, and spans of at most two frames, as
+    /// they are.
+    pub fn thinned(&self, step: usize, device: &Device) -> Result<Frames> {
+        let Some(&last) = self.kept.last() else { return Ok(self.clone()) };
+        if !self.span || step <= 1 || self.kept.len() <= 2 {
+            return Ok(self.clone());
+        }
+        let mut kept: Vec<usize> = self.kept.iter().copied().step_by(step).collect();
+        if kept.last() != Some(&last) {
+            kept.push(last);
+        }
+        let index = Tensor::from_vec(kept.iter().map(|&f| f as u32).collect::<Vec<_>>(), kept.len(), device)?;
+        Ok(Frames { index: Some(index), kept, span: true })
     }
 
     /// The kept frame numbers.

@@ -61,7 +61,8 @@ pub(super) enum Node {
         reduce: Reduce,
     },
     Scene {
-        joints: Tensor,
+        /// The listed joints `[J]` (u32); `None`: every joint.
+        joints: Option<Tensor>,
         surface: bool,
         primitive: Primitive,
         frames: Frames,
@@ -143,8 +144,11 @@ fn worst_point_reduce(errors: &Tensor, mask: Option<&Tensor>, how: Reduce) -> Re
     }
 }
 
-pub(super) fn body_points(joints: &Tensor, set: &Tensor, surface: bool) -> Result<Tensor> {
-    let listed = joints.index_select(set, 2)?;
+pub(super) fn body_points(joints: &Tensor, set: &Option<Tensor>, surface: bool) -> Result<Tensor> {
+    let listed = match set {
+        Some(set) => joints.index_select(set, 2)?,
+        None => joints.clone(),
+    };
     if surface {
         Tensor::cat(&[listed, surface_points(joints)?], 2)
     } else {
@@ -191,6 +195,9 @@ impl Node {
         Ok(match self {
             Node::Compare { quantity, comparison, frames, when, reduce: how } => {
                 let q = signal(joints, quantity)?; // [B, n, C]
+                let n = q.dim(1)?;
+                // The comparison is per frame: selecting the frames first spares the others.
+                let q = frames.select(&q)?;
                 let per_frame = match comparison {
                     Comparison::Equal { target, metric } => {
                         let target = constant(target, q.dtype(), q.device())?;
@@ -203,9 +210,9 @@ impl Node {
                     Comparison::LessThan(max) => (q - *max)?.relu()?,
                     Comparison::GreaterThan(min) => (*min - q)?.relu()?,
                 }
-                .sum(D::Minus1)?; // [B, n]
-                let mask = frames.condition_mask(joints, when, per_frame.dim(1)?)?;
-                reduce(&frames.select(&per_frame)?, mask.as_ref(), *how)?
+                .sum(D::Minus1)?; // [B, F]
+                let mask = frames.condition_mask(joints, when, n)?;
+                reduce(&per_frame, mask.as_ref(), *how)?
             }
             Node::And(args) => {
                 let mut sum = args[0].eval(joints, initial)?;
@@ -257,7 +264,8 @@ impl Node {
                 reduce(&frames.select(&(gap.sqr()? + intrusion.sqr()?)?)?, None, *how)?
             }
             Node::Scene { joints: set, surface, primitive, frames, when, reduce: how } => {
-                let points = frames.select(&body_points(joints, set, *surface)?)?;
+                // The points are per frame: selecting the frames first spares the others.
+                let points = body_points(&frames.select(joints)?, set, *surface)?;
                 let mask = frames.condition_mask(joints, when, joints.dim(1)?)?;
                 worst_point_reduce(&primitive_error(&points, primitive, false)?, mask.as_ref(), *how)?
             }

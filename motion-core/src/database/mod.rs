@@ -1,6 +1,7 @@
 //! The motion database: augmented 20 fps feature sequences cut into labelled windows, stored as
-//! one safetensors file with its index. It is both the training set of the prior and the
-//! retrieval corpus of RG-DNO.
+//! one safetensors file with its index. It is the training set of the prior, and RG-DNO's
+//! retrieval database when one is named (`--database`; by default RG-DNO retrieves from the
+//! corpus's train split, [`crate::rgdno::candidates`]).
 //!
 //! Augmentations: left/right mirroring (labels swap "left" and "right"), time warps (replaying
 //! the source at other speeds, interpolating its rotations), looping of cyclic clips with
@@ -469,14 +470,21 @@ fn window_starts(frames: usize, config: &DatabaseConfig) -> impl Iterator<Item =
     starts.into_iter().map(move |s| (s, len))
 }
 
-/// Swaps the words "left" and "right" in a label.
+/// Swaps the words "left" and "right" in a label, punctuation and a capital first letter kept
+/// ("to the left, sideways" → "to the right, sideways"; "Left" → "Right").
 pub fn mirror_label(label: &str) -> String {
     label
         .split(' ')
-        .map(|w| match w {
-            "left" => "right",
-            "right" => "left",
-            other => other,
+        .map(|w| {
+            let core = w.trim_matches(|c: char| !c.is_alphanumeric());
+            let swapped = match core {
+                "left" => "right",
+                "right" => "left",
+                "Left" => "Right",
+                "Right" => "Left",
+                _ => return w.to_owned(),
+            };
+            w.replacen(core, swapped, 1)
         })
         .collect::<Vec<_>>()
         .join(" ")
@@ -545,5 +553,7 @@ mod tests {
     fn mirrored_labels_swap_sides() {
         assert_eq!(mirror_label("a person kicks with the right leg"), "a person kicks with the left leg");
         assert_eq!(mirror_label("a person walks and turns left"), "a person walks and turns right");
+        assert_eq!(mirror_label("to the left, sideways (Right leg)"), "to the right, sideways (Left leg)");
+        assert_eq!(mirror_label("leftover rights"), "leftover rights");
     }
 }

@@ -18,7 +18,7 @@
 //! returned joints are the finished ones, the network's joints are kept beside them so that a
 //! report can give every figure before and after both.
 //!
-//! RG-DNO needs the program's relational parse and a retrieval corpus; without them, or when
+//! RG-DNO needs the program's relational parse and a retrieval database; without them, or when
 //! no database motion passes the retrieval, it falls back to DNO and says why
 //! ([`Generation::fallback`]).
 
@@ -39,14 +39,15 @@ use crate::dno::{optimize_with_restarts, DnoConfig, Solver, UnrolledDdim};
 use crate::postprocess::{finish, Unfinished};
 use crate::prior::Prior;
 use crate::representation::FEATURE_DIM;
-use crate::rgdno::retrieval::{RetrievalCorpus, RetrievalError};
+use crate::rgdno::candidates::RetrievalDatabase;
+use crate::rgdno::retrieval::RetrievalError;
 use crate::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
 
 /// What RG-DNO retrieves from and how it runs its stages.
 #[derive(Debug, Clone, Copy)]
 pub struct Retrieval<'a> {
-    /// Candidates of the program's frame count, built from the retrieval database.
-    pub corpus: &'a RetrievalCorpus,
+    /// The motions retrieval crops (by default the corpus's train split).
+    pub database: &'a RetrievalDatabase,
     /// RG-DNO's stages.
     pub rg_dno: &'a RgDnoConfig,
 }
@@ -67,7 +68,7 @@ pub enum Event<'a> {
         /// Mean loss over the samples.
         loss: f64,
     },
-    /// Something the user should read: the retrieval corpus built, a fallback and its reason.
+    /// Something the user should read: the retrieval database opened, a fallback and its reason.
     Note(String),
 }
 
@@ -97,7 +98,7 @@ pub enum GenerateError {
 
 /// Generates `config.samples` motions for `task` with `config.method`; RG-DNO retrieves with
 /// `retrieval` and falls back to DNO (telling `on` why) without a relational parse, without a
-/// corpus, or when nothing is retrieved.
+/// retrieval database, or when nothing is retrieved.
 ///
 /// `on` gets every optimisation step.
 pub fn generate(
@@ -132,7 +133,7 @@ pub fn generate(
     Ok(Generation { generated, method: config.method, rg_dno: None, fallback: None })
 }
 
-/// RG-DNO on the corpus of `retrieval`.
+/// RG-DNO on the database of `retrieval`.
 fn rg_dno(
     prior: &Prior,
     Task { program, compiled }: Task<'_>,
@@ -144,8 +145,8 @@ fn rg_dno(
     if program.relational_parse.is_none() {
         return Err(RgDnoError::NoParse);
     }
-    let Retrieval { corpus, rg_dno } = retrieval.ok_or(RgDnoError::NoCorpus)?;
-    generate_rg_dno(prior, RgDnoTask { program, compiled, corpus }, config, rg_dno, device, |p| {
+    let Retrieval { database, rg_dno } = retrieval.ok_or(RgDnoError::NoDatabase)?;
+    generate_rg_dno(prior, RgDnoTask { program, compiled, database }, config, rg_dno, device, |p| {
         on(Event::Step { stage: p.stage.name(), round: p.round, step: p.step, steps: p.steps, loss: p.loss })
     })
 }

@@ -11,8 +11,8 @@
 pub mod bench;
 mod config;
 mod fused_stack;
-mod init;
-mod layer;
+pub(crate) mod init;
+pub(crate) mod layer;
 #[cfg(test)]
 mod tests;
 

@@ -120,7 +120,7 @@ pub(crate) fn facing_direction(pose: &Pose) -> Option<DVec3> {
 }
 
 /// Rotation about y that takes the horizontal direction `forward` to +z.
-fn heading_rotation(forward: DVec3) -> DQuat {
+pub(crate) fn heading_rotation(forward: DVec3) -> DQuat {
     DQuat::from_rotation_y(-forward.x.atan2(forward.z))
 }
 

@@ -21,8 +21,8 @@ mod planted_feet;
 mod recover;
 mod rigid;
 
-pub(crate) use extract::facing_direction;
 pub use extract::{canonicalize, extract_features, ExtractedMotion, FOOT_CONTACT_THRESHOLD_M2};
+pub(crate) use extract::{facing_direction, heading_rotation};
 pub use normalization::{MeanStd, NormalizationError};
 pub use planted_feet::{root_velocity_from_planted_feet, PLANTED_CONTACT};
 pub use recover::recover_from_ric;

@@ -3,8 +3,9 @@
 //!
 //! 1. **groups** (§4.2, Algorithm 1, [`crate::program::TaskProgram::constraint_groups`]): the
 //!    retrieval set `C_R`, the random-noise set `C1` and the retrieved-noise set `C2`;
-//! 2. **retrieval** (§4.3, eqs. 5–6, [`retrieval`]): the database motion `x_R` that best
-//!    satisfies `C_R`;
+//! 2. **retrieval** (§4.3, eqs. 5–6, [`retrieval`]): the motion `x_R` of the retrieval
+//!    database ([`candidates`]: by default the corpus's train split) that best satisfies `C_R`,
+//!    among those that pass the semantic check ([`semantic`]);
 //! 3. **inversion** (eq. 7, `invert.rs`): `z_R = G⁻¹(x_R)` ([`crate::inversion::invert_motion`]);
 //! 4. **two branches** (eqs. 8–9, `branches.rs`): `z1` from random noise fitted to `C1`, `z2`
 //!    from `z_R` fitted to `C2`, each `N1` DNO steps;
@@ -19,6 +20,7 @@
 //! ([`crate::postprocess`]); [`crate::generation::generate`] dispatches here.
 
 mod branches;
+pub mod candidates;
 pub mod config;
 mod final_round;
 mod invert;
@@ -27,6 +29,7 @@ mod mask_search;
 pub mod report;
 pub mod retrieval;
 pub mod reward;
+pub mod semantic;
 mod soft_blend;
 
 use std::time::Instant;
@@ -49,9 +52,10 @@ use crate::prior::Prior;
 use crate::program::{ConstraintGroups, TaskProgram};
 use crate::representation::FEATURE_DIM;
 use branches::Branches;
+use candidates::RetrievalDatabase;
 use mask::blend;
 use mask_search::{MaskStages, Objective};
-use retrieval::{retrieve, RetrievalCorpus, RetrievalQuery};
+use retrieval::{retrieve, RetrievalQuery};
 use reward::RewardWeights;
 
 /// Why RG-DNO did not run ([`RgDnoError::falls_back`]: the caller falls back to DNO and says
@@ -64,9 +68,9 @@ pub enum RgDnoError {
     /// No database motion passed the semantic check and the threshold.
     #[error("no database motion passed the semantic check and the retrieval threshold")]
     NothingRetrieved,
-    /// The caller gave no retrieval corpus.
+    /// The caller gave no retrieval database.
     #[error("no retrieval database was given")]
-    NoCorpus,
+    NoDatabase,
     /// Retrieval failed.
     #[error(transparent)]
     Retrieval(#[from] retrieval::RetrievalError),
@@ -82,23 +86,23 @@ impl From<candle_core::Error> for RgDnoError {
 }
 
 impl RgDnoError {
-    /// Whether this is a reason to fall back to DNO (nothing to retrieve, or no corpus to
+    /// Whether this is a reason to fall back to DNO (nothing to retrieve, or no database to
     /// retrieve from) rather than a failure.
     pub fn falls_back(&self) -> bool {
-        matches!(self, RgDnoError::NoParse | RgDnoError::NothingRetrieved | RgDnoError::NoCorpus)
+        matches!(self, RgDnoError::NoParse | RgDnoError::NothingRetrieved | RgDnoError::NoDatabase)
     }
 }
 
 /// A task as RG-DNO takes it: the program (with its relational parse), compiled, and the
-/// retrieval corpus built for its frame count.
+/// retrieval database.
 #[derive(Debug, Clone, Copy)]
 pub struct RgDnoTask<'a> {
     /// The program.
     pub program: &'a TaskProgram,
     /// The program compiled.
     pub compiled: &'a CompiledProgram,
-    /// Candidates of `program.frames` frames.
-    pub corpus: &'a RetrievalCorpus,
+    /// The motions retrieval crops.
+    pub database: &'a RetrievalDatabase,
 }
 
 /// Generates `config.samples` motions for `task` with RG-DNO. `config` gives the samples,
@@ -114,7 +118,7 @@ pub fn generate_rg_dno(
     device: &Device,
     mut progress: impl FnMut(&StageProgress),
 ) -> Result<(Generated, RgDnoReport), RgDnoError> {
-    let RgDnoTask { program, compiled, corpus } = task;
+    let RgDnoTask { program, compiled, database } = task;
     rg.validate(compiled.frames())?;
     config.check(compiled.frames())?;
     config.dno.validate()?;
@@ -134,8 +138,8 @@ pub fn generate_rg_dno(
         prompt: &program.text,
         counting: !c_r.count_targets().is_empty(),
     };
-    let retrieved = retrieve(corpus, &query, &rg.retrieval)?;
-    let best = retrieved.first().ok_or(RgDnoError::NothingRetrieved)?;
+    let found = retrieve(database, &query, &rg.retrieval, device)?;
+    let best = found.retrieved.first().ok_or(RgDnoError::NothingRetrieved)?;
     seconds.retrieval = clock.elapsed().as_secs_f64();
 
     // The solver, as DNO's, for the batch and for both branches side by side.
@@ -179,8 +183,10 @@ pub fn generate_rg_dno(
         retrieval_set: groups.retrieval,
         random_noise_set: groups.random_noise,
         retrieved_noise_set: groups.retrieved_noise,
-        candidates: corpus.len(),
-        retrieved: retrieved
+        candidates: found.candidates,
+        consistent_candidates: found.consistent,
+        retrieved: found
+            .retrieved
             .iter()
             .map(|r| RetrievedReport {
                 source: r.source.clone(),

@@ -3,10 +3,10 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::candidates::CandidateSource;
 use super::config::RgDnoConfig;
 use super::mask::MaskCandidate;
 use super::mean;
-use super::retrieval::CandidateSource;
 use crate::dno;
 use crate::method::pick_rows;
 
@@ -35,7 +35,8 @@ pub struct ChosenMask {
 /// Seconds per stage.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageSeconds {
-    /// Scoring the corpus.
+    /// Retrieval: the semantic check, scoring every candidate, extracting the retrieved
+    /// features.
     pub retrieval: f64,
     /// Inverting `x_R`.
     pub inversion: f64,
@@ -89,8 +90,11 @@ pub struct RgDnoReport {
     pub random_noise_set: Vec<String>,
     /// `C2`.
     pub retrieved_noise_set: Vec<String>,
-    /// Candidates in the corpus (before the semantic check).
+    /// Candidate crops of the retrieval database for the task's frame count.
     pub candidates: usize,
+    /// Those that passed the semantic check, all scored.
+    #[serde(default)]
+    pub consistent_candidates: usize,
     /// The retrieved motions, best first; the first is `x_R`.
     pub retrieved: Vec<RetrievedReport>,
     /// Mean joint distance of `G(z_R)` to `x_R`, m.

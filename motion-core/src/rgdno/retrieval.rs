@@ -1,15 +1,13 @@
 //! Constraint-based retrieval (RG-DNO §4.3, eqs. 5–6; supp. A "Semantic Check"): the motion of
-//! the database that best satisfies the retrieval set `C_R`, as the start of the retrieved-noise
-//! branch.
+//! the retrieval database that best satisfies the retrieval set `C_R`, as the start of the
+//! retrieved-noise branch.
 //!
-//! **Candidates.** Crops of every database sequence (all augmentations: mirrored copies and
-//! time warps), starting every [`RetrievalConfig::crop_stride_frames`] frames, of
-//! `T·f` frames for each resize factor `f` of [`RetrievalConfig::resize_factors`], each
-//! temporally resized to the task's `T` frames by linear interpolation (the paper's temporal
-//! resizing; velocity channels are scaled by the time ratio so that the motion covers the same
-//! ground in its new length). A factor above 1 plays a crop faster: a 2.5 s crawl resized to
-//! 1 s covers the ground that the task's walk covers. A sequence shorter than `T` is resized
-//! whole.
+//! **Candidates.** Crops of every clip of the retrieval database (by default the corpus's train
+//! split with mirrored copies), starting every [`RetrievalConfig::crop_stride_frames`] frames,
+//! of `T·f` frames for each resize factor `f` of [`RetrievalConfig::resize_factors`], each
+//! resized in joint space to the task's `T` frames (the paper's temporal resizing); a factor
+//! above 1 plays a crop faster. [`super::candidates`] holds the joints once and makes a crop's
+//! joints only while its batch is scored.
 //!
 //! **No transform `H` (eq. 6).** The paper's representation is global, so a retrieved motion
 //! is rotated and shifted in the horizontal plane to fit. Ours (HumanML3D's 263-d features)
@@ -19,28 +17,36 @@
 //! crop start (which sets the facing and position at the first frame) and the resize factor
 //! are the search.
 //!
+//! **Semantic check** ([`super::semantic`]), before anything is scored: a crop is dropped when
+//! its window contradicts the prompt's direction words (forward/backward, left/right) or its
+//! gait (a walk against a jump or a run; beyond the paper, whose check left a walking task free
+//! to retrieve a two-footed jump and keep its hops) and, for counting tasks, when it lacks the
+//! prompt's action verb.
+//!
 //! **Score.** `Σ_i w_i·E_i` over `C_R`, with `w = 1` for the most difficult constraint `c_D`
 //! and [`RetrievalConfig::related_weight`] for its connected ones (supp. C: "we set a smaller
 //! weight for the target position constraint in order not to overshadow `c_D`"), evaluated in
-//! batches on the candidates' joints.
-//!
-//! **Semantic check.** A crop is dropped when its label contradicts the prompt's direction words
-//! (forward/backward, left/right) or its gait (a walk against a jump or a run; beyond the paper,
-//! whose check left a walking task free to retrieve a two-footed jump and keep its hops) and, for
-//! counting tasks, when it lacks the prompt's action verb.
+//! batches on the candidates' joints: every candidate on a proxy (the joint centres only, every
+//! [`RetrievalConfig::proxy_frame_step`]-th frame), then the best
+//! [`RetrievalConfig::exact_shortlist`] exactly (body-surface points, every frame). Features
+//! (`[T, 263]`, for the inversion) are extracted for the retrieved few only.
 
 use candle_core::{DType, Device, Tensor};
+use rayon::prelude::*;
 use serde::Serialize;
 
+use super::candidates::{CandidateSource, Crop, RetrievalDatabase};
 use crate::constraints::{CompiledProgram, ConstraintError};
-use crate::database::{MotionDatabase, Window};
-use crate::representation::{recover_from_ric, FEATURE_DIM, LOCAL_VEL, ROOT_LIN_VEL, ROOT_ROT_VEL};
+use crate::corpus::file::CorpusFileError;
+use crate::database::DatabaseError;
+use crate::skeleton::NUM_JOINTS;
+use crate::MotionError;
 
 /// Settings of [`retrieve`].
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RetrievalConfig {
-    /// Frames between the starts of consecutive crops of one sequence (default 20: 1 s).
+    /// Frames between the starts of consecutive crops of one clip (default 20: 1 s).
     pub crop_stride_frames: usize,
     /// Crop lengths as multiples of the task's frame count, each resized to it (default 1,
     /// 1.5, 2, 2.5: the crop played at 1–2.5× its speed).
@@ -51,11 +57,16 @@ pub struct RetrievalConfig {
     pub top_k: usize,
     /// A motion is kept only when its score is at most this (default `None`: no threshold).
     pub threshold: Option<f64>,
-    /// Crops scored per batch (default 256).
+    /// Crops scored per batch (default 32: 0.7 MB of f32 joints for a 100-frame task, small
+    /// enough that candle runs the proxy's element-wise ops inline on the batch's worker).
     pub batch: usize,
-    /// Candidates re-scored with body-surface points after ranking all on joint centres
-    /// (default 64; at least `top_k`).
+    /// Candidates re-scored exactly (body-surface points, every frame) after ranking all on
+    /// the proxy (default 64; at least `top_k`).
     pub exact_shortlist: usize,
+    /// The proxy that ranks every candidate reads every `proxy_frame_step`-th frame of the
+    /// spans its constraints reduce over, keyframes kept ([`CompiledProgram::thinned`]), and the
+    /// joint centres only (default 4: 5 Hz; 1: every frame).
+    pub proxy_frame_step: usize,
 }
 
 impl Default for RetrievalConfig {
@@ -66,67 +77,41 @@ impl Default for RetrievalConfig {
             related_weight: 0.1,
             top_k: 5,
             threshold: None,
-            batch: 256,
+            batch: 32,
             exact_shortlist: 64,
+            proxy_frame_step: 4,
         }
     }
-}
-
-/// Where a candidate motion comes from.
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
-pub struct CandidateSource {
-    /// Source clip name.
-    pub clip: String,
-    /// Its label (mirrored for mirrored copies).
-    pub label: String,
-    /// A left/right mirrored copy.
-    pub mirrored: bool,
-    /// Playback speed of the augmented copy.
-    pub speed: f64,
-    /// Index of the sequence in the database.
-    pub sequence: usize,
-    /// First frame of the crop in the sequence.
-    pub start: usize,
-    /// Frames taken from the sequence (resized to the task's frame count).
-    pub frames: usize,
-}
-
-impl std::fmt::Display for CandidateSource {
-    /// `"label" (clip [mirrored] ×speed, frames a..b)`.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{:?} ({}{} ×{}, frames {}..{})",
-            self.label,
-            self.clip,
-            if self.mirrored { " mirrored" } else { "" },
-            self.speed,
-            self.start,
-            self.start + self.frames
-        )
-    }
-}
-
-/// Every candidate crop of a database for one frame count, with its joints for scoring.
-#[derive(Debug, Clone)]
-pub struct RetrievalCorpus {
-    frames: usize,
-    sources: Vec<CandidateSource>,
-    /// Raw features of every sequence, flat `[frames, 263]` each.
-    sequences: Vec<Vec<f32>>,
-    /// Joints `[N, T, 22, 3]` (m, y up), f32.
-    joints: Tensor,
 }
 
 /// Why retrieval failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RetrievalError {
-    /// The database has no sequence to crop.
-    #[error("the retrieval database has no sequence of at least 2 frames")]
+    /// The database has no clip to crop.
+    #[error("the retrieval database has no clip of at least 2 frames")]
     Empty,
     /// A setting cannot be used.
     #[error("invalid retrieval setting: {0}")]
     Setting(String),
+    /// The corpus file could not be read (the error names it).
+    #[error(transparent)]
+    Corpus(#[from] CorpusFileError),
+    /// The motion database could not be opened.
+    #[error("the retrieval database ({source_name}): {error}")]
+    Database {
+        /// Where it was looked for.
+        source_name: String,
+        /// What went wrong.
+        error: Box<DatabaseError>,
+    },
+    /// A retrieved crop's features could not be extracted.
+    #[error("retrieved crop {crop}: {error}")]
+    Features {
+        /// The crop.
+        crop: String,
+        /// What went wrong.
+        error: MotionError,
+    },
     /// The retrieval set could not be evaluated.
     #[error(transparent)]
     Constraint(#[from] ConstraintError),
@@ -148,106 +133,22 @@ pub struct Retrieved {
     pub features: Tensor,
 }
 
-impl RetrievalCorpus {
-    /// The crops of `database` for motions of `frames` frames, on `device`.
-    pub fn build(
-        database: &MotionDatabase,
-        frames: usize,
-        config: &RetrievalConfig,
-        device: &Device,
-    ) -> Result<Self, RetrievalError> {
-        if frames < 2 || config.crop_stride_frames == 0 {
-            return Err(RetrievalError::Setting(format!(
-                "frames ({frames}) must be ≥ 2 and crop_stride_frames ({}) ≥ 1",
-                config.crop_stride_frames
-            )));
-        }
-        if let Some(f) = config.resize_factors.iter().find(|f| !(f.is_finite() && **f > 0.0 && **f <= 10.0)) {
-            return Err(RetrievalError::Setting(format!("resize factors must lie in (0, 10], got {f}")));
-        }
-        let mut sources = Vec::new();
-        let mut sequences = Vec::with_capacity(database.sequences().len());
-        for (index, sequence) in database.sequences().iter().enumerate() {
-            let whole = Window { sequence: index, start: 0, frames: sequence.frames };
-            let data = database.window_slice(&whole, 0, sequence.frames).map(<[f32]>::to_vec).unwrap_or_default();
-            let available = data.len() / FEATURE_DIM;
-            let mut push = |start: usize, taken: usize| {
-                sources.push(CandidateSource {
-                    clip: sequence.source.clone(),
-                    label: sequence.label.clone(),
-                    mirrored: sequence.mirrored,
-                    speed: sequence.speed,
-                    sequence: index,
-                    start,
-                    frames: taken,
-                });
-            };
-            if (2..frames).contains(&available) {
-                push(0, available);
-            }
-            for &factor in &config.resize_factors {
-                let length = ((frames as f64 * factor).round() as usize).max(2);
-                let mut start = 0;
-                while start + length <= available {
-                    push(start, length);
-                    start += config.crop_stride_frames;
-                }
-            }
-            sequences.push(data);
-        }
-        if sources.is_empty() {
-            return Err(RetrievalError::Empty);
-        }
-        let mut corpus = Self { frames, sources, sequences, joints: Tensor::zeros(0, DType::F32, device)? };
-        let mut joints = Vec::new();
-        let step = config.batch.max(1);
-        for start in (0..corpus.len()).step_by(step) {
-            let rows: Vec<usize> = (start..(start + step).min(corpus.len())).collect();
-            let features: Vec<f32> = rows.iter().flat_map(|&i| corpus.features_of(i)).collect();
-            let features = Tensor::from_vec(features, (rows.len(), frames, FEATURE_DIM), device)?;
-            joints.push(recover_from_ric(&features)?);
-        }
-        corpus.joints = Tensor::cat(&joints, 0)?;
-        Ok(corpus)
-    }
-
-    /// Raw features of candidate `i`, resized to the corpus's frame count, flat `[T, 263]`.
-    fn features_of(&self, i: usize) -> Vec<f32> {
-        let s = &self.sources[i];
-        let crop = &self.sequences[s.sequence][s.start * FEATURE_DIM..(s.start + s.frames) * FEATURE_DIM];
-        if s.frames == self.frames {
-            crop.to_vec()
-        } else {
-            resize_features(crop, s.frames, self.frames)
-        }
-    }
-
-    /// Frames per candidate.
-    pub fn frames(&self) -> usize {
-        self.frames
-    }
-
-    /// Number of candidates.
-    pub fn len(&self) -> usize {
-        self.sources.len()
-    }
-
-    /// Whether there is no candidate.
-    pub fn is_empty(&self) -> bool {
-        self.sources.is_empty()
-    }
-
-    /// Where candidate `i` comes from.
-    pub fn source(&self, i: usize) -> Option<&CandidateSource> {
-        self.sources.get(i)
-    }
+/// What [`retrieve`] found, and among how many.
+#[derive(Debug, Clone)]
+pub struct RetrievalOutcome {
+    /// The best motions under the threshold, best first (empty when none passes).
+    pub retrieved: Vec<Retrieved>,
+    /// Candidate crops of the database for the task's frame count.
+    pub candidates: usize,
+    /// Those that passed the semantic check, all scored.
+    pub consistent: usize,
 }
 
 /// The task as retrieval sees it: the compiled `C_R`, its most difficult constraint and the
 /// prompt that the semantic check reads.
 #[derive(Debug, Clone, Copy)]
 pub struct RetrievalQuery<'a> {
-    /// `C_R`, compiled for the corpus's frame count.
+    /// `C_R`, compiled for the task's frame count.
     pub program: &'a CompiledProgram,
     /// Id of `c_D` (weight 1 in the score).
     pub most_difficult: &'a str,
@@ -257,190 +158,197 @@ pub struct RetrievalQuery<'a> {
     pub counting: bool,
 }
 
-/// Eqs. 5–6: scores every candidate of `corpus` that passes the semantic check on `query` and
-/// returns the best `top_k` under the threshold, best first (empty when none passes).
+/// Eqs. 5–6: scores every crop of `database` that passes the semantic check on `query` and
+/// returns the best `top_k` under the threshold, best first, with their features on `device`.
 pub fn retrieve(
-    corpus: &RetrievalCorpus,
+    database: &RetrievalDatabase,
     query: &RetrievalQuery<'_>,
     config: &RetrievalConfig,
-) -> Result<Vec<Retrieved>, RetrievalError> {
-    if query.program.frames() != corpus.frames {
-        return Err(RetrievalError::Setting(format!(
-            "C_R is compiled for {} frames, the corpus holds {}",
-            query.program.frames(),
-            corpus.frames
-        )));
-    }
+    device: &Device,
+) -> Result<RetrievalOutcome, RetrievalError> {
     if !(config.related_weight.is_finite() && config.related_weight >= 0.0) {
         return Err(RetrievalError::Setting(format!("related_weight must be ≥ 0, got {}", config.related_weight)));
     }
-    let kept: Vec<usize> = (0..corpus.len())
-        .filter(|&i| semantically_consistent(query.prompt, &corpus.sources[i].label, query.counting))
-        .collect();
-    // Rank every candidate on the joint centres, then score the best exactly (surface points).
-    let proxy = query.program.joints_only();
-    let mut ranked = score(corpus, &proxy, &kept, query.most_difficult, config)?;
-    ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let shortlist: Vec<usize> =
-        ranked.iter().take(config.exact_shortlist.max(config.top_k)).map(|(i, ..)| *i).collect();
-    let mut scored = score(corpus, query.program, &shortlist, query.most_difficult, config)?;
-    scored.retain(|(_, score, _)| score.is_finite() && config.threshold.is_none_or(|t| *score <= t));
-    scored.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let frames = query.program.frames();
+    let crops = database.crops(frames, config)?;
+    let windows = database.consistent_windows(query.prompt, query.counting);
+    let kept: Vec<Crop> = crops.iter().filter(|c| database.crop_is_consistent(c, &windows)).copied().collect();
+    // Rank every candidate on the proxy (joint centres, 5 Hz), then score the best exactly.
+    let proxy = query.program.joints_only().thinned(config.proxy_frame_step, device)?;
+    let mut ranked = score(database, &proxy, &kept, query.most_difficult, config, device)?;
+    ranked.sort_by(|a, b| a.total.total_cmp(&b.total));
+    let shortlist: Vec<Crop> = ranked.iter().take(config.exact_shortlist.max(config.top_k)).map(|s| s.crop).collect();
+    let mut scored = score(database, query.program, &shortlist, query.most_difficult, config, device)?;
+    scored.retain(|s| s.total.is_finite() && config.threshold.is_none_or(|t| s.total <= t));
+    scored.sort_by(|a, b| a.total.total_cmp(&b.total));
     scored.truncate(config.top_k);
-    scored
+    let ids: Vec<&str> = query.program.ids().collect();
+    let retrieved = scored
         .into_iter()
-        .map(|(i, score, per_constraint)| {
+        .map(|s| {
             Ok(Retrieved {
-                source: corpus.sources[i].clone(),
-                score,
-                per_constraint,
-                features: Tensor::from_vec(
-                    corpus.features_of(i),
-                    (corpus.frames, FEATURE_DIM),
-                    corpus.joints.device(),
-                )?,
+                source: database.source(&s.crop, frames),
+                score: s.total,
+                per_constraint: ids.iter().map(|id| (*id).to_owned()).zip(s.errors).collect(),
+                features: database.features(&s.crop, frames, device)?,
             })
         })
-        .collect()
+        .collect::<Result<_, RetrievalError>>()?;
+    Ok(RetrievalOutcome { retrieved, candidates: crops.len(), consistent: kept.len() })
 }
 
-/// A candidate's score: `(candidate, Σ w_i·E_i, (id, E_i) per constraint)`.
-type Scored = (usize, f64, Vec<(String, f64)>);
+/// A candidate's score: `Σ w_i·E_i` (infinite for a crop that cannot be placed) and `E_i` in
+/// program order.
+struct Scored {
+    crop: Crop,
+    total: f64,
+    errors: Vec<f64>,
+}
 
-/// The scores of the candidates `rows` under `program`, in batches.
+/// The scores of `crops` under `program`, in batches spread over the rayon pool: each batch's
+/// joints placed as the generator places a motion (a crop right after its mirror twin is the
+/// twin's placement reflected), then evaluated. The batches are small enough that candle runs
+/// their element-wise ops inline on the worker that owns the batch.
 fn score(
-    corpus: &RetrievalCorpus,
+    database: &RetrievalDatabase,
     program: &CompiledProgram,
-    rows: &[usize],
+    crops: &[Crop],
     most_difficult: &str,
     config: &RetrievalConfig,
+    device: &Device,
 ) -> Result<Vec<Scored>, RetrievalError> {
-    let mut scored = Vec::with_capacity(rows.len());
-    for chunk in rows.chunks(config.batch.max(1)) {
-        let index =
-            Tensor::from_vec(chunk.iter().map(|&i| i as u32).collect::<Vec<_>>(), chunk.len(), corpus.joints.device())?;
-        let evaluation = program.evaluate(&corpus.joints.index_select(&index, 0)?, None)?;
-        let mut per: Vec<(String, Vec<f64>)> = Vec::with_capacity(evaluation.per_constraint.len());
-        for (id, error) in &evaluation.per_constraint {
-            per.push((id.clone(), error.to_dtype(DType::F64)?.to_vec1::<f64>()?));
-        }
-        for (row, &i) in chunk.iter().enumerate() {
-            let errors: Vec<(String, f64)> = per.iter().map(|(id, e)| (id.clone(), e[row])).collect();
-            let total = errors
+    let frames = program.frames();
+    let size = frames * 3 * NUM_JOINTS;
+    let weights: Vec<f64> =
+        program.ids().map(|id| if id == most_difficult { 1.0 } else { config.related_weight }).collect();
+    let batches = crops
+        .par_chunks(config.batch.max(1))
+        .map(|chunk| {
+            let mut joints = Vec::with_capacity(chunk.len() * size);
+            let mut placed = vec![false; chunk.len()];
+            for (k, crop) in chunk.iter().enumerate() {
+                placed[k] = match k.checked_sub(1) {
+                    Some(twin) if placed[twin] && chunk[twin].is_mirror_of(crop) => {
+                        joints.extend_from_within(twin * size..k * size);
+                        database.reflect(&mut joints[k * size..]);
+                        true
+                    }
+                    _ => database.place(crop, frames, &mut joints),
+                };
+            }
+            let joints = Tensor::from_vec(joints, (chunk.len(), frames, NUM_JOINTS, 3), device)?;
+            let evaluation = program.evaluate(&joints, None)?;
+            let errors = evaluation
+                .per_constraint
                 .iter()
-                .map(|(id, e)| if id == most_difficult { *e } else { config.related_weight * e })
-                .sum::<f64>();
-            scored.push((i, total, errors));
-        }
-    }
-    Ok(scored)
-}
-
-/// Pairs of direction words that contradict each other (either way round).
-const DIRECTION_CONTRADICTIONS: [(&str, &str); 3] = [("forward", "backward"), ("left", "right"), ("up", "down")];
-
-/// Pairs of gaits that contradict each other (either way round): a walk always has a foot on
-/// the ground, these have a flight phase. A crawl is not among them: the paper retrieves
-/// crawling for walking prompts (RG-DNO Fig. 3), to pass under barriers.
-const GAIT_CONTRADICTIONS: [(&str, &str); 5] =
-    [("walk", "run"), ("walk", "jog"), ("walk", "jump"), ("walk", "hop"), ("walk", "leap")];
-
-/// Action verbs the semantic check of a counting task looks for, by stem.
-const ACTION_VERBS: [&str; 12] =
-    ["walk", "run", "jog", "jump", "hop", "crawl", "clap", "kick", "punch", "wave", "step", "touch"];
-
-/// The supplementary's keyword check: `false` when `label` holds a direction word or a gait
-/// that contradicts one of `prompt`'s and that the prompt does not name itself ("backwards"
-/// against "walks forwards", "jumps" against "walks", but not "turns right" against "turns
-/// left, then right"), or when `counting` and the prompt names an action verb that `label`
-/// lacks. Words match by stem ("walk" matches "walks" and "walking").
-pub fn semantically_consistent(prompt: &str, label: &str, counting: bool) -> bool {
-    let prompt_words = words(prompt);
-    let label_words = words(label);
-    let has = |ws: &[String], stem: &str| ws.iter().any(|w| w.starts_with(stem));
-    let contradicts =
-        |named: &str, other: &str| has(&prompt_words, named) && !has(&prompt_words, other) && has(&label_words, other);
-    if DIRECTION_CONTRADICTIONS.iter().chain(&GAIT_CONTRADICTIONS).any(|&(a, b)| contradicts(a, b) || contradicts(b, a))
-    {
-        return false;
-    }
-    if counting {
-        let verbs: Vec<&str> = ACTION_VERBS.iter().copied().filter(|v| has(&prompt_words, v)).collect();
-        if !verbs.is_empty() && !verbs.iter().any(|v| has(&label_words, v)) {
-            return false;
-        }
-    }
-    true
-}
-
-fn words(text: &str) -> Vec<String> {
-    text.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).map(str::to_lowercase).collect()
-}
-
-/// Linear resampling of raw features `[from, 263]` (flat) to `to` frames. Velocity channels
-/// (root rotation and linear velocity, local joint velocities; per frame) are scaled by
-/// `(from − 1)/(to − 1)` so that the motion covers the same ground and turn in its new length.
-pub fn resize_features(data: &[f32], from: usize, to: usize) -> Vec<f32> {
-    let scale = if to > 1 { (from.max(1) - 1) as f32 / (to - 1) as f32 } else { 0.0 };
-    // Velocities are per frame: a clip stretched by 1/scale moves 1/scale as far per frame.
-    let factors: Vec<f32> = (0..FEATURE_DIM)
-        .map(|c| match c == ROOT_ROT_VEL || ROOT_LIN_VEL.contains(&c) || LOCAL_VEL.contains(&c) {
-            true => scale,
-            false => 1.0,
+                .map(|(_, e)| e.to_dtype(DType::F64)?.to_vec1::<f64>())
+                .collect::<candle_core::Result<Vec<_>>>()?;
+            let scored = chunk.iter().zip(placed).enumerate().map(|(row, (&crop, placed))| {
+                let errors: Vec<f64> = errors.iter().map(|e| e[row]).collect();
+                let total = match placed {
+                    true => errors.iter().zip(&weights).map(|(e, w)| w * e).sum(),
+                    false => f64::INFINITY,
+                };
+                Scored { crop, total, errors }
+            });
+            Ok(scored.collect::<Vec<_>>())
         })
-        .collect();
-    let row = |t: usize| &data[t * FEATURE_DIM..(t + 1) * FEATURE_DIM];
-    let mut out = Vec::with_capacity(to * FEATURE_DIM);
-    for t in 0..to {
-        let position = t as f32 * scale;
-        let lower = (position.floor() as usize).min(from - 1);
-        let upper = (lower + 1).min(from - 1);
-        let w = position - lower as f32;
-        let blended = row(lower).iter().zip(row(upper)).zip(&factors);
-        out.extend(blended.map(|((&a, &b), &f)| ((1.0 - w) * a + w * b) * f));
-    }
-    out
+        .collect::<Result<Vec<_>, RetrievalError>>()?;
+    Ok(batches.into_iter().flatten().collect())
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::candidates::tests::tiny_corpus;
     use super::*;
+    use crate::corpus::Split;
+    use crate::motion::test_support::walking_poses;
+    use crate::program::TaskProgram;
+    use crate::representation::{extract_features, recover_from_ric, FEATURE_DIM};
+    use crate::skeleton::Pose;
 
-    #[test]
-    fn the_semantic_check_drops_contradicting_directions_gaits_and_missing_verbs() {
-        assert!(!semantically_consistent("a man walks forwards", "a person walks backwards", false));
-        assert!(semantically_consistent("a man walks forwards", "a person walks forward", false));
-        assert!(semantically_consistent("a man walks forwards", "a person crawls forward on the ground", false));
-        assert!(!semantically_consistent("a person walks and turns left", "a person walks and turns right", false));
-        // A direction the prompt names both ways contradicts nothing.
-        assert!(semantically_consistent("a person turns left, then right", "a person walks and turns right", false));
-        // Gaits: a walk is not a jump or a run (either way round), but may be a crawl.
-        assert!(!semantically_consistent("a man walks forwards", "a person jumps forward", false));
-        assert!(!semantically_consistent("a man walks forwards", "a person runs forward", false));
-        assert!(!semantically_consistent("a person jumps forward", "a person walks forward", false));
-        assert!(semantically_consistent(
-            "a man runs forwards and jumps over an obstacle",
-            "a person jumps forward",
-            false
-        ));
-        assert!(semantically_consistent("a man walks forwards and jumps", "a person jumps forward", false));
-        // Counting tasks need the action verb.
-        assert!(!semantically_consistent("a man walks six steps", "a person dances in place", true));
-        assert!(semantically_consistent("a man walks six steps", "a person walks forward punching", true));
-        assert!(semantically_consistent("a man walks six steps", "a person dances in place", false));
+    const FRAMES: usize = 40;
+
+    /// `C_R` pinning the pelvis and the wrists, at four keyframes, where the feature path puts
+    /// `poses` (`FRAMES + 1` of them): the joints the generator would start from.
+    fn pins(poses: &[Pose]) -> CompiledProgram {
+        let features: Vec<f32> = extract_features(poses).unwrap().features.into_iter().flatten().collect();
+        let features = Tensor::from_vec(features, (1, FRAMES, FEATURE_DIM), &Device::Cpu).unwrap();
+        let joints = recover_from_ric(&features).unwrap().squeeze(0).unwrap().to_dtype(DType::F64).unwrap();
+        let joints = joints.to_vec3::<f64>().unwrap();
+        let mut constraints = Vec::new();
+        for t in [0, FRAMES / 3, 2 * FRAMES / 3, FRAMES - 1] {
+            for (name, j) in [("pelvis", 0), ("left_wrist", 20), ("right_wrist", 21)] {
+                let p = &joints[t][j];
+                constraints.push(format!(
+                    r#"{{"id": "c{}", "expr": {{"op": "equal", "quantity": {{"kind": "position", "of": {{"joint": "{name}"}}, "axes": "xyz"}},
+                       "target": [{}, {}, {}], "frames": {{"keyframes": [{{"frame": {t}}}]}}}}}}"#,
+                    constraints.len() + 1,
+                    p[0],
+                    p[1],
+                    p[2]
+                ));
+            }
+        }
+        let text =
+            format!(r#"{{"text": "a person walks", "frames": {FRAMES}, "constraints": [{}]}}"#, constraints.join(","));
+        CompiledProgram::compile(&TaskProgram::from_json_validated(&text).unwrap(), &Device::Cpu).unwrap()
+    }
+
+    fn query<'a>(program: &'a CompiledProgram, prompt: &'a str) -> RetrievalQuery<'a> {
+        RetrievalQuery { program, most_difficult: "c1", prompt, counting: false }
     }
 
     #[test]
-    fn resizing_keeps_the_ends_and_scales_velocities() {
-        let from = 5;
-        let data: Vec<f32> = (0..from * FEATURE_DIM).map(|i| (i / FEATURE_DIM) as f32).collect();
-        let out = resize_features(&data, from, 9);
-        assert_eq!(out.len(), 9 * FEATURE_DIM);
-        // A position channel (root height) goes 0, 0.5, …, 4; a velocity channel is halved.
-        let at = |t: usize, c: usize| out[t * FEATURE_DIM + c];
-        assert_eq!(at(0, 3), 0.0);
-        assert!((at(1, 3) - 0.5).abs() < 1e-6);
-        assert!((at(8, 3) - 4.0).abs() < 1e-6);
-        assert!((at(8, ROOT_ROT_VEL) - 2.0).abs() < 1e-6);
+    fn the_crop_that_the_pins_were_made_from_wins() {
+        let turn = walking_poses(200, 0.8);
+        let corpus = tiny_corpus(vec![
+            ("straight", Split::Train, walking_poses(200, 0.0)),
+            ("turn", Split::Train, turn.clone()),
+        ]);
+        let database = RetrievalDatabase::from_corpus(&corpus).unwrap();
+        // Frames 40..81 of the turning walk, played as captured.
+        let program = pins(&turn[40..=40 + FRAMES]);
+        let config = RetrievalConfig { related_weight: 1.0, ..RetrievalConfig::default() };
+        let found = retrieve(&database, &query(&program, "a person walks"), &config, &Device::Cpu).unwrap();
+        let best = &found.retrieved[0];
+        assert_eq!((best.source.clip.as_str(), best.source.start, best.source.frames), ("turn", 40, FRAMES + 1));
+        assert!(!best.source.mirrored && best.score < 1e-6, "{} {}", best.source, best.score);
+        assert_eq!(best.features.dims(), [FRAMES, FEATURE_DIM]);
+        assert_eq!(found.retrieved.len(), config.top_k);
+        assert!(found.retrieved.windows(2).all(|w| w[0].score <= w[1].score));
+        assert_eq!(found.candidates, found.consistent);
+        // The turning walk turns left: a prompt that turns right drops it, not its mirror.
+        let right = retrieve(&database, &query(&program, "a person walks and turns right"), &config, &Device::Cpu);
+        let right = right.unwrap();
+        assert!(right.consistent < right.candidates);
+        assert!(
+            right.retrieved.iter().all(|r| r.source.clip != "turn" || r.source.mirrored),
+            "{}",
+            right.retrieved[0].source
+        );
+        // A threshold below every score keeps nothing.
+        let strict = RetrievalConfig { threshold: Some(-1.0), ..config };
+        assert!(retrieve(&database, &query(&program, "a person walks"), &strict, &Device::Cpu)
+            .unwrap()
+            .retrieved
+            .is_empty());
+    }
+
+    #[test]
+    fn a_held_out_clip_is_never_retrieved_however_well_it_fits() {
+        let held = walking_poses(200, 1.2);
+        let program = pins(&held[20..=20 + FRAMES]);
+        let config = RetrievalConfig { related_weight: 1.0, top_k: 64, ..RetrievalConfig::default() };
+        let clips = |split| vec![("straight", Split::Train, walking_poses(200, 0.0)), ("held", split, held.clone())];
+        for split in [Split::Validation, Split::Test] {
+            let database = RetrievalDatabase::from_corpus(&tiny_corpus(clips(split))).unwrap();
+            let found = retrieve(&database, &query(&program, "a person walks"), &config, &Device::Cpu).unwrap();
+            assert!(found.retrieved.iter().all(|r| r.source.clip == "straight") && found.retrieved[0].score > 0.01);
+        }
+        // In the train split it would have won.
+        let database = RetrievalDatabase::from_corpus(&tiny_corpus(clips(Split::Train))).unwrap();
+        let found = retrieve(&database, &query(&program, "a person walks"), &config, &Device::Cpu).unwrap();
+        assert_eq!(found.retrieved[0].source.clip, "held");
     }
 }

@@ -39,6 +39,9 @@ pub struct Batch {
     pub text: Tensor,
 }
 
+/// `(first frame, rows of the condition table)` of each captioned stretch of a sequence.
+type Captions = Vec<(usize, Vec<u32>)>;
+
 /// One normalised feature sequence and the captions of its stretches.
 #[derive(Debug, Clone)]
 struct Sequence {
@@ -46,7 +49,7 @@ struct Sequence {
     features: Tensor,
     /// `(first frame, rows of the condition table)` of each captioned stretch, by first frame;
     /// the first starts at frame 0.
-    captions: Vec<(usize, Vec<u32>)>,
+    captions: Captions,
     /// Balancing group (the label of a database window).
     group: usize,
 }
@@ -130,7 +133,8 @@ impl TrainingSet {
             windows_of[w.clip].push(i);
         }
         let mut rows: BTreeMap<String, u32> = BTreeMap::new();
-        let mut raw: Vec<(Vec<FeatureFrame>, Vec<(usize, Vec<u32>)>)> = Vec::new();
+        // Each copy's feature frames and captioned stretches.
+        let mut raw: Vec<(Vec<FeatureFrame>, Captions)> = Vec::new();
         for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == split) {
             let poses = corpus.clip_joints(clip);
             for mirrored in [false, true] {

@@ -212,3 +212,28 @@ fn scene_primitives_on_the_body_surface() {
     let depth = compiled.max_scene_penetration(&tensor(&m)).unwrap().unwrap().to_vec1::<f64>().unwrap();
     assert!((depth[0] - 0.05).abs() < 1e-9);
 }
+
+/// Retrieval's ranking proxy: a span thinned to every 4th frame (its first and last kept, here
+/// frames 0, 4, 8 and 9 of 10) misses a wrist out of the gap on frame 2 alone; a keyframe is
+/// read as it is, and step 1 is the program itself.
+#[test]
+fn a_thinned_program_reads_every_step_th_frame_of_a_span_and_every_keyframe() {
+    let mut m = glide(10);
+    m[2][Joint::LeftWrist.index()][0] = 1.0;
+    let gap = |frames: &str| {
+        format!(
+            r#"{{"op": "scene", "body": {{"joints": {{"only": ["left_wrist", "right_wrist"]}}}}, "primitive": {{"kind": "gap", "centre_x_m": 0.0, "width_m": 0.4}}, "reduce": "max"{frames}}}"#
+        )
+    };
+    let thinned = |expr: &str, step: usize| {
+        let proxy = compile(10, expr).thinned(step, &Device::Cpu).unwrap();
+        proxy.evaluate(&tensor(&m), None).unwrap().total.to_vec1::<f64>().unwrap()[0]
+    };
+    close(&gap(""), &m, 0.8);
+    assert!((thinned(&gap(""), 4) - 0.02).abs() < 1e-9);
+    assert!((thinned(&gap(""), 1) - 0.8).abs() < 1e-9);
+    let keyframe = r#", "frames": {"keyframes": [{"frame": 2}]}"#;
+    assert!((thinned(&gap(keyframe), 4) - 0.8).abs() < 1e-9);
+    let range = r#", "frames": {"range": {"from": {"frame": 1}, "to": {"frame": 3}}}"#;
+    assert!((thinned(&gap(range), 4) - 0.02).abs() < 1e-9, "frames 1 and 3 of the range 1..=3");
+}
