@@ -312,7 +312,7 @@ fn train_evaluator(
         balance_labels: false,
         ..TrainConfig::default()
     };
-    let mut trainer = EvaluatorTrainer::new(EvaluatorConfig::default(), device, args.seed)?;
+    let mut trainer = EvaluatorTrainer::new(EvaluatorConfig::default(), data.mean_std().clone(), device, args.seed)?;
     let start = Instant::now();
     let (mut loss, mut accuracy) = (None::<f64>, 0.0);
     let schedule = TrainConfig { steps: args.steps, lr: args.lr, ..TrainConfig::default() };

@@ -34,7 +34,7 @@ use crate::model::init::SeededInit;
 use crate::model::layer::{Dropout, EncoderLayer, ParamLoader};
 use crate::model::{sinusoidal_table, MdmConfig, MAX_LEN};
 use crate::nn::Linear;
-use crate::representation::FEATURE_DIM;
+use crate::representation::{MeanStd, FEATURE_DIM};
 use crate::tensor_file::{read_metadata, write_safetensors};
 
 /// Sizes of the evaluator.
@@ -104,15 +104,20 @@ pub struct Evaluator {
     text_out: Linear,
     /// Sinusoidal positions `[MAX_LEN, width]`.
     pe: Tensor,
+    /// The normalisation of the features it reads (its training data's).
+    mean_std: MeanStd,
     params: Vec<(String, Tensor)>,
 }
 
 const CONFIG_KEY: &str = "evaluator_config";
+const MEAN_KEY: &str = "normalization.mean";
+const STD_KEY: &str = "normalization.std";
 
 impl Evaluator {
     /// Builds the evaluator from `vb` (names `input`, `layers.{i}.*`, `motion_out`,
-    /// `text_hidden`, `text_out`); a `VarMap` backend creates missing parameters.
-    pub fn new(config: EvaluatorConfig, vb: VarBuilder) -> Result<Self> {
+    /// `text_hidden`, `text_out`) for features normalised by `mean_std`; a `VarMap` backend
+    /// creates missing parameters.
+    pub fn new(config: EvaluatorConfig, mean_std: MeanStd, vb: VarBuilder) -> Result<Self> {
         let layer_config = config.layer_config();
         layer_config.validate()?;
         let mut params = Vec::new();
@@ -125,14 +130,20 @@ impl Evaluator {
         let text_hidden = loader.linear(&vb.pp("text_hidden"), config.text_dim, config.width)?;
         let text_out = loader.linear(&vb.pp("text_out"), config.width, config.embedding)?;
         let pe = sinusoidal_table(MAX_LEN, config.width, vb.device())?;
-        Ok(Self { config, input, layers, motion_out, text_hidden, text_out, pe, params })
+        Ok(Self { config, input, layers, motion_out, text_hidden, text_out, pe, mean_std, params })
     }
 
     /// A trainable evaluator: missing parameters are created in `varmap` as `Var`s with
     /// PyTorch's default init drawn from `StdRng::seed_from_u64(seed)`.
-    pub fn init_seeded(config: EvaluatorConfig, varmap: &VarMap, device: &Device, seed: u64) -> Result<Self> {
+    pub fn init_seeded(
+        config: EvaluatorConfig,
+        mean_std: MeanStd,
+        varmap: &VarMap,
+        device: &Device,
+        seed: u64,
+    ) -> Result<Self> {
         let backend = SeededInit::new(varmap.clone(), StdRng::seed_from_u64(seed));
-        Self::new(config, VarBuilder::from_backend(Box::new(backend), DType::F32, device.clone()))
+        Self::new(config, mean_std, VarBuilder::from_backend(Box::new(backend), DType::F32, device.clone()))
     }
 
     /// Loads an evaluator file written by [`Evaluator::save`].
@@ -145,7 +156,16 @@ impl Evaluator {
         )
         .map_err(|e| err(format!("bad {CONFIG_KEY}: {e}")))?;
         let tensors = candle_core::safetensors::load_buffer(&bytes, device).map_err(|e| err(e.to_string()))?;
-        Self::new(config, VarBuilder::from_tensors(tensors, DType::F32, device)).map_err(|e| err(e.to_string()))
+        let stat = |key: &str| -> std::result::Result<Vec<f32>, EvaluatorError> {
+            tensors
+                .get(key)
+                .ok_or_else(|| err(format!("missing tensor `{key}`")))?
+                .to_vec1::<f32>()
+                .map_err(|e| err(format!("tensor `{key}`: {e}")))
+        };
+        let mean_std = MeanStd::from_vecs(stat(MEAN_KEY)?, stat(STD_KEY)?, device).map_err(|e| err(e.to_string()))?;
+        Self::new(config, mean_std, VarBuilder::from_tensors(tensors, DType::F32, device))
+            .map_err(|e| err(e.to_string()))
     }
 
     /// Writes the parameters and the configuration as one safetensors file.
@@ -155,7 +175,9 @@ impl Evaluator {
             CONFIG_KEY.to_owned(),
             serde_json::to_string(&self.config).map_err(|e| err(e.to_string()))?,
         )]);
-        let tensors: Vec<(String, Tensor)> = self.params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
+        let mut tensors: Vec<(String, Tensor)> = self.params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
+        tensors.push((MEAN_KEY.into(), self.mean_std.mean().clone()));
+        tensors.push((STD_KEY.into(), self.mean_std.std().clone()));
         write_safetensors(path, &tensors, metadata).map_err(err)
     }
 
@@ -164,13 +186,19 @@ impl Evaluator {
         &self.config
     }
 
+    /// The normalisation of the features [`Evaluator::embed_motion`] reads (its training
+    /// data's): normalise raw features with it.
+    pub fn mean_std(&self) -> &MeanStd {
+        &self.mean_std
+    }
+
     /// Every parameter with its name.
     pub fn named_parameters(&self) -> &[(String, Tensor)] {
         &self.params
     }
 
-    /// Unit motion embeddings `[batch, embedding]` of normalised features `[batch, frames, 263]`
-    /// (at most 5,000 frames).
+    /// Unit motion embeddings `[batch, embedding]` of features `[batch, frames, 263]` normalised
+    /// with [`Evaluator::mean_std`] (at most 5,000 frames).
     pub fn embed_motion(&self, x: &Tensor) -> Result<Tensor> {
         let (_, frames, _) = x.dims3()?;
         let mut h = self.input.forward(x)?.broadcast_add(&self.pe.narrow(0, 0, frames)?.unsqueeze(0)?)?;
@@ -215,8 +243,12 @@ fn unit_rows(x: &Tensor) -> Result<Tensor> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
+
+    pub(super) fn unit() -> MeanStd {
+        MeanStd::from_vecs(vec![0.0; FEATURE_DIM], vec![1.0; FEATURE_DIM], &Device::Cpu).unwrap()
+    }
 
     fn tiny() -> EvaluatorConfig {
         EvaluatorConfig { width: 16, ff_size: 32, layers: 1, heads: 2, embedding: 8, text_dim: 6, temperature: 0.1 }
@@ -226,7 +258,7 @@ mod tests {
     fn embeddings_are_unit_rows_of_the_embedding_width_and_survive_a_file() {
         let dev = Device::Cpu;
         let varmap = VarMap::new();
-        let e = Evaluator::init_seeded(tiny(), &varmap, &dev, 3).unwrap();
+        let e = Evaluator::init_seeded(tiny(), unit(), &varmap, &dev, 3).unwrap();
         let x = crate::diffusion::noise::gaussian((3, 20, FEATURE_DIM), 1, &dev).unwrap();
         let m = e.embed_motion(&x).unwrap();
         assert_eq!(m.dims(), &[3, 8]);
@@ -239,6 +271,7 @@ mod tests {
         e.save(&path).unwrap();
         let back = Evaluator::load(&path, &dev).unwrap();
         assert_eq!(back.config(), e.config());
+        assert_eq!(back.mean_std().std().to_vec1::<f32>().unwrap(), vec![1.0; FEATURE_DIM]);
         assert_eq!(crate::testing::max_abs_diff(&back.embed_motion(&x).unwrap(), &m).unwrap(), 0.0);
         std::fs::write(&path, b"junk").unwrap();
         assert!(Evaluator::load(&path, &dev).unwrap_err().to_string().contains("evaluator.safetensors"));
@@ -247,7 +280,7 @@ mod tests {
     #[test]
     fn the_loss_is_low_for_matched_pairs_and_ignores_repeated_captions() {
         let dev = Device::Cpu;
-        let e = Evaluator::init_seeded(tiny(), &VarMap::new(), &dev, 3).unwrap();
+        let e = Evaluator::init_seeded(tiny(), unit(), &VarMap::new(), &dev, 3).unwrap();
         let basis = Tensor::eye(8, DType::F32, &dev).unwrap().narrow(0, 0, 3).unwrap();
         let distinct = vec![vec![true, false, false], vec![false, true, false], vec![false, false, true]];
         let matched = e.contrastive_loss(&basis, &basis, &distinct).unwrap().to_scalar::<f32>().unwrap();

@@ -6,6 +6,7 @@ use candle_nn::{VarBuilder, VarMap};
 
 use super::{Evaluator, EvaluatorConfig, EvaluatorError};
 use crate::optim::AdamW;
+use crate::representation::MeanStd;
 
 /// Captions whose sentence embeddings have a dot product above this are the same sentence.
 const SAME_CAPTION_DOT: f32 = 0.9999;
@@ -30,10 +31,11 @@ pub struct EvaluatorTrainer {
 }
 
 impl EvaluatorTrainer {
-    /// A fresh evaluator with seeded weights.
-    pub fn new(config: EvaluatorConfig, device: &Device, seed: u64) -> Result<Self, EvaluatorError> {
+    /// A fresh evaluator with seeded weights, for features normalised by `mean_std` (the
+    /// training data's).
+    pub fn new(config: EvaluatorConfig, mean_std: MeanStd, device: &Device, seed: u64) -> Result<Self, EvaluatorError> {
         let varmap = VarMap::new();
-        let model = Evaluator::init_seeded(config, &varmap, device, seed)?;
+        let model = Evaluator::init_seeded(config, mean_std, &varmap, device, seed)?;
         let data = varmap.data().lock().map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
         let vars: Vec<(String, Var)> = model
             .named_parameters()
@@ -83,7 +85,8 @@ impl EvaluatorTrainer {
     pub fn evaluator(&self) -> Result<Evaluator, EvaluatorError> {
         let tensors = self.vars.iter().map(|(n, v)| (n.clone(), v.as_tensor().detach())).collect();
         let device = self.vars.first().map_or(Device::Cpu, |(_, v)| v.device().clone());
-        Ok(Evaluator::new(self.model.config().clone(), VarBuilder::from_tensors(tensors, DType::F32, &device))?)
+        let vb = VarBuilder::from_tensors(tensors, DType::F32, &device);
+        Ok(Evaluator::new(self.model.config().clone(), self.model.mean_std().clone(), vb)?)
     }
 }
 
@@ -106,7 +109,7 @@ mod tests {
             text_dim: 4,
             temperature: 0.1,
         };
-        let mut trainer = EvaluatorTrainer::new(config, &dev, 0).unwrap();
+        let mut trainer = EvaluatorTrainer::new(config, super::super::tests::unit(), &dev, 0).unwrap();
         let offsets = Tensor::new(&[-1.5f32, -0.5, 0.5, 1.5], &dev).unwrap().reshape((4, 1, 1)).unwrap();
         let noise = crate::diffusion::noise::gaussian((4, 12, FEATURE_DIM), 5, &dev).unwrap();
         let x0 = (noise * 0.1).unwrap().broadcast_add(&offsets).unwrap();
