@@ -265,7 +265,7 @@ fn run_families(
     let rows = family_report(prior, &corpus, &config, device, |r, cleaned| {
         let [samples, cleaned_share, held_out] = r.detected;
         let line = format!(
-            "| {} | {} | {} | {} / {} / {} | {:.3} / {:.3} | {:.3} | {} |",
+            "| {} | {} | {} | {} / {} / {} | {:.3} / {} | {:.3} | {} |",
             r.family.name(),
             r.held_out.count,
             r.family.detector().unwrap_or("none"),
@@ -273,7 +273,11 @@ fn run_families(
             share(cleaned_share),
             share(held_out),
             r.nearest_training_m,
-            r.held_out_nearest_training_m,
+            if r.held_out_nearest_training_m.is_finite() {
+                format!("{:.3}", r.held_out_nearest_training_m)
+            } else {
+                "–".to_owned()
+            },
             r.sample_diversity_m,
             metric_cells(&r.samples, &r.held_out)
         );
@@ -308,38 +312,42 @@ fn run_families(
     Ok(())
 }
 
+/// The metric cells of a report row, each `generated / reference` (`/ –` without reference
+/// motions).
 fn metric_cells(g: &MetricMeans, d: &MetricMeans) -> String {
-    format!(
-        "{:.2} / {:.2} | {:.3} / {:.3} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.0}% / {:.0}% | {:+.0} ({:.0}% / {:.0}%) / {:+.0} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2}",
-        g.steps_per_second,
-        d.steps_per_second,
-        g.toe_flicker,
-        d.toe_flicker,
-        g.mean_acceleration,
-        d.mean_acceleration,
-        g.max_acceleration,
-        d.max_acceleration,
-        g.foot_skate_ratio,
-        d.foot_skate_ratio,
-        g.bone_length_range_m,
-        d.bone_length_range_m,
-        g.ground_penetration_m,
-        d.ground_penetration_m,
-        g.stance_toe_height_m,
-        d.stance_toe_height_m,
-        100.0 * g.airborne_share,
-        100.0 * d.airborne_share,
-        g.turn_deg,
-        100.0 * g.turn_left_share,
-        100.0 * g.turn_right_share,
-        d.turn_deg,
-        g.spikes,
-        d.spikes,
-        g.head_height_m,
-        d.head_height_m,
-        g.travel_m,
-        d.travel_m,
-    )
+    let (generated, reference) = (metric_values(g, true), metric_values(d, false));
+    let has_reference = d.count > 0;
+    generated
+        .iter()
+        .zip(&reference)
+        .map(|(g, d)| if has_reference { format!("{g} / {d}") } else { format!("{g} / –") })
+        .collect::<Vec<_>>()
+        .join(" | ")
+}
+
+/// The 13 metric figures as the report prints them; the turn with its left/right shares when
+/// `turn_shares`.
+fn metric_values(m: &MetricMeans, turn_shares: bool) -> [String; 13] {
+    let turn = if turn_shares {
+        format!("{:+.0} ({:.0}% / {:.0}%)", m.turn_deg, 100.0 * m.turn_left_share, 100.0 * m.turn_right_share)
+    } else {
+        format!("{:+.0}", m.turn_deg)
+    };
+    [
+        format!("{:.2}", m.steps_per_second),
+        format!("{:.3}", m.toe_flicker),
+        format!("{:.4}", m.mean_acceleration),
+        format!("{:.3}", m.max_acceleration),
+        format!("{:.3}", m.foot_skate_ratio),
+        format!("{:.3}", m.bone_length_range_m),
+        format!("{:.3}", m.ground_penetration_m),
+        format!("{:.3}", m.stance_toe_height_m),
+        format!("{:.0}%", 100.0 * m.airborne_share),
+        turn,
+        format!("{:.2}", m.spikes),
+        format!("{:.2}", m.head_height_m),
+        format!("{:.2}", m.travel_m),
+    ]
 }
 
 #[derive(Debug, Args)]
