@@ -64,7 +64,8 @@ enum Command {
     /// Motion data: the motion corpus (build, stats, pictures) and the training/retrieval database.
     #[command(subcommand)]
     Data(commands::data::DataCommand),
-    /// Train the motion prior on a database (resumable; progress and loss on stderr).
+    /// Train the motion prior on the corpus or your own database, or the text–motion evaluator
+    /// (resumable; progress and loss on stderr).
     Train(commands::train::TrainArgs),
     /// Unconstrained motions from the prior for a text prompt (npy, PNG strip, BVH, GLB, viewer
     /// page).
