@@ -81,7 +81,8 @@ enum Command {
     Export(commands::export::ExportArgs),
     /// Print the JSON Schema of constraint programs (what `run` accepts).
     Schema,
-    /// Reports: `prior` compares unconstrained samples with the training data per label.
+    /// Reports: `prior` measures unconstrained samples per skill family against held-out capture
+    /// (or per label against a database).
     #[command(subcommand)]
     Report(ReportCommand),
     /// Benchmarks: `prior` (denoiser and DNO-step speed), `tasks` (results table), `dno` (full DNO run time),
@@ -105,7 +106,9 @@ enum BenchCommand {
 
 #[derive(Debug, Subcommand)]
 enum ReportCommand {
-    /// Foot skate, acceleration, bone lengths, penetration, memorisation per label.
+    /// Unconstrained samples per skill family against the corpus's held-out capture: action
+    /// detectors, gait, foot skate, acceleration, floor, memorisation, strips (`--database`: per
+    /// label against a database).
     Prior(commands::report::ReportArgs),
     /// Plot a training loss curve from `mogen train --loss-csv`.
     Loss(commands::report::LossArgs),
