@@ -36,18 +36,7 @@ impl EvaluatorTrainer {
     pub fn new(config: EvaluatorConfig, mean_std: MeanStd, device: &Device, seed: u64) -> Result<Self, EvaluatorError> {
         let varmap = VarMap::new();
         let model = Evaluator::init_seeded(config, mean_std, &varmap, device, seed)?;
-        let data = varmap.data().lock().map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
-        let vars: Vec<(String, Var)> = model
-            .named_parameters()
-            .iter()
-            .map(|(name, _)| {
-                data.get(name)
-                    .cloned()
-                    .map(|v| (name.clone(), v))
-                    .ok_or_else(|| candle_core::Error::Msg(format!("no variable for `{name}`")))
-            })
-            .collect::<candle_core::Result<_>>()?;
-        drop(data);
+        let vars = crate::model::init::named_vars(&varmap, model.named_parameters())?;
         let optimizer = AdamW::new(vars.iter().map(|(_, v)| v.clone()).collect(), 0.0)?;
         Ok(Self { model, vars, optimizer, step: 0 })
     }

@@ -66,6 +66,21 @@ impl SimpleBackend for SeededInit {
     }
 }
 
+/// The variables of `varmap` behind named parameters (a model's, in its order), each with its
+/// name: what an optimiser steps.
+pub(crate) fn named_vars(varmap: &VarMap, named: &[(String, Tensor)]) -> Result<Vec<(String, Var)>> {
+    let data = varmap.data().lock().map_err(|_| Error::Msg("VarMap lock poisoned".into()))?;
+    named
+        .iter()
+        .map(|(name, _)| {
+            data.get(name)
+                .cloned()
+                .map(|v| (name.clone(), v))
+                .ok_or_else(|| Error::Msg(format!("no variable for `{name}`")))
+        })
+        .collect()
+}
+
 impl SeededInit {
     fn lookup(&self, name: &str) -> Result<Option<Tensor>> {
         let data = self.varmap.data().lock().map_err(|_| Error::Msg("VarMap lock poisoned".into()))?;

@@ -216,7 +216,7 @@ impl Trainer {
         let model_config = MdmConfig { text_dim: data.encoder().dim(), ..model_config };
         let varmap = VarMap::new();
         let model = Mdm::init_seeded(model_config.clone(), &varmap, DType::F32, device, config.seed)?;
-        let vars = named_vars(&varmap, &model)?;
+        let vars = crate::model::init::named_vars(&varmap, model.named_parameters())?;
         let ema =
             vars.iter().map(|(_, v)| Ok(v.as_tensor().copy()?.detach())).collect::<candle_core::Result<Vec<_>>>()?;
         let optimizer = AdamW::new(vars.iter().map(|(_, v)| v.clone()).collect(), config.weight_decay)?;
@@ -491,21 +491,6 @@ impl Objective<'_> {
             foot_contact: foot_contact * weight,
         })
     }
-}
-
-/// The model's variables with their checkpoint names, in the model's parameter order.
-fn named_vars(varmap: &VarMap, model: &Mdm) -> Result<Vec<(String, Var)>, TrainError> {
-    let data = varmap.data().lock().map_err(|_| TrainError::Data("variable map lock poisoned".into()))?;
-    model
-        .named_parameters()
-        .iter()
-        .map(|(name, _)| {
-            data.get(name)
-                .cloned()
-                .map(|v| (name.clone(), v))
-                .ok_or_else(|| TrainError::Data(format!("no variable for `{name}`")))
-        })
-        .collect()
 }
 
 #[cfg(test)]
