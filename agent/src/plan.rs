@@ -88,7 +88,7 @@ pub async fn plan_task(task: &str, llm: &Llm, settings: &PlanSettings) -> Result
 /// Plans from a task file (a [`TaskProgram`] as JSON, e.g. `fixtures/tasks/*.json`), with its
 /// own relational parse when it has one; the same checks as an LLM answer.
 pub fn plan_from_file(path: &Path) -> Result<PlannedTask, PlanError> {
-    let text = motion_core::limits::read_text(path, &motion_core::limits::PROGRAM_FILE_BYTES)
+    let text = motion_core::files::read_text(path, &motion_core::limits::PROGRAM_FILE_BYTES)
         .map_err(|error| PlanError::File { path: path.to_owned(), message: error.to_string() })?;
     let invalid = |problems: Vec<String>| PlanError::InvalidFile { path: path.to_owned(), problems };
     let program = TaskProgram::from_json(&text).map_err(|error| invalid(vec![error.to_string()]))?;

@@ -8,8 +8,6 @@
 //! that `mogen run` can generate.
 
 use std::fmt;
-use std::io::Read;
-use std::path::{Path, PathBuf};
 
 /// One limit: a name users can search for, the largest allowed value, its unit and advice.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -149,46 +147,6 @@ pub const REPAIR_QUOTE_CHARS: Limit = Limit {
     advice: "the reply is quoted up to this length",
 };
 
-/// Reads a whole file as UTF-8 text, refusing one longer than `limit` before reading past it
-/// (so `/dev/zero` or a multi-gigabyte file fails at once). Errors name the path.
-pub fn read_text(path: &Path, limit: &Limit) -> Result<String, ReadError> {
-    let bytes = read_bytes(path, limit)?;
-    String::from_utf8(bytes).map_err(|e| ReadError::Io {
-        path: path.into(),
-        message: format!("not UTF-8 text (byte {} is not valid UTF-8)", e.utf8_error().valid_up_to()),
-    })
-}
-
-/// Reads a whole file, refusing one longer than `limit` before reading past it. Errors name the
-/// path.
-pub fn read_bytes(path: &Path, limit: &Limit) -> Result<Vec<u8>, ReadError> {
-    let io = |e: std::io::Error| ReadError::Io { path: path.into(), message: e.to_string() };
-    let file = std::fs::File::open(path).map_err(io)?;
-    if file.metadata().map_err(io)?.is_dir() {
-        return Err(ReadError::Io { path: path.into(), message: "is a folder, not a file".into() });
-    }
-    let mut bytes = Vec::new();
-    file.take(limit.max.saturating_add(1)).read_to_end(&mut bytes).map_err(io)?;
-    limit.check_stream(bytes.len() as u64, path.display())?;
-    Ok(bytes)
-}
-
-/// Reading a bounded file failed.
-#[derive(Debug, thiserror::Error)]
-pub enum ReadError {
-    /// The file could not be opened or read.
-    #[error("{path}: {message}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What went wrong.
-        message: String,
-    },
-    /// The file is longer than its limit.
-    #[error(transparent)]
-    TooLarge(#[from] LimitExceeded),
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -202,19 +160,5 @@ mod tests {
             "{err}"
         );
         assert!(err.contains("in parts"), "{err}");
-    }
-
-    #[test]
-    fn an_endless_file_is_refused_without_reading_it_all() {
-        let limit = Limit { name: "test", max: 4096, unit: "bytes", advice: "a test" };
-        let err = read_bytes(Path::new("/dev/zero"), &limit).unwrap_err().to_string();
-        assert!(err.contains("/dev/zero is at least 4097 bytes, over the limit of 4096 bytes"), "{err}");
-        let dir = tempfile::tempdir().unwrap();
-        let err = read_text(dir.path(), &limit).unwrap_err().to_string();
-        assert!(err.contains("is a folder"), "{err}");
-        let file = dir.path().join("a.json");
-        std::fs::write(&file, b"{\xff}").unwrap();
-        let err = read_text(&file, &limit).unwrap_err().to_string();
-        assert!(err.contains("a.json: not UTF-8 text (byte 1"), "{err}");
     }
 }

@@ -6,8 +6,8 @@ use std::path::Path;
 
 use candle_core::{DType, Tensor};
 
-use crate::import::ImportError;
-use crate::limits::{read_bytes, MOCAP_FILE_BYTES};
+use crate::files::{read_bytes, FileError};
+use crate::limits::MOCAP_FILE_BYTES;
 
 /// A float array read from a `.npy` file, converted to f32, C order.
 pub(crate) struct NpyArray {
@@ -17,21 +17,22 @@ pub(crate) struct NpyArray {
     pub(crate) data: Vec<f32>,
 }
 
-fn invalid(path: &Path, location: &str, message: String) -> ImportError {
-    ImportError::Invalid { path: path.to_path_buf(), location: location.into(), message }
+fn invalid(path: &Path, location: &str, message: String) -> FileError {
+    FileError::format(path, format!("{location}: {message}"))
 }
 
 const NPY_MAGIC: &[u8] = b"\x93NUMPY";
 
 /// Reads a little-endian `<f4` or `<f8` `.npy` file (format versions 1–3) of at most
 /// [`MOCAP_FILE_BYTES`]. `check_shape` sees the header's shape before the data is sized
-/// against it or converted, so a shape over a limit is refused from the header alone.
-pub(crate) fn read_float_npy(
+/// against it or converted, so a shape over a limit is refused from the header alone (with the
+/// caller's error `E`, which every [`FileError`] converts into).
+pub(crate) fn read_float_npy<E: From<FileError>>(
     path: &Path,
-    check_shape: impl FnOnce(&[usize]) -> Result<(), ImportError>,
-) -> Result<NpyArray, ImportError> {
+    check_shape: impl FnOnce(&[usize]) -> Result<(), E>,
+) -> Result<NpyArray, E> {
     let bytes = read_bytes(path, &MOCAP_FILE_BYTES)?;
-    let bad = |message: String| invalid(path, "npy header", message);
+    let bad = |message: String| E::from(invalid(path, "npy header", message));
     if bytes.len() < 10 || !bytes.starts_with(NPY_MAGIC) {
         return Err(bad("not a .npy file (no \\x93NUMPY magic)".into()));
     }
@@ -68,14 +69,14 @@ pub(crate) fn read_float_npy(
         .ok_or_else(|| bad(format!("shape {shape:?} is too large")))?;
     let data = &bytes[data_start.min(bytes.len())..];
     if data.len() != expected {
-        return Err(invalid(
+        return Err(E::from(invalid(
             path,
             "data",
             format!(
                 "shape {shape:?} of {descr} needs {expected} bytes; the file has {} (truncated or corrupt)",
                 data.len()
             ),
-        ));
+        )));
     }
     let data = if item_size == 4 {
         data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()

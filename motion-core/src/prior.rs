@@ -17,6 +17,7 @@ use candle_nn::VarBuilder;
 
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{DdimSampler, Guidance, NoiseSchedule};
+use crate::files::FileError;
 use crate::model::{Mdm, MdmConfig};
 use crate::representation::{
     recover_from_ric, rigid_bones, root_velocity_from_planted_feet, MeanStd, NormalizationError, RestSkeleton,
@@ -33,20 +34,15 @@ const SENTENCE_KEY: &str = "sentence_encoder";
 /// Errors loading or saving a prior.
 #[derive(Debug, thiserror::Error)]
 pub enum PriorError {
-    /// File system error.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// A malformed or incomplete prior file.
-    #[error("{path}: {message}")]
-    Format {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
+    /// The prior file could not be read or written, or is malformed or incomplete.
+    #[error(transparent)]
+    File(#[from] FileError),
+    /// A computation with the prior failed (sampling, a report): what was being done, and why.
+    #[error("{what}: {message}")]
+    Compute {
+        /// What was being done (`sampling`, `the family report`, ...).
+        what: &'static str,
+        /// What went wrong.
         message: String,
     },
     /// Bad normalisation statistics.
@@ -145,8 +141,8 @@ impl Prior {
     /// Loads a prior file onto `device`; a prior conditioned on a sentence encoder loads it from
     /// `text_models`, the folder holding one folder per encoder (`fixtures/text`).
     pub fn load(path: &Path, text_models: &Path, device: &Device) -> Result<Self, PriorError> {
-        let format = |message: String| PriorError::Format { path: path.into(), message };
-        let bytes = std::fs::read(path).map_err(|source| PriorError::Io { path: path.into(), source })?;
+        let format = |message: String| PriorError::from(FileError::format(path, message));
+        let bytes = std::fs::read(path).map_err(|e| FileError::io(path, &e))?;
         let meta = read_metadata(&bytes).map_err(format)?;
         let get = |key: &str| meta.get(key).ok_or_else(|| format(format!("no `{key}` in the header metadata")));
         let cfg: MdmConfig =
@@ -224,7 +220,7 @@ impl Prior {
         mean_std: &MeanStd,
         rest: Option<&RestSkeleton>,
     ) -> Result<(), PriorError> {
-        let format = |message: String| PriorError::Format { path: path.into(), message };
+        let format = |message: String| PriorError::from(FileError::format(path, message));
         let mut tensors: Vec<(String, Tensor)> = params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
         tensors.push((MEAN_KEY.into(), mean_std.mean().clone()));
         tensors.push((STD_KEY.into(), mean_std.std().clone()));
@@ -254,7 +250,7 @@ impl Prior {
     /// normalised features `[batch, frames, 263]`.
     pub fn sample(&self, request: &Sampling<'_>, device: &Device) -> Result<Tensor, PriorError> {
         let Sampling { prompt, frames, batch, seed, steps, guidance } = *request;
-        let fail = |e: String| PriorError::Format { path: PathBuf::from("<sampling>"), message: e };
+        let fail = |message: String| PriorError::Compute { what: "sampling", message };
         let sampler = DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(|e| fail(e.to_string()))?;
         let text = self.encode_text(&vec![prompt; batch], device).map_err(|e| fail(e.to_string()))?;
         let guidance = guidance.for_text(&text).map_err(|e| fail(e.to_string()))?;

@@ -34,13 +34,9 @@ const LAYERS: &[&[&str]] = &[
     &["motion"],
     &["skeleton"],
     &["npy", "tensor_file"],
-    &["diffusion", "nn", "optim", "files", "limits", "testing"],
+    &["files"],
+    &["diffusion", "nn", "optim", "limits", "testing"],
 ];
-
-/// Known arrows against the order, each with what removes it. `npy.rs` reads into the
-/// importers' error until `import::ImportError` converts from a file-format error (a change in
-/// `import/`, whose owner is reworking it).
-const PENDING: &[(&str, &str)] = &[("npy", "import")];
 
 /// The layer of `module`, counted from 1 at the top as in the README.
 fn layer_of(module: &str) -> Option<usize> {
@@ -150,7 +146,6 @@ fn no_module_uses_a_higher_or_equal_layer() {
                 None => {
                     unplaced.insert(used);
                 }
-                Some(_) if PENDING.contains(&(top.as_str(), used.as_str())) => {}
                 Some(theirs) if used != top && theirs <= own => arrows
                     .push(format!("{}:{line}: {top} (layer {own}) uses {used} (layer {theirs})", relative.display())),
                 Some(_) => {}

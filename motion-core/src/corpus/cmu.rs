@@ -10,8 +10,9 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 
 use super::{RawTake, Source};
+use crate::files::{read_text, FileError};
 use crate::import::ImportError;
-use crate::limits::{read_text, MOCAP_FILE_BYTES};
+use crate::limits::MOCAP_FILE_BYTES;
 use crate::skeleton::{Pose, NUM_JOINTS};
 
 /// File name of the positions inside a CMU folder.
@@ -148,7 +149,7 @@ fn read_index(path: &Path) -> Result<Vec<IndexEntry>, ImportError> {
 
 /// Reads the npz of positions: every array must be `[frames ≥ 2, 22, 3]` of finite values.
 fn read_positions(path: &Path) -> Result<Vec<(String, Vec<Pose>)>, ImportError> {
-    let size = std::fs::metadata(path).map_err(|source| ImportError::Io { path: path.into(), source })?.len();
+    let size = std::fs::metadata(path).map_err(|e| FileError::io(path, &e))?.len();
     MOCAP_FILE_BYTES.check(size, path.display())?;
     let invalid =
         |location: String, message: String| ImportError::Invalid { path: PathBuf::from(path), location, message };

@@ -8,13 +8,14 @@
 
 use std::collections::HashMap;
 use std::io::{Read, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use super::{Corpus, CorpusClip, CorpusWindow, DropReport};
-use crate::limits::{read_bytes, MOCAP_FILE_BYTES};
+use crate::files::{read_bytes, FileError};
+use crate::limits::MOCAP_FILE_BYTES;
 use crate::skeleton::{Pose, FPS, NUM_JOINTS};
 
 /// Version of the layout, checked on load.
@@ -23,27 +24,6 @@ const FORMAT_VERSION: u32 = 1;
 const JOINTS: &str = "joints_mm_delta";
 /// Channels per frame: x, y, z of each joint.
 const CHANNELS: usize = 3 * NUM_JOINTS;
-
-/// Errors reading or writing a corpus file; each names the file.
-#[derive(Debug, thiserror::Error)]
-pub enum CorpusFileError {
-    /// The file could not be read or written.
-    #[error("{path}: {message}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What went wrong.
-        message: String,
-    },
-    /// The file is not a corpus file of this version, or is damaged.
-    #[error("{path}: {message}")]
-    Format {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
-}
 
 #[derive(Serialize, Deserialize)]
 struct Header {
@@ -55,8 +35,8 @@ struct Header {
 }
 
 /// Writes the corpus to `path` (through a temporary file and a rename).
-pub fn save(corpus: &Corpus, path: &Path) -> Result<(), CorpusFileError> {
-    let format = |message: String| CorpusFileError::Format { path: path.into(), message };
+pub fn save(corpus: &Corpus, path: &Path) -> Result<(), FileError> {
+    let format = |message: String| FileError::format(path, message);
     let frames = corpus.joints.len();
     let mut channels = vec![0i16; CHANNELS * frames];
     for clip in &corpus.clips {
@@ -88,17 +68,15 @@ pub fn save(corpus: &Corpus, path: &Path) -> Result<(), CorpusFileError> {
         .map_err(|e| format(e.to_string()))?;
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
     gz.write_all(&st).and_then(|_| gz.finish()).map_err(|e| format(e.to_string())).and_then(|packed| {
-        crate::files::write_atomically(path, &packed)
-            .map_err(|e| CorpusFileError::Io { path: path.into(), message: e.to_string() })
+        crate::files::write_atomically(path, &packed).map_err(|e| FileError::Io { path: e.path, message: e.message })
     })
 }
 
 /// Reads a corpus written by [`save`], checking that every clip and window lies inside the
 /// joints and every value is finite.
-pub fn load(path: &Path) -> Result<Corpus, CorpusFileError> {
-    let format = |message: String| CorpusFileError::Format { path: path.into(), message };
-    let packed = read_bytes(path, &MOCAP_FILE_BYTES)
-        .map_err(|e| CorpusFileError::Io { path: path.into(), message: e.to_string() })?;
+pub fn load(path: &Path) -> Result<Corpus, FileError> {
+    let format = |message: String| FileError::format(path, message);
+    let packed = read_bytes(path, &MOCAP_FILE_BYTES)?;
     let mut bytes = Vec::new();
     flate2::read::GzDecoder::new(packed.as_slice())
         .take(MOCAP_FILE_BYTES.max)

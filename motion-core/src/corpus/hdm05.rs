@@ -8,6 +8,7 @@
 use std::path::Path;
 
 use super::{RawTake, Source};
+use crate::files::FileError;
 use crate::import::asf_amc::{AsfAmcClip, AsfAmcOptions};
 use crate::import::{resample, ImportError};
 
@@ -16,7 +17,7 @@ pub const HOLD_FRAMES: usize = 20;
 
 /// An I/O error naming `path`.
 fn io(path: &Path) -> impl Fn(std::io::Error) -> ImportError + '_ {
-    move |source| ImportError::Io { path: path.into(), source }
+    move |e| FileError::io(path, &e).into()
 }
 
 /// What each of HDM05's motion names does, as a description.

@@ -7,13 +7,14 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::files::read_text;
 use crate::import::asf_amc::{AsfAmcClip, AsfAmcOptions};
 use crate::import::bvh::{BvhClip, BvhOptions};
 use crate::import::deepmimic::DeepMimicClip;
 use crate::import::humanml3d::HumanMl3dFolder;
 use crate::import::isaaclab::IsaacAmpClip;
 use crate::import::{ImportError, ImportWarning, MocapClip};
-use crate::limits::{read_text, MOCAP_FILE_BYTES};
+use crate::limits::MOCAP_FILE_BYTES;
 
 /// File format of a source clip.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]

@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 use candle_core::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
+use crate::files::FileError;
 use crate::import::ImportWarning;
 use crate::import::{check_clip_length, resample, short_number};
 use crate::limits::LimitExceeded;
@@ -154,22 +155,9 @@ pub enum DatabaseError {
         /// Shortest window.
         min: usize,
     },
-    /// File system error.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// A malformed or incompatible database file.
-    #[error("{path}: {message}")]
-    Format {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
+    /// The database file could not be read or written, or is malformed or incompatible.
+    #[error(transparent)]
+    File(#[from] FileError),
     /// A catalog or one of its clips could not be read.
     #[error("catalog {path}: {source}")]
     Catalog {
@@ -363,7 +351,7 @@ impl MotionDatabase {
     /// Writes the database as one safetensors file: tensors `features` `[N, 263]`, `mean`,
     /// `std` (f32) and the index as JSON in the header metadata under `index`.
     pub fn save(&self, path: &Path) -> Result<(), DatabaseError> {
-        let format = |message: String| DatabaseError::Format { path: path.into(), message };
+        let format = |message: String| DatabaseError::from(FileError::format(path, message));
         let index = Index {
             format_version: FORMAT_VERSION,
             fps: FPS,
@@ -384,8 +372,8 @@ impl MotionDatabase {
 
     /// Reads a database written by [`MotionDatabase::save`], checking its consistency.
     pub fn load(path: &Path) -> Result<Self, DatabaseError> {
-        let format = |message: String| DatabaseError::Format { path: path.into(), message };
-        let bytes = std::fs::read(path).map_err(|source| DatabaseError::Io { path: path.into(), source })?;
+        let format = |message: String| DatabaseError::from(FileError::format(path, message));
+        let bytes = std::fs::read(path).map_err(|e| FileError::io(path, &e))?;
         let st = safetensors::SafeTensors::deserialize(&bytes)
             .map_err(|e| format(format!("not a safetensors file: {e}")))?;
         let meta = read_metadata(&bytes).map_err(format)?;

@@ -46,17 +46,9 @@ pub enum ExportError {
     /// Nothing to export, or samples of different lengths where one length is needed.
     #[error("cannot export: {0}")]
     Shape(String),
-    /// Reading an input file failed.
-    #[error("{path}: {message}")]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong with it.
-        message: String,
-    },
     /// An input file is unreadable, malformed or over a limit.
     #[error(transparent)]
-    Import(#[from] crate::import::ImportError),
+    File(#[from] crate::files::FileError),
     /// Writing a file failed.
     #[error("{path}: {message}")]
     Write {

@@ -21,6 +21,7 @@ use super::rotations::{RotationTrack, SolveFit};
 use super::scene::{scene_boxes, PositionTarget, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
 use super::{write_atomically, ExportError};
+use crate::files::FileError;
 use crate::program::{Carry, Primitive};
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
@@ -178,22 +179,19 @@ fn probes(fk: &[Pose]) -> Vec<Probe> {
 /// length; checked from the header). Non-finite values are left for [`RotationTrack::solve`] to
 /// name; a missing file or another shape is an error naming the file.
 pub fn read_joints_npy(path: &Path) -> Result<Vec<Vec<Pose>>, ExportError> {
-    let fail = |message: String| ExportError::Read { path: path.into(), message };
     if !path.is_file() {
-        return Err(fail("no such file".into()));
+        return Err(FileError::Io { path: path.into(), message: "no such file".into() }.into());
     }
     let shape_error = |shape: &[usize]| {
-        let shape = shape.to_vec();
-        crate::import::ImportError::Invalid {
-            path: path.into(),
-            location: "shape".into(),
-            message: format!(
-                "{shape:?}; expected [frames, {NUM_JOINTS}, 3] or [samples, frames, {NUM_JOINTS}, 3] with at least \
-                 one frame"
+        FileError::format(
+            path,
+            format!(
+                "shape {shape:?}; expected [frames, {NUM_JOINTS}, 3] or [samples, frames, {NUM_JOINTS}, 3] with at \
+                 least one frame"
             ),
-        }
+        )
     };
-    let array = crate::npy::read_float_npy(path, |shape| {
+    let array = crate::npy::read_float_npy(path, |shape| -> Result<(), FileError> {
         let frames = match *shape {
             [frames, NUM_JOINTS, 3] | [_, frames, NUM_JOINTS, 3] if frames > 0 && shape[0] > 0 => frames,
             _ => return Err(shape_error(shape)),

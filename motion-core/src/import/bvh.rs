@@ -30,7 +30,8 @@ pub use clip::{BvhClip, BvhOptions};
 pub use rig::Rig;
 
 use super::{check_clip_length, short_number, ImportError, ImportWarning};
-use crate::limits::{read_bytes, MOCAP_FILE_BYTES, RIG_JOINTS};
+use crate::files::read_bytes;
+use crate::limits::{MOCAP_FILE_BYTES, RIG_JOINTS};
 
 /// A coordinate axis of the file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -15,7 +15,8 @@ use file::ClipFile;
 use glam::{DQuat, DVec3};
 
 use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
-use crate::limits::{read_text, MOCAP_FILE_BYTES};
+use crate::files::read_text;
+use crate::limits::MOCAP_FILE_BYTES;
 
 use crate::skeleton::{smoothstep, Pose, NUM_JOINTS};
 

@@ -28,7 +28,8 @@ use crate::npy::read_float_npy;
 pub use clip::HumanMl3dClip;
 
 use super::{check_clip_length, ImportError};
-use crate::limits::{read_text, MOCAP_FILE_BYTES};
+use crate::files::{read_text, FileError};
+use crate::limits::MOCAP_FILE_BYTES;
 use crate::representation::{FeatureFrame, MeanStd, FEATURE_DIM};
 use crate::skeleton::FPS;
 
@@ -139,8 +140,7 @@ impl HumanMl3dFolder {
         for dir in ["new_joint_vecs", "texts"] {
             let path = root.join(dir);
             if !path.is_dir() {
-                let source = std::io::Error::new(std::io::ErrorKind::NotFound, "folder not found");
-                return Err(ImportError::Io { path, source });
+                return Err(FileError::Io { path, message: "folder not found".into() }.into());
             }
         }
         let stats = |name: &str| -> Result<Vec<f32>, ImportError> {
@@ -170,7 +170,7 @@ impl HumanMl3dFolder {
     /// Every id with a `new_joint_vecs/<id>.npy`, sorted.
     pub fn ids(&self) -> Result<Vec<String>, ImportError> {
         let dir = self.root.join("new_joint_vecs");
-        let io = |source| ImportError::Io { path: dir.clone(), source };
+        let io = |e| ImportError::from(FileError::io(&dir, &e));
         let mut ids = Vec::new();
         for entry in std::fs::read_dir(&dir).map_err(io)? {
             let path = entry.map_err(io)?.path();

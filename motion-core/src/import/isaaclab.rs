@@ -30,6 +30,7 @@ use glam::{DQuat, DVec3};
 
 use super::deepmimic::{self, DM_JOINTS};
 use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
+use crate::files::FileError;
 use crate::limits::MOCAP_FILE_BYTES;
 use crate::skeleton::Pose;
 
@@ -83,8 +84,8 @@ impl IsaacAmpClip {
     pub fn read(path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
         // Opened first so that a missing or unreadable file is an I/O error with its OS reason,
         // not an npz message.
-        let file = std::fs::File::open(path).map_err(|source| ImportError::Io { path: path.into(), source })?;
-        let bytes = file.metadata().map_err(|source| ImportError::Io { path: path.into(), source })?.len();
+        let file = std::fs::File::open(path).map_err(|e| FileError::io(path, &e))?;
+        let bytes = file.metadata().map_err(|e| FileError::io(path, &e))?.len();
         MOCAP_FILE_BYTES.check(bytes, path.display())?;
         let npz = |e: candle_core::Error| ImportError::Invalid {
             path: path.into(),

@@ -12,7 +12,8 @@ pub mod isaaclab;
 
 use std::path::PathBuf;
 
-use crate::limits::{LimitExceeded, ReadError, CLIP_FRAMES};
+use crate::files::FileError;
+use crate::limits::{LimitExceeded, CLIP_FRAMES};
 use crate::skeleton::{Pose, FPS};
 
 /// Largest distance of an imported position from the origin after unit scaling, m. Real
@@ -82,14 +83,6 @@ impl std::fmt::Display for ImportWarning {
 /// Errors reading motion-capture files. Every variant names the file and where in it.
 #[derive(Debug, thiserror::Error)]
 pub enum ImportError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
     /// The file is not valid JSON.
     #[error("{path}: line {line}, column {column}: not valid JSON: {message}")]
     Json {
@@ -118,9 +111,10 @@ pub enum ImportError {
         /// The file.
         path: PathBuf,
     },
-    /// The file could not be read within its size limit (the message names the file).
+    /// The file could not be read, within its size limit, or is not in its format (the message
+    /// names the file).
     #[error(transparent)]
-    Read(#[from] ReadError),
+    File(#[from] FileError),
     /// The clip is over a limit (the message names the file and where).
     #[error(transparent)]
     Limit(#[from] LimitExceeded),

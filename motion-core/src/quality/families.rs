@@ -312,7 +312,7 @@ pub fn family_report(
     device: &Device,
     mut on_family: impl FnMut(&FamilyQuality, &[Vec<Pose>]),
 ) -> Result<Vec<FamilyQuality>, PriorError> {
-    let fail = |message: String| PriorError::Format { path: "<family report>".into(), message };
+    let fail = |message: String| PriorError::Compute { what: "the family report", message };
     let tensor = |e: candle_core::Error| fail(e.to_string());
     let families = if config.families.is_empty() { Family::ALL.to_vec() } else { config.families.clone() };
     // Descriptors compare the first frames that every motion has: samples have

@@ -162,7 +162,7 @@ pub fn quality_report(
     device: &Device,
     mut on_label: impl FnMut(&LabelQuality),
 ) -> Result<Vec<LabelQuality>, PriorError> {
-    let fail = |e: candle_core::Error| PriorError::Format { path: "<quality report>".into(), message: e.to_string() };
+    let fail = |e: candle_core::Error| PriorError::Compute { what: "the quality report", message: e.to_string() };
     let t = config.frames;
     // Every training window long enough, cropped to its first `t` frames.
     let crops: Vec<(usize, String, Tensor)> = db
@@ -174,8 +174,8 @@ pub fn quality_report(
         .map_err(fail)?;
     let train_desc = descriptors(&crops.iter().map(|c| c.2.clone()).collect::<Vec<_>>()).map_err(fail)?;
     if let Some(unknown) = config.labels.iter().find(|l| !db.labels().contains(l)) {
-        return Err(PriorError::Format {
-            path: "<quality report>".into(),
+        return Err(PriorError::Compute {
+            what: "the quality report",
             message: format!("label `{unknown}` is not in the database (labels: {})", db.labels().join("; ")),
         });
     }
@@ -199,7 +199,7 @@ pub fn quality_report(
             .iter()
             .map(|m| foot_lock(m, None, &FootLockConfig::default()).map(|c| c.poses))
             .collect::<Result<_, _>>()
-            .map_err(|e| PriorError::Format { path: "<quality report>".into(), message: e.to_string() })?;
+            .map_err(|e| PriorError::Compute { what: "the quality report", message: e.to_string() })?;
         let sample_desc = descriptors(
             &raw.chunk(raw.dim(0).map_err(fail)?, 0)
                 .map_err(fail)?
@@ -280,8 +280,7 @@ pub fn inversion_round_trip(
     config: &InversionConfig,
     device: &Device,
 ) -> Result<RoundTrip, PriorError> {
-    let fail =
-        |e: candle_core::Error| PriorError::Format { path: "<inversion round trip>".into(), message: e.to_string() };
+    let fail = |e: candle_core::Error| PriorError::Compute { what: "the inversion round trip", message: e.to_string() };
     let x0 = label_crops(prior, db, label, (windows, frames), device)?;
     let count = x0.dim(0).map_err(fail)?;
     let text = prior.encode_text(&vec![label; count], device).map_err(fail)?;
@@ -334,8 +333,7 @@ pub fn denoising_fidelity(
     timesteps: &[usize],
     device: &Device,
 ) -> Result<Vec<DenoisingFidelity>, PriorError> {
-    let fail =
-        |e: candle_core::Error| PriorError::Format { path: "<denoising fidelity>".into(), message: e.to_string() };
+    let fail = |e: candle_core::Error| PriorError::Compute { what: "the denoising fidelity", message: e.to_string() };
     let x0 = label_crops(prior, db, label, (windows, frames), device)?;
     let batch = x0.dim(0).map_err(fail)?;
     let text = prior.encode_text(&vec![label; batch], device).map_err(fail)?;
@@ -345,8 +343,8 @@ pub fn denoising_fidelity(
     timesteps
         .iter()
         .map(|&t| {
-            let abar = *schedule.alphas_cumprod().get(t).ok_or_else(|| PriorError::Format {
-                path: "<denoising fidelity>".into(),
+            let abar = *schedule.alphas_cumprod().get(t).ok_or_else(|| PriorError::Compute {
+                what: "the denoising fidelity",
                 message: format!("timestep {t} outside 0..{}", schedule.num_timesteps()),
             })?;
             let run = || -> candle_core::Result<DenoisingFidelity> {
@@ -392,7 +390,7 @@ fn label_crops(
     (windows, frames): (usize, usize),
     device: &Device,
 ) -> Result<Tensor, PriorError> {
-    let fail = |e: candle_core::Error| PriorError::Format { path: "<training crops>".into(), message: e.to_string() };
+    let fail = |e: candle_core::Error| PriorError::Compute { what: "the training crops", message: e.to_string() };
     let crops = db
         .windows()
         .iter()
@@ -402,8 +400,8 @@ fn label_crops(
         .collect::<candle_core::Result<Vec<_>>>()
         .map_err(fail)?;
     if crops.is_empty() {
-        return Err(PriorError::Format {
-            path: "<training crops>".into(),
+        return Err(PriorError::Compute {
+            what: "the training crops",
             message: format!("no window of `{label}` has {frames} frames"),
         });
     }

@@ -37,8 +37,8 @@ use serde::Serialize;
 
 use super::candidates::{CandidateSource, Crop, RetrievalDatabase};
 use crate::constraints::{CompiledProgram, ConstraintError};
-use crate::corpus::file::CorpusFileError;
 use crate::database::DatabaseError;
+use crate::files::FileError;
 use crate::skeleton::NUM_JOINTS;
 use crate::MotionError;
 
@@ -95,7 +95,7 @@ pub enum RetrievalError {
     Setting(String),
     /// The corpus file could not be read (the error names it).
     #[error(transparent)]
-    Corpus(#[from] CorpusFileError),
+    Corpus(#[from] FileError),
     /// The motion database could not be opened.
     #[error("the retrieval database ({source_name}): {error}")]
     Database {

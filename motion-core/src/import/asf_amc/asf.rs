@@ -7,9 +7,10 @@ use std::path::Path;
 use glam::{DQuat, DVec3};
 
 use super::{invalid, numbered_lines, parse_finite};
+use crate::files::read_bytes;
 use crate::import::bvh::Axis;
 use crate::import::{short_number, ImportError, ImportWarning};
-use crate::limits::{read_bytes, MOCAP_FILE_BYTES, RIG_JOINTS};
+use crate::limits::{MOCAP_FILE_BYTES, RIG_JOINTS};
 
 /// Metres per inch: an ASF length unit is `0.0254 / length` m.
 const METRES_PER_INCH: f64 = 0.0254;

@@ -5,8 +5,9 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::{invalid, AmcMotion, Asf};
+use crate::files::read_bytes;
 use crate::import::{short_number, ImportError, ImportWarning, MocapClip};
-use crate::limits::{read_bytes, MOCAP_FILE_BYTES};
+use crate::limits::MOCAP_FILE_BYTES;
 use crate::motion::retarget_pose;
 use crate::skeleton::{Pose, NUM_JOINTS};
 
