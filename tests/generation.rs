@@ -89,7 +89,7 @@ fn every_method_runs_and_optimisers_lower_the_error() {
             assert!(history[11] < history[0], "{method}: {history:?}");
         }
         assert!(r.max_scene_penetration_m.is_some_and(f64::is_finite));
-        assert!(r.foot_skate_ratio.is_finite() && r.max_acceleration.is_finite());
+        assert!(r.motion.foot_skate_ratio.is_finite() && r.motion.max_acceleration.is_finite());
     }
 }
 
@@ -164,7 +164,7 @@ fn the_foot_clean_up_runs_on_every_output_and_switches_off() {
     let r = report(&program, &compiled, &on, &on_config).unwrap();
     let r_off = report(&program, &compiled, &off, &off_config).unwrap();
     assert!(r.cleanup.enabled && !r_off.cleanup.enabled);
-    assert_eq!(r.cleanup.before.foot_skate_ratio, r_off.foot_skate_ratio);
+    assert_eq!(r.cleanup.before.motion.foot_skate_ratio, r_off.motion.foot_skate_ratio);
     assert_eq!(r.cleanup.before.constraint_error, r_off.constraint_error);
     for (after, before) in r.constraint_error_per_sample.iter().zip(&r_off.constraint_error_per_sample) {
         let bound = before * (1.0 + CONSTRAINT_TOLERANCE_RELATIVE) + CONSTRAINT_TOLERANCE_ABSOLUTE;

@@ -12,8 +12,9 @@ use std::path::Path;
 use candle_core::{Device, Tensor};
 use motion_core::diffusion::noise::gaussian;
 use motion_core::diffusion::{DdimSampler, Denoiser, Guidance, NoiseSchedule};
+use motion_core::metrics::MetricMeans;
 use motion_core::prior::Prior;
-use motion_core::quality::{joints_of, MetricMeans};
+use motion_core::quality::joints_of;
 use motion_core::representation::FEATURE_DIM;
 
 fn describe(what: &str, m: &MetricMeans) {

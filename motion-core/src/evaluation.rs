@@ -7,10 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::cleanup::FootLockReport;
 use crate::constraints::{Check, CompiledProgram};
 use crate::generation::{Generated, GenerationConfig};
-use crate::metrics::{
-    foot_skate_ratio, ground_penetration, hands_raised, head_neck_incorrect, max_acceleration, mean_acceleration, pace,
-    stance_toe_height, step_count, toe_flicker,
-};
+use crate::metrics::{step_count, MetricMeans};
 use crate::motion::tensor_to_poses;
 use crate::program::TaskProgram;
 use crate::refine::RefineReport;
@@ -55,12 +52,11 @@ pub struct BeforeCleanup {
     pub success_rate: f64,
     /// The deepest penetration of any sample into an obstacle, m.
     pub max_scene_penetration_m: Option<f64>,
-    /// Mean foot skate ratio.
-    pub foot_skate_ratio: f64,
-    /// Mean over samples of the maximum joint acceleration, m/frame².
-    pub max_acceleration: f64,
     /// Steps counted per sample, for programs with a counting constraint.
     pub steps: Option<Vec<usize>>,
+    /// The motion figures of the samples.
+    #[serde(flatten)]
+    pub motion: MetricMeans,
 }
 
 /// What the finishing stages did to the run: the kinematic refinement ([`crate::refine`]) and
@@ -107,36 +103,12 @@ pub struct TaskReport {
     pub scene_penetration_per_sample_m: Option<Vec<f64>>,
     /// Fraction of samples that meet every constraint within its tolerance.
     pub success_rate: f64,
-    /// Mean foot skate ratio ([`crate::metrics::foot_skate_ratio`]).
-    pub foot_skate_ratio: f64,
-    /// Mean over samples of the maximum joint acceleration, m/frame² (ProgMoGen's Max Acc).
-    pub max_acceleration: f64,
     /// Step counting, for programs with a counting constraint over foot speeds.
     pub steps: Option<StepReport>,
-    /// Fraction of samples with a hand above the shoulder in at least half of the frames
-    /// ([`crate::metrics::hands_raised`]).
-    pub hands_raised_rate: f64,
-    /// Mean steps per second ([`crate::metrics::pace`]).
-    pub pace_steps_per_s: f64,
-    /// Mean coefficient of variation of step intervals over the samples that have one.
-    pub pace_interval_cv: Option<f64>,
-    /// Mean toe flicker ([`crate::metrics::toe_flicker`]): fraction of frames at which a toe
-    /// zig-zags by more than 1 cm both ways (the DeepMimic walks: about 0.1).
-    #[serde(default)]
-    pub toe_flicker: f64,
-    /// Mean over samples of the mean joint acceleration, m/frame² (the walks: about 0.011).
-    #[serde(default)]
-    pub mean_acceleration: f64,
-    /// Mean over samples of the lower toe's median height, m
-    /// ([`crate::metrics::stance_toe_height`]; the walks: 1.5–2 cm): a floating figure shows here.
-    #[serde(default)]
-    pub stance_toe_height_m: f64,
-    /// The deepest any joint goes under the floor y = 0 in any sample, m.
-    #[serde(default)]
-    pub max_under_floor_m: f64,
-    /// Fraction of head–neck lengths at frames 0, L//2, L−1 outside
-    /// [`crate::metrics::HEAD_NECK_VALID_M`].
-    pub head_neck_incorrect_ratio: f64,
+    /// The motion figures of the samples (foot skate, accelerations, pace, toe flicker, stance
+    /// toe height, depth under the floor, hands raised, head–neck lengths, ...).
+    #[serde(flatten)]
+    pub motion: MetricMeans,
     /// The clean-up and the figures before it (every figure above is measured after it, on the
     /// written joints).
     pub cleanup: CleanupReport,
@@ -206,11 +178,6 @@ fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len().max(1) as f64
 }
 
-/// The mean over samples of a per-motion figure.
-fn mean_of(motions: &[Vec<Pose>], figure: impl Fn(&[Pose]) -> f64) -> f64 {
-    mean(&motions.iter().map(|m| figure(m)).collect::<Vec<_>>())
-}
-
 fn worst(values: &Option<Vec<f64>>) -> Option<f64> {
     values.as_ref().map(|p| p.iter().copied().fold(0.0, f64::max))
 }
@@ -237,20 +204,11 @@ impl TaskReport {
     /// The name of the first figure that is NaN or infinite (`None` when all are finite): a
     /// report must never store a broken figure as `null` or print it as a pass.
     pub fn non_finite_figure(&self) -> Option<String> {
-        let scalars = [
-            ("constraint error", self.constraint_error),
-            ("success rate", self.success_rate),
-            ("foot skate ratio", self.foot_skate_ratio),
-            ("max acceleration", self.max_acceleration),
-            ("mean acceleration", self.mean_acceleration),
-            ("toe flicker", self.toe_flicker),
-            ("stance toe height", self.stance_toe_height_m),
-            ("depth under the floor", self.max_under_floor_m),
-            ("head-neck ratio", self.head_neck_incorrect_ratio),
-            ("pace", self.pace_steps_per_s),
-        ];
-        if let Some((name, _)) = scalars.iter().find(|(_, v)| !v.is_finite()) {
-            return Some((*name).to_owned());
+        let scalars = [("constraint error", self.constraint_error), ("success rate", self.success_rate)];
+        if let Some(name) =
+            scalars.iter().find(|(_, v)| !v.is_finite()).map(|(name, _)| *name).or(self.motion.non_finite_figure())
+        {
+            return Some(name.to_owned());
         }
         let penetration =
             self.max_scene_penetration_m.iter().chain(self.scene_penetration_per_sample_m.iter().flatten());
@@ -283,11 +241,6 @@ pub fn report(
 ) -> candle_core::Result<TaskReport> {
     let judged = judge(program, compiled, &generated.joints, &generated.initial_joints)?;
     let raw = judge(program, compiled, &generated.raw_joints, &generated.initial_joints)?;
-    let motions = &judged.motions;
-    let paces: Vec<(f64, Option<f64>)> = motions.iter().map(|m| pace(m)).collect();
-    let cvs: Vec<f64> = paces.iter().filter_map(|p| p.1).collect();
-    let (bad, checked) =
-        motions.iter().map(|m| head_neck_incorrect(m)).fold((0, 0), |(b, c), (b1, c1)| (b + b1, c + c1));
     let cleanup = CleanupReport {
         enabled: config.foot_lock.enabled,
         samples: generated.foot_lock.clone(),
@@ -297,9 +250,8 @@ pub fn report(
             constraint_error: mean(&raw.per_sample),
             success_rate: raw.success_rate,
             max_scene_penetration_m: worst(&raw.penetration),
-            foot_skate_ratio: mean_of(&raw.motions, foot_skate_ratio),
-            max_acceleration: mean_of(&raw.motions, max_acceleration),
             steps: raw.steps.map(|s| s.counts),
+            motion: MetricMeans::of(&raw.motions),
         },
     };
     Ok(TaskReport {
@@ -313,17 +265,8 @@ pub fn report(
         constraint_error_per_sample: judged.per_sample,
         constraints: judged.constraints,
         success_rate: judged.success_rate,
-        foot_skate_ratio: mean_of(motions, foot_skate_ratio),
-        max_acceleration: mean_of(motions, max_acceleration),
         steps: judged.steps,
-        hands_raised_rate: mean_of(motions, |m| f64::from(u8::from(hands_raised(m)))),
-        pace_steps_per_s: mean(&paces.iter().map(|p| p.0).collect::<Vec<_>>()),
-        pace_interval_cv: (!cvs.is_empty()).then(|| mean(&cvs)),
-        toe_flicker: mean_of(motions, toe_flicker),
-        mean_acceleration: mean_of(motions, mean_acceleration),
-        stance_toe_height_m: mean_of(motions, stance_toe_height),
-        max_under_floor_m: motions.iter().map(|m| ground_penetration(m)).fold(0.0, f64::max),
-        head_neck_incorrect_ratio: bad as f64 / checked.max(1) as f64,
+        motion: MetricMeans::of(&judged.motions),
         cleanup,
         rg_dno: None,
         fallback: None,
@@ -396,7 +339,7 @@ mod tests {
         assert!(depths[0].abs() < 1e-9 && (depths[1] - 0.16).abs() < 1e-9, "{depths:?}");
         assert!((r.max_scene_penetration_m.unwrap() - 0.16).abs() < 1e-9);
         // Poses are f32: 0.16 to single precision.
-        assert!((r.max_under_floor_m - 0.16).abs() < 1e-6, "{}", r.max_under_floor_m);
+        assert!((r.motion.max_under_floor_m - 0.16).abs() < 1e-6, "{}", r.motion.max_under_floor_m);
         assert_eq!(r.constraints[0].pass, vec![true, false]);
         assert_eq!(r.success_rate, 0.5);
         // The sample under the floor is the one to retry; the standing one beats it, not the

@@ -125,13 +125,13 @@ pub fn markdown(rows: &[ResultRow]) -> String {
         let before = &p.cleanup.before;
         let (skate, met, penetration) = if p.cleanup.enabled || p.cleanup.refine_enabled {
             (
-                format!("{:.3} → {:.3}", before.foot_skate_ratio, p.foot_skate_ratio),
+                format!("{:.3} → {:.3}", before.motion.foot_skate_ratio, p.motion.foot_skate_ratio),
                 format!("{:.0}% → {:.0}%", 100.0 * before.success_rate, 100.0 * p.success_rate),
                 format!("{} → {}", fmt_opt(before.max_scene_penetration_m, 3), fmt_opt(p.max_scene_penetration_m, 3)),
             )
         } else {
             (
-                format!("{:.3}", p.foot_skate_ratio),
+                format!("{:.3}", p.motion.foot_skate_ratio),
                 format!("{:.0}%", 100.0 * p.success_rate),
                 fmt_opt(p.max_scene_penetration_m, 3),
             )
@@ -146,12 +146,12 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             r.task,
             p.config.method,
             p.constraint_error,
-            p.max_under_floor_m,
-            p.pace_steps_per_s,
-            p.toe_flicker,
-            p.mean_acceleration,
-            p.max_acceleration,
-            p.stance_toe_height_m,
+            p.motion.max_under_floor_m,
+            p.motion.pace_steps_per_s,
+            p.motion.toe_flicker,
+            p.motion.mean_acceleration,
+            p.motion.max_acceleration,
+            p.motion.stance_toe_height_m,
             p.seconds
         ));
     }
@@ -170,7 +170,7 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             };
             out.push_str(&format!(
                 "| {task} | {ratio} | {:.2} |\n",
-                d.max_acceleration / u.max_acceleration.max(1e-12)
+                d.motion.max_acceleration / u.motion.max_acceleration.max(1e-12)
             ));
         }
     }
@@ -202,8 +202,8 @@ pub fn markdown(rows: &[ResultRow]) -> String {
                 100.0 * r.success_rate,
                 fmt_opt(d.max_scene_penetration_m, 3),
                 fmt_opt(r.max_scene_penetration_m, 3),
-                d.max_acceleration,
-                r.max_acceleration,
+                d.motion.max_acceleration,
+                r.motion.max_acceleration,
                 steps(d),
                 steps(r),
                 d.seconds,

@@ -9,9 +9,10 @@ use motion_core::cleanup::{foot_lock, FootLockConfig};
 use motion_core::corpus::file as corpus_file;
 use motion_core::database::MotionDatabase;
 use motion_core::inversion::InversionConfig;
+use motion_core::metrics::MetricMeans;
 use motion_core::prior::{RootDecode, Sampling};
 use motion_core::quality::families::{family_report, Family, FamilyConfig};
-use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, MetricMeans, QualityConfig};
+use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, QualityConfig};
 use motion_core::render::{motion_strip, StripRow};
 
 use crate::paths;
@@ -176,7 +177,7 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
             let line = format!(
                 "One-step x̂0 of {} `{walk}` windows noised to t = {}: MSE {:.4} (copying x_t/√ᾱ: {:.4}; frames shuffled: {:.4}), skate {:.3}, foot acc {:.4} m/frame², travel {:.2} m, {:.2} steps/s",
                 m.count,
-                f.timestep, f.mse, f.identity_mse, f.shuffled_mse, m.foot_skate_ratio, m.foot_acceleration, m.travel_m, m.steps_per_second
+                f.timestep, f.mse, f.identity_mse, f.shuffled_mse, m.foot_skate_ratio, m.foot_acceleration, m.travel_m, m.pace_steps_per_s
             );
             println!("{line}");
             lines.push(line + "  ");
@@ -334,13 +335,13 @@ fn metric_values(m: &MetricMeans, turn_shares: bool) -> [String; 13] {
         format!("{:+.0}", m.turn_deg)
     };
     [
-        format!("{:.2}", m.steps_per_second),
+        format!("{:.2}", m.pace_steps_per_s),
         format!("{:.3}", m.toe_flicker),
         format!("{:.4}", m.mean_acceleration),
         format!("{:.3}", m.max_acceleration),
         format!("{:.3}", m.foot_skate_ratio),
         format!("{:.3}", m.bone_length_range_m),
-        format!("{:.3}", m.ground_penetration_m),
+        format!("{:.3}", m.max_under_floor_m),
         format!("{:.3}", m.stance_toe_height_m),
         format!("{:.0}%", 100.0 * m.airborne_share),
         turn,

@@ -330,7 +330,7 @@ pub fn print_summary(report: &TaskReport) {
     let penetration = report.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
     println!(
         "  foot skate {:.3}, max acceleration {:.4} m/frame², max scene penetration {penetration}, head-neck incorrect {:.2}",
-        report.foot_skate_ratio, report.max_acceleration, report.head_neck_incorrect_ratio
+        report.motion.foot_skate_ratio, report.motion.max_acceleration, report.motion.head_neck_incorrect_ratio
     );
     if let Some(steps) = &report.steps {
         println!("  steps {:?} (target {}), success {:.2}", steps.counts, steps.target, steps.success_rate);
@@ -362,7 +362,7 @@ pub fn print_summary(report: &TaskReport) {
              stretch), sinking frames raised up to {raised:.3} m, {held} leg-frames held above the floor, joints \
              moved up to {moved:.3} m; the network's motion before the refinement and the clean-up: foot skate {:.3}, \
              all constraints met by {:.0}%, max scene penetration {penetration}{}",
-            before.foot_skate_ratio,
+            before.motion.foot_skate_ratio,
             100.0 * before.success_rate,
             before.steps.as_ref().map_or(String::new(), |s| format!(", steps {s:?}"))
         );

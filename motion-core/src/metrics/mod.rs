@@ -3,11 +3,14 @@
 //! y = 0.
 
 mod gait;
+mod means;
 
 pub use gait::{
     airborne_frames, alternation_frames, heading_change_rad, mean_acceleration, pace, spike_frames, stance_toe_height,
     step_count, toe_flicker, toe_separation, AIRBORNE_M, ALTERNATION_HYSTERESIS_M, FLICKER_M, SPIKE_ACCELERATION_M,
 };
+
+pub use means::{MetricMeans, TURN_DEG};
 
 use crate::program::EventRegion;
 use crate::skeleton::{bone_lengths, Joint, Pose, FPS, NUM_JOINTS};

@@ -23,13 +23,14 @@
 use candle_core::{DType, Device, Tensor};
 use serde::Serialize;
 
-use super::{descriptors, mean_pairwise, nearest_distances, MetricMeans};
+use super::{descriptors, mean_pairwise, nearest_distances};
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::corpus::caption::Action;
 use crate::corpus::skill::Skill;
 use crate::corpus::tags::{standing_pelvis_height, MotionTags, TravelDirection};
 use crate::corpus::{Corpus, Split};
 use crate::diffusion::Guidance;
+use crate::metrics::MetricMeans;
 use crate::motion::tensor_to_poses;
 use crate::prior::{Prior, PriorError, Sampling};
 use crate::representation::{extract_features, FEATURE_DIM, RIC};

@@ -13,88 +13,11 @@ use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
 use crate::diffusion::NoiseSchedule;
 use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
-use crate::metrics::{
-    airborne_frames, bone_length_range, foot_skate_ratio, ground_penetration, heading_change_rad, max_acceleration,
-    mean_acceleration, mean_foot_acceleration, pace, root_travel, spike_frames, stance_toe_height, toe_flicker,
-};
+use crate::metrics::MetricMeans;
 use crate::motion::tensor_to_poses;
 use crate::prior::{Prior, PriorError, Sampling};
 use crate::representation::RIC;
-use crate::skeleton::{Joint, Pose};
-
-/// Means of the metrics over a set of motions (worst cases where the name says so).
-#[derive(Debug, Clone, Copy, Default, Serialize)]
-pub struct MetricMeans {
-    /// Leg alternations (steps) per second ([`crate::metrics::pace`]).
-    pub steps_per_second: f64,
-    /// Fraction of frames whose toe heights zig-zag ([`toe_flicker`]).
-    pub toe_flicker: f64,
-    /// Mean joint acceleration, m/frame² ([`mean_acceleration`]).
-    pub mean_acceleration: f64,
-    /// Max acceleration, m/frame² (mean over motions of each one's maximum).
-    pub max_acceleration: f64,
-    /// Mean acceleration of the two foot joints, m/frame² ([`mean_foot_acceleration`]).
-    pub foot_acceleration: f64,
-    /// Foot skate ratio.
-    pub foot_skate_ratio: f64,
-    /// Largest bone-length range within any motion, m (worst over motions).
-    pub bone_length_range_m: f64,
-    /// Deepest ground penetration of any joint in any motion, m (worst over motions).
-    pub ground_penetration_m: f64,
-    /// Median height of the lower toe, m ([`stance_toe_height`]): how the feet meet the floor.
-    pub stance_toe_height_m: f64,
-    /// Fraction of motions airborne for at least 2 frames ([`airborne_frames`]).
-    pub airborne_share: f64,
-    /// Mean signed turn, degrees (positive: left; [`heading_change_rad`]).
-    pub turn_deg: f64,
-    /// Fraction of motions turning more than 30° left.
-    pub turn_left_share: f64,
-    /// Fraction of motions turning more than 30° right.
-    pub turn_right_share: f64,
-    /// Mean number of one-frame spikes per motion ([`spike_frames`]).
-    pub spikes: f64,
-    /// Mean head height, m.
-    pub head_height_m: f64,
-    /// Horizontal pelvis travel from first to last frame, m.
-    pub travel_m: f64,
-    /// Motions measured.
-    pub count: usize,
-}
-
-/// A turn of more than this counts as turning that way, degrees.
-pub const TURN_DEG: f64 = 30.0;
-
-impl MetricMeans {
-    /// Means over motions.
-    pub fn of(motions: &[Vec<Pose>]) -> Self {
-        let n = motions.len().max(1) as f64;
-        let mean = |f: &dyn Fn(&[Pose]) -> f64| motions.iter().map(|m| f(m)).sum::<f64>() / n;
-        let worst = |f: &dyn Fn(&[Pose]) -> f64| motions.iter().map(|m| f(m)).fold(0.0, f64::max);
-        let share = |f: &dyn Fn(&[Pose]) -> bool| motions.iter().filter(|m| f(m)).count() as f64 / n;
-        let turn = |m: &[Pose]| heading_change_rad(m).to_degrees();
-        Self {
-            steps_per_second: mean(&|m: &[Pose]| pace(m).0),
-            toe_flicker: mean(&toe_flicker),
-            mean_acceleration: mean(&mean_acceleration),
-            max_acceleration: mean(&max_acceleration),
-            foot_acceleration: mean(&mean_foot_acceleration),
-            foot_skate_ratio: mean(&foot_skate_ratio),
-            bone_length_range_m: worst(&bone_length_range),
-            ground_penetration_m: worst(&ground_penetration),
-            stance_toe_height_m: mean(&stance_toe_height),
-            airborne_share: share(&|m: &[Pose]| airborne_frames(m) >= 2),
-            turn_deg: mean(&turn),
-            turn_left_share: share(&|m: &[Pose]| turn(m) > TURN_DEG),
-            turn_right_share: share(&|m: &[Pose]| turn(m) < -TURN_DEG),
-            spikes: mean(&|m: &[Pose]| spike_frames(m) as f64),
-            head_height_m: mean(&|m: &[Pose]| {
-                m.iter().map(|p| p[Joint::Head.index()].y).sum::<f64>() / m.len().max(1) as f64
-            }),
-            travel_m: mean(&root_travel),
-            count: motions.len(),
-        }
-    }
-}
+use crate::skeleton::Pose;
 
 /// One label's row of the report.
 #[derive(Debug, Clone, Serialize)]
