@@ -109,7 +109,7 @@ enum ReportCommand {
     /// Unconstrained samples per skill family against the corpus's held-out capture: action
     /// detectors, gait, foot skate, acceleration, floor, memorisation, strips (`--database`: per
     /// label against a database).
-    Prior(commands::report::ReportArgs),
+    Prior(Box<commands::report::ReportArgs>),
     /// Plot a training loss curve from `mogen train --loss-csv`.
     Loss(commands::report::LossArgs),
 }
@@ -175,7 +175,7 @@ fn run_command() -> anyhow::Result<()> {
             println!("{}", serde_json::to_string_pretty(&motion_core::program::json_schema())?);
             Ok(())
         }
-        Command::Report(ReportCommand::Prior(args)) => commands::report::run(args),
+        Command::Report(ReportCommand::Prior(args)) => commands::report::run(*args),
         Command::Report(ReportCommand::Loss(args)) => commands::report::run_loss(args),
         Command::Bench(BenchCommand::Prior(args)) => commands::bench::run(args),
         Command::Bench(BenchCommand::Tasks(args)) => commands::bench_tasks::run_tasks(args),

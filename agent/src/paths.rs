@@ -126,6 +126,11 @@ pub fn default_prior() -> PathBuf {
     fixtures_dir().join("model").join("prior.safetensors")
 }
 
+/// The text–motion evaluator of the prior report (in the source tree's fixtures; not embedded).
+pub fn default_evaluator() -> PathBuf {
+    fixtures_dir().join("model").join("evaluator").join("evaluator.safetensors")
+}
+
 /// The folder of the sentence encoders a prior may condition on (one folder per encoder).
 pub fn text_models() -> PathBuf {
     fixtures_dir().join("text")

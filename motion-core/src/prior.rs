@@ -250,13 +250,29 @@ impl Prior {
     /// normalised features `[batch, frames, 263]`.
     pub fn sample(&self, request: &Sampling<'_>, device: &Device) -> Result<Tensor, PriorError> {
         let Sampling { prompt, frames, batch, seed, steps, guidance } = *request;
+        let text = self
+            .encode_text(&vec![prompt; batch], device)
+            .map_err(|e| PriorError::Compute { what: "sampling", message: e.to_string() })?;
+        self.sample_conditioned(&text, frames, seed, steps, guidance)
+    }
+
+    /// One motion per row of condition vectors `text` `[batch, text_dim]` (prompts through
+    /// [`Self::encode_text`]), as [`Self::sample`] draws them: `[batch, frames, 263]`, normalised.
+    pub fn sample_conditioned(
+        &self,
+        text: &Tensor,
+        frames: usize,
+        seed: u64,
+        steps: usize,
+        guidance: Guidance,
+    ) -> Result<Tensor, PriorError> {
         let fail = |message: String| PriorError::Compute { what: "sampling", message };
         let sampler = DdimSampler::new(&NoiseSchedule::mdm(), steps).map_err(|e| fail(e.to_string()))?;
-        let text = self.encode_text(&vec![prompt; batch], device).map_err(|e| fail(e.to_string()))?;
-        let guidance = guidance.for_text(&text).map_err(|e| fail(e.to_string()))?;
-        let x_t = gaussian((batch, frames, crate::representation::FEATURE_DIM), seed, device)
+        let guidance = guidance.for_text(text).map_err(|e| fail(e.to_string()))?;
+        let batch = text.dim(0).map_err(|e| fail(e.to_string()))?;
+        let x_t = gaussian((batch, frames, crate::representation::FEATURE_DIM), seed, text.device())
             .map_err(|e| fail(e.to_string()))?;
-        sampler.sample(&self.mdm, &x_t, &text, guidance).map_err(|e| fail(e.to_string()))
+        sampler.sample(&self.mdm, &x_t, text, guidance).map_err(|e| fail(e.to_string()))
     }
 
     /// De-normalised features `[batch, frames, 263]` of normalised ones, the root velocity

@@ -410,24 +410,8 @@ pub fn family_report(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::skeleton::rest_pose;
+    use crate::quality::test_fixtures::{corpus_of, moving, tiny_prior};
     use glam::DVec3;
-
-    /// The rest pose lowered by `drop` m (knees not bent: enough for the pelvis measures) and
-    /// moved by `velocity` m/s, for `frames` frames.
-    fn moving(frames: usize, velocity: DVec3, drop: f64) -> Vec<Pose> {
-        let floor = rest_pose().iter().map(|v| v.y).fold(f64::INFINITY, f64::min);
-        (0..frames)
-            .map(|t| {
-                let shift = velocity * (t as f64 / FPS);
-                rest_pose().map(|v| {
-                    let y = v.y - floor + crate::corpus::prepare::STANCE_TOE_HEIGHT_M;
-                    let y = if y > 0.5 { y - drop } else { y };
-                    DVec3::new(v.x + shift.x, y, v.z + shift.z)
-                })
-            })
-            .collect()
-    }
 
     #[test]
     fn detectors_measure_direction_height_and_nothing_for_carrying() {
@@ -460,49 +444,11 @@ mod tests {
     /// both.
     #[test]
     fn the_report_measures_samples_against_test_split_windows_only() {
-        use crate::corpus::{CorpusClip, CorpusWindow, Source};
-        use crate::model::{Mdm, MdmConfig};
-        use crate::prior::RootDecode;
-        use crate::representation::MeanStd;
-        use crate::text::vocabulary::VocabularyEncoder;
-        use crate::text::ConditionEncoder;
-
-        let mut corpus =
-            Corpus { clips: Vec::new(), joints: Vec::new(), windows: Vec::new(), drops: Default::default() };
-        for (c, split) in [Split::Train, Split::Test].into_iter().enumerate() {
-            let poses = moving(120, DVec3::new(0.0, 0.0, 1.2), 0.0);
-            let tags = MotionTags::measure(&poses);
-            assert!(Family::Walk.holds(&poses, &tags, "walk"), "{tags:?}");
-            corpus.windows.push(CorpusWindow { clip: c, start: 0, frames: 120, tags, captions: vec!["walks".into()] });
-            corpus.clips.push(CorpusClip {
-                name: format!("0{c}_01"),
-                source: Source::Cmu,
-                take: format!("0{c}_01"),
-                subject: format!("0{c}"),
-                description: "walk".into(),
-                split,
-                take_frame: 0,
-                offset: corpus.joints.len(),
-                frames: 120,
-            });
-            corpus.joints.extend(poses);
-        }
-        let encoder = VocabularyEncoder::from_labels(["a person walks forward"]);
-        let cfg = MdmConfig {
-            latent_dim: 16,
-            ff_size: 32,
-            num_layers: 1,
-            num_heads: 2,
-            text_dim: encoder.words().len(),
-            ..MdmConfig::small()
-        };
-        let prior = Prior {
-            mdm: Mdm::random(cfg, candle_core::DType::F32, &Device::Cpu, 1).unwrap(),
-            encoder: ConditionEncoder::Vocabulary(encoder),
-            mean_std: MeanStd::from_vecs(vec![0.0; FEATURE_DIM], vec![0.1; FEATURE_DIM], &Device::Cpu).unwrap(),
-            root_decode: RootDecode::Velocity,
-            rest: None,
-        };
+        let walk = moving(120, DVec3::new(0.0, 0.0, 1.2), 0.0);
+        let tags = MotionTags::measure(&walk);
+        assert!(Family::Walk.holds(&walk, &tags, "walk"), "{tags:?}");
+        let corpus = corpus_of(vec![(Split::Train, walk.clone(), "walk"), (Split::Test, walk, "walk")]);
+        let prior = tiny_prior(&["a person walks forward"]);
         let config = FamilyConfig {
             samples: 3,
             frames: 40,

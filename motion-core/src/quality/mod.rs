@@ -3,6 +3,10 @@
 //! family against the corpus's held-out capture ([`families`]).
 
 pub mod families;
+pub mod text_motion;
+
+#[cfg(test)]
+mod test_fixtures;
 
 use candle_core::{Device, Tensor};
 use serde::Serialize;

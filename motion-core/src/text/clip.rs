@@ -450,8 +450,8 @@ mod tests {
         (dir, w, t)
     }
 
-    fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-        (a - b).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap()
+    fn max_abs_diff(a: &Tensor, b: &Tensor) -> f64 {
+        crate::testing::max_abs_diff(a, b).unwrap()
     }
 
     fn loads_tiny_openai_checkpoint_and_encodes(dev: &Device) {

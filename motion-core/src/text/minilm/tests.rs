@@ -3,6 +3,7 @@ use std::sync::OnceLock;
 use serde::Deserialize;
 
 use super::*;
+use crate::testing::max_abs_diff;
 
 fn fixtures() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/text")
@@ -35,11 +36,6 @@ fn rows(t: &Tensor) -> Vec<Vec<f32>> {
     t.to_vec2::<f32>().unwrap()
 }
 
-fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
-    assert_eq!(a.len(), b.len());
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
-}
-
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -67,9 +63,10 @@ fn shipped_encoder_matches_sentence_transformers() {
     }
     // Two prompts of different lengths, in one batch: 1e-3 is the f16 weights' budget.
     let (a, b) = (0, 3);
-    let got = rows(&enc.encode(&[prompts[a], prompts[b]]).unwrap());
-    for (row, i) in got.iter().zip([a, b]) {
-        let diff = max_abs_diff(row, &reference.embeddings[i]);
+    let got = enc.encode(&[prompts[a], prompts[b]]).unwrap();
+    for (row, i) in [a, b].into_iter().enumerate() {
+        let want = Tensor::new(reference.embeddings[i].as_slice(), &Device::Cpu).unwrap();
+        let diff = max_abs_diff(&got.get(row).unwrap(), &want).unwrap();
         assert!(diff <= 1e-3, "{:?}: max |Δ| {diff}", prompts[i]);
     }
 }
@@ -94,10 +91,10 @@ fn rows_have_unit_length_even_for_empty_prompts() {
 fn padding_does_not_change_a_prompt() {
     let enc = shipped();
     let prompts = ["a", "a man tiptoes sideways to his right", "walk 3.5 m forward, turn 90 degrees left"];
-    let batch = rows(&enc.encode(&prompts).unwrap());
-    for (row, prompt) in batch.iter().zip(prompts) {
-        let alone = rows(&enc.encode(&[prompt]).unwrap());
-        let diff = max_abs_diff(row, &alone[0]);
+    let batch = enc.encode(&prompts).unwrap();
+    for (row, prompt) in prompts.into_iter().enumerate() {
+        let alone = enc.encode(&[prompt]).unwrap();
+        let diff = max_abs_diff(&batch.get(row).unwrap(), &alone.get(0).unwrap()).unwrap();
         assert!(diff < 1e-5, "{prompt:?}: {diff}");
     }
 }
