@@ -14,7 +14,7 @@
 //! MDM runs CLIP in fp16 on the GPU; we run f32, so embeddings agree to about 1e-3.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarBuilder;
@@ -22,10 +22,14 @@ pub use candle_transformers::models::clip::text_model::ClipTextConfig;
 use candle_transformers::models::clip::text_model::ClipTextTransformer;
 use tokenizers::Tokenizer;
 
+use super::weights::{no_extra_layer, take_tensor, EncoderError, TensorProblem};
+
 /// CLIP's start-of-text token.
 pub const START_OF_TEXT: &str = "<|startoftext|>";
 /// CLIP's end-of-text token.
 pub const END_OF_TEXT: &str = "<|endoftext|>";
+/// The tensor names a CLIP checkpoint must have.
+const OPENAI_NAMES: &str = "OpenAI CLIP key names; see fixtures/clip/README.md";
 
 /// The text tower's shape and MDM's tokenisation.
 #[derive(Debug, Clone)]
@@ -43,79 +47,6 @@ impl ClipTextEncoderConfig {
     pub fn mdm_vit_b32() -> Self {
         Self { text: ClipTextConfig::vit_base_patch32(), context_length: 22 }
     }
-}
-
-/// Errors loading or running the CLIP text encoder.
-#[derive(Debug, thiserror::Error)]
-pub enum ClipError {
-    /// The weights file could not be read as safetensors.
-    #[error("{path}: cannot read CLIP weights: {source}")]
-    Weights {
-        /// The weights file.
-        path: PathBuf,
-        /// candle's error.
-        source: candle_core::Error,
-    },
-    /// A tensor the text tower needs is absent (OpenAI key names are expected).
-    #[error("{path}: missing tensor `{key}` (expected OpenAI CLIP key names; see fixtures/clip/README.md)")]
-    MissingKey {
-        /// The weights file.
-        path: PathBuf,
-        /// The OpenAI key.
-        key: String,
-    },
-    /// A tensor whose shape does not fit the configuration.
-    #[error("{path}: tensor `{key}` has shape {found:?}; the configuration needs {expected:?}")]
-    WrongShape {
-        /// The weights file.
-        path: PathBuf,
-        /// The OpenAI key.
-        key: String,
-        /// Shape in the file.
-        found: Vec<usize>,
-        /// Shape the configuration implies.
-        expected: Vec<usize>,
-    },
-    /// The file has more residual blocks than the configuration (wrong config or wrong file).
-    #[error("{path}: tensor `{key}` belongs to a layer beyond the configured {layers}")]
-    ExtraLayer {
-        /// The weights file.
-        path: PathBuf,
-        /// The OpenAI key.
-        key: String,
-        /// Configured layers.
-        layers: usize,
-    },
-    /// The tokenizer file could not be loaded.
-    #[error("{path}: cannot load tokenizer: {message}")]
-    Tokenizer {
-        /// The tokenizer file.
-        path: PathBuf,
-        /// The tokenizers crate's message.
-        message: String,
-    },
-    /// The tokenizer lacks a special token or has ids outside the embedding table.
-    #[error("{path}: {message}")]
-    TokenizerMismatch {
-        /// The tokenizer file.
-        path: PathBuf,
-        /// What does not fit.
-        message: String,
-    },
-    /// Tokenising a prompt failed.
-    #[error("prompt {index}: {message}")]
-    Tokenize {
-        /// Index of the prompt.
-        index: usize,
-        /// What went wrong.
-        message: String,
-    },
-    /// A configuration that cannot work (e.g. a context longer than the positions).
-    #[error("CLIP configuration: {0}")]
-    Config(String),
-    /// A tensor operation failed.
-    #[error("CLIP forward pass: {0}")]
-    Tensor(#[from] candle_core::Error),
 }
 
 /// CLIP's text tower with MDM's tokenisation: prompts → `[N, projection_dim]` embeddings.
@@ -139,7 +70,7 @@ impl std::fmt::Debug for ClipTextEncoder {
 impl ClipTextEncoder {
     /// Loads ViT-B/32 ([`ClipTextEncoderConfig::mdm_vit_b32`]) from OpenAI-named safetensors
     /// weights and a CLIP `tokenizer.json`.
-    pub fn load(weights: &Path, tokenizer: &Path, device: &Device) -> Result<Self, ClipError> {
+    pub fn load(weights: &Path, tokenizer: &Path, device: &Device) -> Result<Self, EncoderError> {
         Self::load_with_config(weights, tokenizer, ClipTextEncoderConfig::mdm_vit_b32(), device)
     }
 
@@ -149,23 +80,23 @@ impl ClipTextEncoder {
         tokenizer: &Path,
         config: ClipTextEncoderConfig,
         device: &Device,
-    ) -> Result<Self, ClipError> {
+    ) -> Result<Self, EncoderError> {
         let text = &config.text;
         if config.context_length < 2 || config.context_length > text.max_position_embeddings {
-            return Err(ClipError::Config(format!(
-                "context length {} must be in 2..={} (the positions)",
+            return Err(EncoderError::Config(format!(
+                "CLIP context length {} must be in 2..={} (the positions)",
                 config.context_length, text.max_position_embeddings
             )));
         }
         if text.embed_dim.checked_rem(text.num_attention_heads) != Some(0) {
-            return Err(ClipError::Config(format!(
-                "width {} is not divisible by {} heads",
+            return Err(EncoderError::Config(format!(
+                "CLIP width {} is not divisible by {} heads",
                 text.embed_dim, text.num_attention_heads
             )));
         }
         let tensors = candle_core::safetensors::load(weights, device)
-            .map_err(|source| ClipError::Weights { path: weights.to_path_buf(), source })?;
-        let (renamed, projection) = rename_openai_keys(tensors, text).map_err(|e| e.at(weights))?;
+            .map_err(|source| EncoderError::Weights { path: weights.to_path_buf(), source })?;
+        let (renamed, projection) = rename_openai_keys(tensors, text).map_err(|e| e.at(weights, OPENAI_NAMES))?;
         let vb = VarBuilder::from_tensors(renamed, DType::F32, device);
         let transformer = ClipTextTransformer::new(vb, text)?;
 
@@ -185,13 +116,15 @@ impl ClipTextEncoder {
 
     /// MDM's token ids for one prompt, unpadded: `[SOT, ≤ context_length − 2 BPE ids, EOT]`.
     /// Truncation keeps the first BPE tokens, as `clip.tokenize(..., truncate=True)` does.
-    pub fn tokenize(&self, prompt: &str) -> Result<Vec<u32>, ClipError> {
+    pub fn tokenize(&self, prompt: &str) -> Result<Vec<u32>, EncoderError> {
         self.tokenize_prompt(0, prompt)
     }
 
-    fn tokenize_prompt(&self, index: usize, prompt: &str) -> Result<Vec<u32>, ClipError> {
-        let encoding =
-            self.tokenizer.encode(prompt, false).map_err(|e| ClipError::Tokenize { index, message: e.to_string() })?;
+    fn tokenize_prompt(&self, index: usize, prompt: &str) -> Result<Vec<u32>, EncoderError> {
+        let encoding = self
+            .tokenizer
+            .encode(prompt, false)
+            .map_err(|e| EncoderError::Tokenize { index, message: e.to_string() })?;
         let keep = self.config.context_length - 2;
         let mut ids = Vec::with_capacity(self.config.context_length);
         ids.push(self.sot);
@@ -201,7 +134,7 @@ impl ClipTextEncoder {
     }
 
     /// Encodes prompts: `[N, projection_dim]`, f32, one row per prompt (MDM's `encode_text`).
-    pub fn encode(&self, prompts: &[&str]) -> Result<Tensor, ClipError> {
+    pub fn encode(&self, prompts: &[&str]) -> Result<Tensor, EncoderError> {
         let positions = self.config.text.max_position_embeddings;
         if prompts.is_empty() {
             return Ok(Tensor::zeros((0, self.embedding_dim()), DType::F32, &self.device)?);
@@ -226,44 +159,18 @@ impl ClipTextEncoder {
 
 /// Loads `tokenizer.json` with its own truncation and padding switched off (we apply MDM's),
 /// checks that every id fits the embedding table, and returns the SOT and EOT ids.
-fn load_tokenizer(path: &Path, vocab_size: usize) -> Result<(Tokenizer, u32, u32), ClipError> {
-    let err = |message: String| ClipError::Tokenizer { path: path.to_path_buf(), message };
+fn load_tokenizer(path: &Path, vocab_size: usize) -> Result<(Tokenizer, u32, u32), EncoderError> {
+    let err = |message: String| EncoderError::Tokenizer { path: path.to_path_buf(), message };
     let mut tokenizer = Tokenizer::from_file(path).map_err(|e| err(e.to_string()))?;
     tokenizer.with_truncation(None).map_err(|e| err(e.to_string()))?;
     tokenizer.with_padding(None);
-    let mismatch = |message: String| ClipError::TokenizerMismatch { path: path.to_path_buf(), message };
+    let mismatch = |message: String| EncoderError::TokenizerMismatch { path: path.to_path_buf(), message };
     let special = |token: &str| tokenizer.token_to_id(token).ok_or_else(|| mismatch(format!("no token `{token}`")));
     let (sot, eot) = (special(START_OF_TEXT)?, special(END_OF_TEXT)?);
     if let Some(max) = tokenizer.get_vocab(true).values().max().filter(|&&id| id as usize >= vocab_size) {
         return Err(mismatch(format!("token id {max} does not fit the embedding table of {vocab_size} rows")));
     }
     Ok((tokenizer, sot, eot))
-}
-
-/// A problem with one tensor, before the file's path is attached.
-enum KeyProblem {
-    Missing(String),
-    Shape { key: String, found: Vec<usize>, expected: Vec<usize> },
-    ExtraLayer(String, usize),
-    Tensor(candle_core::Error),
-}
-
-impl KeyProblem {
-    fn at(self, path: &Path) -> ClipError {
-        let path = path.to_path_buf();
-        match self {
-            KeyProblem::Missing(key) => ClipError::MissingKey { path, key },
-            KeyProblem::Shape { key, found, expected } => ClipError::WrongShape { path, key, found, expected },
-            KeyProblem::ExtraLayer(key, layers) => ClipError::ExtraLayer { path, key, layers },
-            KeyProblem::Tensor(source) => ClipError::Weights { path, source },
-        }
-    }
-}
-
-impl From<candle_core::Error> for KeyProblem {
-    fn from(e: candle_core::Error) -> Self {
-        KeyProblem::Tensor(e)
-    }
 }
 
 /// Maps OpenAI's text-tower tensors to candle-transformers' names (f32), checking every shape;
@@ -282,19 +189,9 @@ impl From<candle_core::Error> for KeyProblem {
 fn rename_openai_keys(
     mut src: HashMap<String, Tensor>,
     c: &ClipTextConfig,
-) -> Result<(HashMap<String, Tensor>, Tensor), KeyProblem> {
+) -> Result<(HashMap<String, Tensor>, Tensor), TensorProblem> {
     let (w, mlp) = (c.embed_dim, c.intermediate_size);
-    let mut take = |key: &str, expected: &[usize]| -> Result<Tensor, KeyProblem> {
-        let t = src.remove(key).ok_or_else(|| KeyProblem::Missing(key.to_owned()))?;
-        if t.dims() != expected {
-            return Err(KeyProblem::Shape {
-                key: key.to_owned(),
-                found: t.dims().to_vec(),
-                expected: expected.to_vec(),
-            });
-        }
-        Ok(t.to_dtype(DType::F32)?)
-    };
+    let mut take = |key: &str, expected: &[usize]| take_tensor(&mut src, key, expected);
     let mut out = HashMap::new();
     out.insert("embeddings.token_embedding.weight".into(), take("token_embedding.weight", &[c.vocab_size, w])?);
     out.insert(
@@ -324,15 +221,15 @@ fn rename_openai_keys(
     out.insert("final_layer_norm.weight".into(), take("ln_final.weight", &[w])?);
     out.insert("final_layer_norm.bias".into(), take("ln_final.bias", &[w])?);
     let projection = take("text_projection", &[w, c.projection_dim])?;
-    if let Some(extra) = src.keys().filter(|k| k.starts_with("transformer.resblocks.")).min() {
-        return Err(KeyProblem::ExtraLayer(extra.clone(), c.num_hidden_layers));
-    }
+    no_extra_layer(&src, "transformer.resblocks.", c.num_hidden_layers)?;
     Ok((out, projection))
 }
 
 #[cfg(test)]
 mod tests {
     use candle_transformers::models::clip::text_model::Activation;
+
+    use std::path::PathBuf;
 
     use super::*;
 
@@ -596,7 +493,7 @@ mod tests {
         std::fs::write(&w, b"not safetensors").unwrap();
         assert!(matches!(
             ClipTextEncoder::load_with_config(&w, &t, tiny_config(), &dev),
-            Err(ClipError::Weights { .. })
+            Err(EncoderError::Weights { .. })
         ));
 
         candle_core::safetensors::save(&openai_weights(&dev), &w).unwrap();

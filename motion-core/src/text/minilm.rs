@@ -16,7 +16,7 @@
 //! and always computes in f32.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarBuilder;
@@ -24,6 +24,7 @@ pub use candle_transformers::models::bert::Config as BertConfig;
 use candle_transformers::models::bert::{BertModel, HiddenAct, PositionEmbeddingType};
 use tokenizers::{Tokenizer, TruncationParams};
 
+use super::weights::{no_extra_layer, take_tensor, EncoderError, TensorProblem};
 use super::TextEncoder;
 
 /// The weights file [`MiniLm::load`] reads from its folder.
@@ -34,6 +35,8 @@ pub const TOKENIZER_FILE: &str = "tokenizer.json";
 pub const CLS: &str = "[CLS]";
 /// BERT's separator token, last in every sequence.
 pub const SEP: &str = "[SEP]";
+/// The tensor names a MiniLM checkpoint must have.
+const BERT_NAMES: &str = "Hugging Face BertModel names; see fixtures/text/convert_minilm.py";
 
 /// The encoder's shape and its tokenisation.
 #[derive(Debug, Clone, PartialEq)]
@@ -75,91 +78,6 @@ impl MiniLmConfig {
     }
 }
 
-/// Errors loading or running the MiniLM encoder.
-#[derive(Debug, thiserror::Error)]
-pub enum MiniLmError {
-    /// The weights file could not be read as safetensors.
-    #[error("{path}: cannot read MiniLM weights: {source}")]
-    Weights {
-        /// The weights file.
-        path: PathBuf,
-        /// candle's error.
-        source: candle_core::Error,
-    },
-    /// A tensor BERT needs is absent (Hugging Face `BertModel` names are expected).
-    #[error(
-        "{path}: missing tensor `{key}` (expected Hugging Face BertModel names; see fixtures/text/convert_minilm.py)"
-    )]
-    MissingTensor {
-        /// The weights file.
-        path: PathBuf,
-        /// The tensor's name.
-        key: String,
-    },
-    /// A tensor whose shape does not fit the configuration.
-    #[error("{path}: tensor `{key}` has shape {found:?}; the configuration needs {expected:?}")]
-    WrongShape {
-        /// The weights file.
-        path: PathBuf,
-        /// The tensor's name.
-        key: String,
-        /// Shape in the file.
-        found: Vec<usize>,
-        /// Shape the configuration implies.
-        expected: Vec<usize>,
-    },
-    /// A tensor that is not floating point.
-    #[error("{path}: tensor `{key}` is {dtype:?}; expected f32, f16 or bf16")]
-    WrongDType {
-        /// The weights file.
-        path: PathBuf,
-        /// The tensor's name.
-        key: String,
-        /// Its element type.
-        dtype: DType,
-    },
-    /// The file has encoder tensors the configuration does not (more layers: wrong config or file).
-    #[error("{path}: tensor `{key}` is not part of a {layers}-layer BERT")]
-    ExtraLayer {
-        /// The weights file.
-        path: PathBuf,
-        /// The tensor's name.
-        key: String,
-        /// Configured layers.
-        layers: usize,
-    },
-    /// The tokenizer file could not be loaded.
-    #[error("{path}: cannot load tokenizer: {message}")]
-    Tokenizer {
-        /// The tokenizer file.
-        path: PathBuf,
-        /// The tokenizers crate's message.
-        message: String,
-    },
-    /// The tokenizer is not BERT's WordPiece for this vocabulary.
-    #[error("{path}: {message}")]
-    TokenizerMismatch {
-        /// The tokenizer file.
-        path: PathBuf,
-        /// What does not fit.
-        message: String,
-    },
-    /// Tokenising a prompt failed.
-    #[error("prompt {index}: {message}")]
-    Tokenize {
-        /// Index of the prompt.
-        index: usize,
-        /// What went wrong.
-        message: String,
-    },
-    /// A configuration that cannot work (e.g. more ids per prompt than positions).
-    #[error("MiniLM configuration: {0}")]
-    Config(String),
-    /// A tensor operation failed.
-    #[error("MiniLM forward pass: {0}")]
-    Tensor(#[from] candle_core::Error),
-}
-
 /// all-MiniLM-L6-v2: prompts → `[N, 384]` L2-normalised sentence embeddings, f32.
 pub struct MiniLm {
     bert: BertModel,
@@ -178,35 +96,35 @@ impl MiniLm {
     /// Loads all-MiniLM-L6-v2 ([`MiniLmConfig::all_minilm_l6_v2`]) from a folder holding
     /// [`WEIGHTS_FILE`] and [`TOKENIZER_FILE`], e.g. `fixtures/text/all-MiniLM-L6-v2`, or the
     /// unzipped upstream model (its extra `pooler.*` and `embeddings.position_ids` are ignored).
-    pub fn load(dir: &Path, device: &Device) -> Result<Self, MiniLmError> {
+    pub fn load(dir: &Path, device: &Device) -> Result<Self, EncoderError> {
         Self::load_with_config(dir, MiniLmConfig::all_minilm_l6_v2(), device)
     }
 
     /// [`MiniLm::load`] for any BERT shape (tests use a tiny one).
-    pub fn load_with_config(dir: &Path, config: MiniLmConfig, device: &Device) -> Result<Self, MiniLmError> {
+    pub fn load_with_config(dir: &Path, config: MiniLmConfig, device: &Device) -> Result<Self, EncoderError> {
         let bert = &config.bert;
         if config.max_seq_length < 2 || config.max_seq_length > bert.max_position_embeddings {
-            return Err(MiniLmError::Config(format!(
-                "max_seq_length {} must be in 2..={} (the positions)",
+            return Err(EncoderError::Config(format!(
+                "MiniLM max_seq_length {} must be in 2..={} (the positions)",
                 config.max_seq_length, bert.max_position_embeddings
             )));
         }
         if bert.hidden_size.checked_rem(bert.num_attention_heads) != Some(0) {
-            return Err(MiniLmError::Config(format!(
-                "hidden size {} is not divisible by {} heads",
+            return Err(EncoderError::Config(format!(
+                "MiniLM hidden size {} is not divisible by {} heads",
                 bert.hidden_size, bert.num_attention_heads
             )));
         }
         if bert.pad_token_id >= bert.vocab_size {
-            return Err(MiniLmError::Config(format!(
-                "padding id {} is outside the vocabulary of {}",
+            return Err(EncoderError::Config(format!(
+                "MiniLM padding id {} is outside the vocabulary of {}",
                 bert.pad_token_id, bert.vocab_size
             )));
         }
         let weights = dir.join(WEIGHTS_FILE);
         let tensors = candle_core::safetensors::load(&weights, device)
-            .map_err(|source| MiniLmError::Weights { path: weights.clone(), source })?;
-        let tensors = bert_tensors(tensors, bert).map_err(|e| e.at(&weights))?;
+            .map_err(|source| EncoderError::Weights { path: weights.clone(), source })?;
+        let tensors = bert_tensors(tensors, bert).map_err(|e| e.at(&weights, BERT_NAMES))?;
         let vb = VarBuilder::from_tensors(tensors, DType::F32, device);
         let model = BertModel::load(vb, bert)?;
         let tokenizer = load_tokenizer(&dir.join(TOKENIZER_FILE), &config)?;
@@ -230,19 +148,21 @@ impl MiniLm {
 
     /// The ids of one prompt, unpadded: `[CLS, word pieces…, SEP]`, at most
     /// [`MiniLmConfig::max_seq_length`] long (the first word pieces are kept).
-    pub fn tokenize(&self, prompt: &str) -> Result<Vec<u32>, MiniLmError> {
+    pub fn tokenize(&self, prompt: &str) -> Result<Vec<u32>, EncoderError> {
         self.tokenize_prompt(0, prompt)
     }
 
-    fn tokenize_prompt(&self, index: usize, prompt: &str) -> Result<Vec<u32>, MiniLmError> {
-        let encoding =
-            self.tokenizer.encode(prompt, true).map_err(|e| MiniLmError::Tokenize { index, message: e.to_string() })?;
+    fn tokenize_prompt(&self, index: usize, prompt: &str) -> Result<Vec<u32>, EncoderError> {
+        let encoding = self
+            .tokenizer
+            .encode(prompt, true)
+            .map_err(|e| EncoderError::Tokenize { index, message: e.to_string() })?;
         Ok(encoding.get_ids().to_vec())
     }
 
     /// Encodes prompts: `[N, 384]`, f32, each row of unit length (an empty list gives `[0, 384]`).
     /// The batch is padded to its longest prompt; padding changes no row beyond float rounding.
-    pub fn encode(&self, prompts: &[&str]) -> Result<Tensor, MiniLmError> {
+    pub fn encode(&self, prompts: &[&str]) -> Result<Tensor, EncoderError> {
         let n = prompts.len();
         if n == 0 {
             return Ok(Tensor::zeros((0, self.embedding_dim()), DType::F32, &self.device)?);
@@ -293,14 +213,14 @@ fn l2_normalise(x: &Tensor) -> candle_core::Result<Tensor> {
 /// Loads `tokenizer.json` with sentence-transformers' truncation (`max_seq_length` ids, special
 /// tokens included) and without its own padding (the file pads to 128; we pad to the batch),
 /// and checks that it is BERT's: `[CLS] … [SEP]` around every prompt, every id in the table.
-fn load_tokenizer(path: &Path, config: &MiniLmConfig) -> Result<Tokenizer, MiniLmError> {
-    let err = |message: String| MiniLmError::Tokenizer { path: path.to_path_buf(), message };
+fn load_tokenizer(path: &Path, config: &MiniLmConfig) -> Result<Tokenizer, EncoderError> {
+    let err = |message: String| EncoderError::Tokenizer { path: path.to_path_buf(), message };
     let mut tokenizer = Tokenizer::from_file(path).map_err(|e| err(e.to_string()))?;
     tokenizer
         .with_truncation(Some(TruncationParams { max_length: config.max_seq_length, ..Default::default() }))
         .map_err(|e| err(e.to_string()))?;
     tokenizer.with_padding(None);
-    let mismatch = |message: String| MiniLmError::TokenizerMismatch { path: path.to_path_buf(), message };
+    let mismatch = |message: String| EncoderError::TokenizerMismatch { path: path.to_path_buf(), message };
     let special = |token: &str| tokenizer.token_to_id(token).ok_or_else(|| mismatch(format!("no token `{token}`")));
     let (cls, sep) = (special(CLS)?, special(SEP)?);
     let empty = tokenizer.encode("", true).map_err(|e| err(e.to_string()))?;
@@ -315,34 +235,6 @@ fn load_tokenizer(path: &Path, config: &MiniLmConfig) -> Result<Tokenizer, MiniL
         return Err(mismatch(format!("token id {max} does not fit the embedding table of {vocab_size} rows")));
     }
     Ok(tokenizer)
-}
-
-/// A problem with one tensor, before the file's path is attached.
-enum TensorProblem {
-    Missing(String),
-    Shape { key: String, found: Vec<usize>, expected: Vec<usize> },
-    DType(String, DType),
-    ExtraLayer(String, usize),
-    Tensor(candle_core::Error),
-}
-
-impl TensorProblem {
-    fn at(self, path: &Path) -> MiniLmError {
-        let path = path.to_path_buf();
-        match self {
-            TensorProblem::Missing(key) => MiniLmError::MissingTensor { path, key },
-            TensorProblem::Shape { key, found, expected } => MiniLmError::WrongShape { path, key, found, expected },
-            TensorProblem::DType(key, dtype) => MiniLmError::WrongDType { path, key, dtype },
-            TensorProblem::ExtraLayer(key, layers) => MiniLmError::ExtraLayer { path, key, layers },
-            TensorProblem::Tensor(source) => MiniLmError::Weights { path, source },
-        }
-    }
-}
-
-impl From<candle_core::Error> for TensorProblem {
-    fn from(e: candle_core::Error) -> Self {
-        TensorProblem::Tensor(e)
-    }
 }
 
 /// The tensors [`BertModel`] reads, under its names, with the shape `c` implies:
@@ -385,18 +277,10 @@ fn expected_shapes(c: &BertConfig) -> Vec<(String, Vec<usize>)> {
 fn bert_tensors(mut src: HashMap<String, Tensor>, c: &BertConfig) -> Result<HashMap<String, Tensor>, TensorProblem> {
     let mut out = HashMap::new();
     for (key, expected) in expected_shapes(c) {
-        let t = src.remove(&key).ok_or_else(|| TensorProblem::Missing(key.clone()))?;
-        if !matches!(t.dtype(), DType::F32 | DType::F16 | DType::BF16) {
-            return Err(TensorProblem::DType(key, t.dtype()));
-        }
-        if t.dims() != expected {
-            return Err(TensorProblem::Shape { key, found: t.dims().to_vec(), expected });
-        }
-        out.insert(key, t.to_dtype(DType::F32)?);
+        let t = take_tensor(&mut src, &key, &expected)?;
+        out.insert(key, t);
     }
-    if let Some(extra) = src.keys().filter(|k| k.starts_with("encoder.layer.")).min() {
-        return Err(TensorProblem::ExtraLayer(extra.clone(), c.num_hidden_layers));
-    }
+    no_extra_layer(&src, "encoder.layer.", c.num_hidden_layers)?;
     Ok(out)
 }
 

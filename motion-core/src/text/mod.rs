@@ -6,14 +6,16 @@
 pub mod clip;
 pub mod minilm;
 pub mod vocabulary;
+pub mod weights;
 
 use std::path::Path;
 use std::sync::Arc;
 
 use candle_core::{Device, Result, Tensor};
 
-use minilm::{MiniLm, MiniLmError};
+use minilm::MiniLm;
 use vocabulary::VocabularyEncoder;
+use weights::EncoderError;
 
 /// Turns prompts into condition vectors. Encode once per run, never inside a sampling loop.
 pub trait TextEncoder {
@@ -39,9 +41,11 @@ pub enum ConditionEncoder {
 impl ConditionEncoder {
     /// Loads the sentence encoder called `name` from `text_models` (the folder holding one folder
     /// per encoder, e.g. `fixtures/text`).
-    pub fn sentence(name: &str, text_models: &Path, device: &Device) -> std::result::Result<Self, MiniLmError> {
+    pub fn sentence(name: &str, text_models: &Path, device: &Device) -> std::result::Result<Self, EncoderError> {
         if name != MINILM_NAME {
-            return Err(MiniLmError::Config(format!("unknown sentence encoder {name:?}: only {MINILM_NAME:?} exists")));
+            return Err(EncoderError::Config(format!(
+                "unknown sentence encoder {name:?}: only {MINILM_NAME:?} exists"
+            )));
         }
         Ok(Self::MiniLm(Arc::new(MiniLm::load(&text_models.join(name), device)?)))
     }
