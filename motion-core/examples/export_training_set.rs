@@ -1,29 +1,122 @@
 //! Exports what `mogen train` trains on, for the PyTorch mirror of the trainer
-//! (`fixtures/model/gpu/train_mdm.py`, used for recipe sweeps on a GPU):
+//! (`fixtures/model/gpu/train_mdm.py`, for training on a GPU). Three modes:
 //!
-//! - `x` `[rows, 263]`: the normalised features of every sequence of the database, one after
-//!   the other;
-//! - `windows` `[n, 3]` (i64): each window's first row in `x`, its frames and its label id;
-//! - `label_text` `[labels, vocabulary]`: the condition vector of each label (sorted labels);
-//! - `mean`, `std` `[263]`: the normalisation;
+//! - `captions CORPUS TEXT_MODELS OUT`: the caption tables of the corpus's train and validation
+//!   splits (mirrored copies' captions included, in the trainer's row order), encoded with
+//!   all-MiniLM-L6-v2: `train.text`, `validation.text` `[rows, 384]` (f32), the captions
+//!   themselves in the header metadata. Run where the sentence encoder is (11 MB out of 45).
+//! - `corpus CORPUS CAPTIONS OUT`: the normalised features of both splits with their captioned
+//!   stretches, the caption tables copied from CAPTIONS (checked against the corpus's captions,
+//!   row by row): per split `S` in `train`, `validation`, `S.x` `[rows, 263]` (the sequences one
+//!   after the other, normalised with the train split's statistics), `S.sequences` `[n, 2]`
+//!   (first row, frames), `S.stretches` `[m, 4]` (sequence, first frame, first phrasing, number
+//!   of phrasings), `S.phrasings` `[p]` (caption rows), `S.text` `[rows, 384]`; and
+//!   `mean`, `std` `[263]`; all f32, with the rest skeleton as JSON in the header metadata. Run where the training runs (the features of 11.6 h are 0.9 GB).
+//! - `database DB OUT`: a motion database's windows with label ids and a vocabulary (`x`,
+//!   `windows` `[n, 3]` = first row, frames, label; `label_text`, `mean`, `std`, and
+//!   `OUT.vocab.json`).
 //!
-//! and beside it `OUT.vocab.json` (the vocabulary, as stored in a prior file's header).
-//!
-//! Usage: `cargo run --release --example export_training_set -p motion-core -- DB OUT`
+//! Usage: `cargo run --release --example export_training_set -p motion-core -- MODE ARGS...`
 use std::collections::HashMap;
 use std::error::Error;
 use std::path::Path;
 
 use candle_core::{Device, Tensor};
+use motion_core::corpus::{file as corpus_file, Split};
 use motion_core::database::{MotionDatabase, Window};
+use motion_core::representation::RestSkeleton;
+use motion_core::skeleton::rest_bone_lengths;
 use motion_core::text::vocabulary::VocabularyEncoder;
-use motion_core::text::TextEncoder;
+use motion_core::text::{ConditionEncoder, TextEncoder, MINILM_NAME};
+use motion_core::training::CaptionedSequences;
+
+const SPLITS: [(Split, &str); 2] = [(Split::Train, "train"), (Split::Validation, "validation")];
 
 fn main() -> Result<(), Box<dyn Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let [_, db_path, out] = args.as_slice() else {
-        return Err("usage: export_training_set DATABASE OUT.safetensors".into());
-    };
+    match args.iter().map(String::as_str).collect::<Vec<_>>().as_slice() {
+        [_, "captions", corpus, text_models, out] => captions(corpus, text_models, out),
+        [_, "corpus", corpus, captions, out] => corpus_arrays(corpus, captions, out),
+        [_, "database", db, out] => database(db, out),
+        _ => Err("usage: export_training_set captions CORPUS TEXT_MODELS OUT | corpus CORPUS CAPTIONS OUT | \
+                  database DB OUT"
+            .into()),
+    }
+}
+
+/// Both splits' sequences, the validation split normalised with the train split's statistics.
+fn splits(corpus: &str) -> Result<Vec<CaptionedSequences>, Box<dyn Error>> {
+    let corpus = corpus_file::load(Path::new(corpus))?;
+    let train = CaptionedSequences::from_corpus(&corpus, Split::Train, None, &Device::Cpu)?;
+    let validation =
+        CaptionedSequences::from_corpus(&corpus, Split::Validation, Some(train.mean_std()), &Device::Cpu)?;
+    Ok(vec![train, validation])
+}
+
+fn captions(corpus: &str, text_models: &str, out: &str) -> Result<(), Box<dyn Error>> {
+    let encoder = ConditionEncoder::sentence(MINILM_NAME, Path::new(text_models), &Device::Cpu)?;
+    let mut tensors = Vec::new();
+    let mut metadata = HashMap::new();
+    for (sequences, (_, name)) in splits(corpus)?.iter().zip(SPLITS) {
+        let captions: Vec<&str> = sequences.captions().iter().map(String::as_str).collect();
+        let mut rows = Vec::new();
+        for (k, chunk) in captions.chunks(256).enumerate() {
+            eprintln!("{name}: {}/{} captions", k * 256, captions.len());
+            rows.push(encoder.encode(chunk, &Device::Cpu)?);
+        }
+        tensors.push((format!("{name}.text"), Tensor::cat(&rows, 0)?));
+        metadata.insert(format!("{name}.captions"), serde_json::to_string(&captions)?);
+        println!("{name}: {} captions", captions.len());
+    }
+    motion_core::tensor_file::write_safetensors(Path::new(out), &tensors, metadata)?;
+    Ok(())
+}
+
+fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn Error>> {
+    let bytes = std::fs::read(captions)?;
+    let meta = motion_core::tensor_file::read_metadata(&bytes)?;
+    let tables = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)?;
+    let splits = splits(corpus)?;
+    let mut tensors = vec![
+        ("mean".to_owned(), splits[0].mean_std().mean().clone()),
+        ("std".to_owned(), splits[0].mean_std().std().clone()),
+    ];
+    for (sequences, (_, name)) in splits.iter().zip(SPLITS) {
+        let stored: Vec<String> =
+            serde_json::from_str(meta.get(&format!("{name}.captions")).ok_or("no captions in the captions file")?)?;
+        if stored != sequences.captions() {
+            return Err(format!("{captions}: the {name} captions are not this corpus's (made from another?)").into());
+        }
+        let text = tables.get(&format!("{name}.text")).ok_or("no caption table")?;
+        let (mut x, mut rows, mut stretches, mut phrasings) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut first_row = 0i64;
+        for (i, (features, captioned)) in sequences.sequences().enumerate() {
+            let frames = features.dim(0)? as i64;
+            rows.extend([first_row, frames]);
+            for (start, ids) in captioned {
+                stretches.extend([i as i64, *start as i64, phrasings.len() as i64, ids.len() as i64]);
+                phrasings.extend(ids.iter().map(|&id| i64::from(id)));
+            }
+            x.push(features.clone());
+            first_row += frames;
+        }
+        let (n, m, p) = (rows.len() / 2, stretches.len() / 4, phrasings.len());
+        tensors.push((format!("{name}.x"), Tensor::cat(&x, 0)?));
+        tensors.push((format!("{name}.sequences"), Tensor::from_vec(rows, (n, 2), &Device::Cpu)?));
+        tensors.push((format!("{name}.stretches"), Tensor::from_vec(stretches, (m, 4), &Device::Cpu)?));
+        tensors.push((format!("{name}.phrasings"), Tensor::from_vec(phrasings, p, &Device::Cpu)?));
+        tensors.push((format!("{name}.text"), text.clone()));
+        println!("{name}: {n} sequences, {first_row} frames, {m} captioned stretches, {} captions", stored.len());
+    }
+    // Every tensor is stored as f32 (the indices too: exact below 2^24 rows), with the rest
+    // skeleton of the corpus (the prior's) in the header.
+    let rest = RestSkeleton { bone_lengths_m: rest_bone_lengths() };
+    let metadata = HashMap::from([("rest_skeleton".to_owned(), serde_json::to_string(&rest)?)]);
+    motion_core::tensor_file::write_safetensors(Path::new(out), &tensors, metadata)?;
+    Ok(())
+}
+
+fn database(db_path: &str, out: &str) -> Result<(), Box<dyn Error>> {
     let db = MotionDatabase::load(Path::new(db_path))?;
     let dev = Device::Cpu;
     let labels = db.labels();

@@ -35,7 +35,7 @@ pub mod render;
 pub mod representation;
 pub mod rgdno;
 pub mod skeleton;
-mod tensor_file;
+pub mod tensor_file;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 pub mod text;

@@ -7,7 +7,7 @@ use candle_core::{DType, Tensor};
 
 /// Writes `tensors` (converted to f32 on the CPU) with header `metadata` to `path` atomically,
 /// creating the parent folder. Errors are messages; callers add the path and their context.
-pub(crate) fn write_safetensors(
+pub fn write_safetensors(
     path: &Path,
     tensors: &[(String, Tensor)],
     metadata: HashMap<String, String>,
@@ -37,7 +37,7 @@ pub(crate) fn write_safetensors(
 
 /// The string metadata of a safetensors file's header (empty when it has none). Errors are
 /// messages; callers add the path.
-pub(crate) fn read_metadata(bytes: &[u8]) -> Result<HashMap<String, String>, String> {
+pub fn read_metadata(bytes: &[u8]) -> Result<HashMap<String, String>, String> {
     let (_, meta) =
         safetensors::SafeTensors::read_metadata(bytes).map_err(|e| format!("not a safetensors file: {e}"))?;
     Ok(meta.metadata().clone().unwrap_or_default())

@@ -126,70 +126,9 @@ impl TrainingSet {
         encoder: ConditionEncoder,
         mean_std: Option<&MeanStd>,
         device: &Device,
-        mut progress: impl FnMut(usize, usize),
+        progress: impl FnMut(usize, usize),
     ) -> Result<Self, TrainError> {
-        let mut windows_of: Vec<Vec<usize>> = vec![Vec::new(); corpus.clips.len()];
-        for (i, w) in corpus.windows.iter().enumerate() {
-            windows_of[w.clip].push(i);
-        }
-        let mut rows: BTreeMap<String, u32> = BTreeMap::new();
-        // Each copy's feature frames and captioned stretches.
-        let mut raw: Vec<(Vec<FeatureFrame>, Captions)> = Vec::new();
-        for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == split) {
-            let poses = corpus.clip_joints(clip);
-            for mirrored in [false, true] {
-                let poses = if mirrored { mirror(poses) } else { poses.to_vec() };
-                let extracted = extract_features(&poses)
-                    .map_err(|e| TrainError::Data(format!("corpus clip {}: {e}", clip.name)))?;
-                let mut captions = Vec::new();
-                for &w in &windows_of[index] {
-                    let window = &corpus.windows[w];
-                    let ids = window
-                        .captions
-                        .iter()
-                        .map(|c| {
-                            let caption = if mirrored { mirror_label(c) } else { c.clone() };
-                            let next = rows.len() as u32;
-                            *rows.entry(caption).or_insert(next)
-                        })
-                        .collect();
-                    captions.push((window.start, ids));
-                }
-                captions.sort_by_key(|(start, _)| *start);
-                if let Some(first) = captions.first_mut() {
-                    first.0 = 0;
-                    raw.push((extracted.features, captions));
-                }
-            }
-        }
-        if raw.is_empty() {
-            return Err(TrainError::Data(format!("the corpus has no {} clip", split.name())));
-        }
-        let mean_std = match mean_std {
-            Some(m) => m.to_device(device)?,
-            None => MeanStd::from_frames(raw.iter().flat_map(|(f, _)| f))
-                .map_err(|e| TrainError::Data(e.to_string()))?
-                .to_device(device)?,
-        };
-        let frames: usize = raw.iter().map(|(f, _)| f.len()).sum();
-        let mut sequences = Vec::with_capacity(raw.len());
-        for (features, captions) in raw {
-            let n = features.len();
-            let flat: Vec<f32> = features.into_iter().flatten().collect();
-            let features = mean_std.normalize(&Tensor::from_vec(flat, (n, FEATURE_DIM), device)?)?;
-            sequences.push(Sequence { features, captions, group: 0 });
-        }
-        let mut texts: Vec<(u32, String)> = rows.into_iter().map(|(caption, row)| (row, caption)).collect();
-        texts.sort_by_key(|(row, _)| *row);
-        let mut encoded = Vec::with_capacity(texts.len().div_ceil(ENCODE_BATCH));
-        for (k, chunk) in texts.chunks(ENCODE_BATCH).enumerate() {
-            progress(k * ENCODE_BATCH, texts.len());
-            encoded.push(encoder.encode(&chunk.iter().map(|(_, c)| c.as_str()).collect::<Vec<_>>(), device)?);
-        }
-        progress(texts.len(), texts.len());
-        let text = Tensor::cat(&encoded, 0)?;
-        let rest = Some(RestSkeleton { bone_lengths_m: rest_bone_lengths() });
-        Self::assemble(sequences, text, encoder, mean_std, rest, false, frames as f64 / crate::skeleton::FPS)
+        CaptionedSequences::from_corpus(corpus, split, mean_std, device)?.encode(encoder, progress)
     }
 
     fn assemble(
@@ -294,6 +233,123 @@ impl TrainingSet {
         }
         let ids = Tensor::from_vec(rows, config.batch_size, self.text.device())?;
         Ok(Batch { x0: Tensor::stack(&crops, 0)?, text: self.text.index_select(&ids, 0)? })
+    }
+}
+
+/// A corpus split ready to train on before its captions are encoded: every clip and its
+/// mirrored copy as normalised features, each window's phrasings as rows of a caption table.
+/// [`CaptionedSequences::encode`] makes the [`TrainingSet`]; the arrays are also what the
+/// PyTorch mirror of the trainer reads (`motion-core/examples/export_training_set.rs`), with the
+/// captions encoded where the sentence encoder is.
+#[derive(Debug, Clone)]
+pub struct CaptionedSequences {
+    sequences: Vec<Sequence>,
+    /// The distinct captions, in row order.
+    captions: Vec<String>,
+    mean_std: MeanStd,
+    /// Seconds of motion, mirrored copies included.
+    seconds: f64,
+}
+
+impl CaptionedSequences {
+    /// The clips of `split` and their mirrored copies, normalised with `mean_std` or, when
+    /// `None`, with the statistics of these clips.
+    pub fn from_corpus(
+        corpus: &Corpus,
+        split: Split,
+        mean_std: Option<&MeanStd>,
+        device: &Device,
+    ) -> Result<Self, TrainError> {
+        let mut windows_of: Vec<Vec<usize>> = vec![Vec::new(); corpus.clips.len()];
+        for (i, w) in corpus.windows.iter().enumerate() {
+            windows_of[w.clip].push(i);
+        }
+        let mut rows: BTreeMap<String, u32> = BTreeMap::new();
+        // Each copy's feature frames and captioned stretches.
+        let mut raw: Vec<(Vec<FeatureFrame>, Captions)> = Vec::new();
+        for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == split) {
+            let poses = corpus.clip_joints(clip);
+            for mirrored in [false, true] {
+                let poses = if mirrored { mirror(poses) } else { poses.to_vec() };
+                let extracted = extract_features(&poses)
+                    .map_err(|e| TrainError::Data(format!("corpus clip {}: {e}", clip.name)))?;
+                let mut captions = Vec::new();
+                for &w in &windows_of[index] {
+                    let window = &corpus.windows[w];
+                    let ids = window
+                        .captions
+                        .iter()
+                        .map(|c| {
+                            let caption = if mirrored { mirror_label(c) } else { c.clone() };
+                            let next = rows.len() as u32;
+                            *rows.entry(caption).or_insert(next)
+                        })
+                        .collect();
+                    captions.push((window.start, ids));
+                }
+                captions.sort_by_key(|(start, _)| *start);
+                if let Some(first) = captions.first_mut() {
+                    first.0 = 0;
+                    raw.push((extracted.features, captions));
+                }
+            }
+        }
+        if raw.is_empty() {
+            return Err(TrainError::Data(format!("the corpus has no {} clip", split.name())));
+        }
+        let mean_std = match mean_std {
+            Some(m) => m.to_device(device)?,
+            None => MeanStd::from_frames(raw.iter().flat_map(|(f, _)| f))
+                .map_err(|e| TrainError::Data(e.to_string()))?
+                .to_device(device)?,
+        };
+        let frames: usize = raw.iter().map(|(f, _)| f.len()).sum();
+        let mut sequences = Vec::with_capacity(raw.len());
+        for (features, captions) in raw {
+            let n = features.len();
+            let flat: Vec<f32> = features.into_iter().flatten().collect();
+            let features = mean_std.normalize(&Tensor::from_vec(flat, (n, FEATURE_DIM), device)?)?;
+            sequences.push(Sequence { features, captions, group: 0 });
+        }
+        let mut texts: Vec<(u32, String)> = rows.into_iter().map(|(caption, row)| (row, caption)).collect();
+        texts.sort_by_key(|(row, _)| *row);
+        let captions = texts.into_iter().map(|(_, caption)| caption).collect();
+        Ok(Self { sequences, captions, mean_std, seconds: frames as f64 / crate::skeleton::FPS })
+    }
+
+    /// The distinct captions, in the row order of the caption table.
+    pub fn captions(&self) -> &[String] {
+        &self.captions
+    }
+
+    /// Normalisation statistics of the features.
+    pub fn mean_std(&self) -> &MeanStd {
+        &self.mean_std
+    }
+
+    /// Each sequence: its normalised features `[frames, 263]` and its captioned stretches
+    /// (first frame, the caption rows of its phrasings), by first frame, the first at frame 0.
+    pub fn sequences(&self) -> impl Iterator<Item = (&Tensor, &[(usize, Vec<u32>)])> {
+        self.sequences.iter().map(|s| (&s.features, s.captions.as_slice()))
+    }
+
+    /// The training set: the captions encoded by `encoder` (`progress(done, total)` follows
+    /// it), the corpus's rest skeleton, batches drawn uniformly over all crops.
+    pub fn encode(
+        self,
+        encoder: ConditionEncoder,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<TrainingSet, TrainError> {
+        let device = self.mean_std.mean().device().clone();
+        let mut encoded = Vec::with_capacity(self.captions.len().div_ceil(ENCODE_BATCH));
+        for (k, chunk) in self.captions.chunks(ENCODE_BATCH).enumerate() {
+            progress(k * ENCODE_BATCH, self.captions.len());
+            encoded.push(encoder.encode(&chunk.iter().map(String::as_str).collect::<Vec<_>>(), &device)?);
+        }
+        progress(self.captions.len(), self.captions.len());
+        let text = Tensor::cat(&encoded, 0)?;
+        let rest = Some(RestSkeleton { bone_lengths_m: rest_bone_lengths() });
+        TrainingSet::assemble(self.sequences, text, encoder, self.mean_std, rest, false, self.seconds)
     }
 }
 

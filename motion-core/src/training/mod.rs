@@ -7,7 +7,7 @@ mod batches;
 mod checkpoint;
 mod geometric;
 
-pub use batches::{Batch, TrainingSet};
+pub use batches::{Batch, CaptionedSequences, TrainingSet};
 pub use checkpoint::TrainState;
 pub use geometric::{GeometricLoss, GeometricTerms, CONTACT_SPEED_M_PER_S};
 
