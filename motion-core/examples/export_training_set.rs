@@ -48,8 +48,7 @@ fn main() -> Result<(), Box<dyn Error>> {
 fn splits(corpus: &str) -> Result<Vec<CaptionedSequences>, Box<dyn Error>> {
     let corpus = corpus_file::load(Path::new(corpus))?;
     let train = CaptionedSequences::from_corpus(&corpus, Split::Train, None, &Device::Cpu)?;
-    let validation =
-        CaptionedSequences::from_corpus(&corpus, Split::Validation, Some(train.mean_std()), &Device::Cpu)?;
+    let validation = CaptionedSequences::from_corpus(&corpus, Split::Validation, Some(train.mean_std()), &Device::Cpu)?;
     Ok(vec![train, validation])
 }
 

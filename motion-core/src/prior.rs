@@ -301,9 +301,32 @@ impl Prior {
 }
 
 #[cfg(test)]
+impl Prior {
+    /// An untrained one-layer prior (width 16) that hears the words of `labels`: normalisation
+    /// mean 0 and std 0.1, the velocity decode, no rest skeleton. For tests.
+    pub(crate) fn tiny(labels: &[&str]) -> Self {
+        let encoder = crate::text::vocabulary::VocabularyEncoder::from_labels(labels.iter().copied());
+        let cfg = MdmConfig {
+            latent_dim: 16,
+            ff_size: 32,
+            num_layers: 1,
+            num_heads: 2,
+            text_dim: encoder.words().len(),
+            ..MdmConfig::small()
+        };
+        Self {
+            mdm: Mdm::random(cfg, DType::F32, &Device::Cpu, 1).unwrap(),
+            encoder: ConditionEncoder::Vocabulary(encoder),
+            mean_std: MeanStd::from_vecs(vec![0.0; 263], vec![0.1; 263], &Device::Cpu).unwrap(),
+            root_decode: RootDecode::Velocity,
+            rest: None,
+        }
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
-    use crate::text::vocabulary::VocabularyEncoder;
 
     #[test]
     fn root_decode_names_round_trip() {
@@ -315,25 +338,11 @@ mod tests {
 
     #[test]
     fn saves_and_loads_with_metadata_and_names_missing_parts() {
-        let encoder = VocabularyEncoder::from_labels(["a person walks", "a person runs"]);
-        let cfg = MdmConfig {
-            latent_dim: 16,
-            ff_size: 32,
-            num_layers: 1,
-            num_heads: 2,
-            text_dim: encoder.words().len(),
-            ..MdmConfig::small()
-        };
-        let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
-        let mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
-        let rest = RestSkeleton::of_pose(&crate::skeleton::rest_pose());
-        let prior = Prior {
-            mdm,
-            encoder: ConditionEncoder::Vocabulary(encoder.clone()),
-            mean_std,
-            root_decode: RootDecode::PlantedFeet,
-            rest: Some(rest),
-        };
+        let mut prior = Prior::tiny(&["a person walks", "a person runs"]);
+        prior.mean_std = MeanStd::from_vecs(vec![0.1; 263], vec![2.0; 263], &Device::Cpu).unwrap();
+        prior.root_decode = RootDecode::PlantedFeet;
+        prior.rest = Some(RestSkeleton::of_pose(&crate::skeleton::rest_pose()));
+        let ConditionEncoder::Vocabulary(encoder) = prior.encoder.clone() else { unreachable!() };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("prior.safetensors");
         prior.save(&path).unwrap();
@@ -343,7 +352,7 @@ mod tests {
         assert_eq!(back.mdm.config(), prior.mdm.config());
         assert_eq!(back.mean_std.std().to_vec1::<f32>().unwrap()[5], 2.0);
         assert_eq!(back.root_decode, RootDecode::Velocity, "the default decode");
-        assert_eq!(back.rest, Some(rest));
+        assert_eq!(back.rest, prior.rest);
 
         // A weight made NaN (a damaged file): refused at load, naming the tensor.
         let mut named = prior.mdm.named_parameters().to_vec();

@@ -410,7 +410,7 @@ pub fn family_report(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::quality::test_fixtures::{corpus_of, moving, tiny_prior};
+    use crate::quality::test_fixtures::{corpus_of, moving};
     use glam::DVec3;
 
     #[test]
@@ -448,7 +448,7 @@ mod tests {
         let tags = MotionTags::measure(&walk);
         assert!(Family::Walk.holds(&walk, &tags, "walk"), "{tags:?}");
         let corpus = corpus_of(vec![(Split::Train, walk.clone(), "walk"), (Split::Test, walk, "walk")]);
-        let prior = tiny_prior(&["a person walks forward"]);
+        let prior = Prior::tiny(&["a person walks forward"]);
         let config = FamilyConfig {
             samples: 3,
             frames: 40,

@@ -1,17 +1,11 @@
-//! What the report tests share: bodies that glide at a set velocity, a corpus of such windows,
-//! and a tiny untrained prior.
+//! What the report tests share: bodies that glide at a set velocity and a corpus of such
+//! windows (the tiny untrained prior is `Prior::tiny`).
 
-use candle_core::Device;
 use glam::DVec3;
 
 use crate::corpus::tags::MotionTags;
 use crate::corpus::{Corpus, CorpusClip, CorpusWindow, Source, Split};
-use crate::model::{Mdm, MdmConfig};
-use crate::prior::{Prior, RootDecode};
-use crate::representation::{MeanStd, FEATURE_DIM};
 use crate::skeleton::{rest_pose, Pose, FPS};
-use crate::text::vocabulary::VocabularyEncoder;
-use crate::text::ConditionEncoder;
 
 /// The rest pose lowered by `drop` m (knees not bent: enough for the pelvis measures) and
 /// moved by `velocity` m/s, for `frames` frames.
@@ -51,24 +45,4 @@ pub(super) fn corpus_of(clips: Vec<(Split, Vec<Pose>, &str)>) -> Corpus {
         corpus.joints.extend(poses);
     }
     corpus
-}
-
-/// An untrained one-layer prior (width 16) that hears the words of `labels`.
-pub(super) fn tiny_prior(labels: &[&str]) -> Prior {
-    let encoder = VocabularyEncoder::from_labels(labels.iter().copied());
-    let cfg = MdmConfig {
-        latent_dim: 16,
-        ff_size: 32,
-        num_layers: 1,
-        num_heads: 2,
-        text_dim: encoder.words().len(),
-        ..MdmConfig::small()
-    };
-    Prior {
-        mdm: Mdm::random(cfg, candle_core::DType::F32, &Device::Cpu, 1).unwrap(),
-        encoder: ConditionEncoder::Vocabulary(encoder),
-        mean_std: MeanStd::from_vecs(vec![0.0; FEATURE_DIM], vec![0.1; FEATURE_DIM], &Device::Cpu).unwrap(),
-        root_decode: RootDecode::Velocity,
-        rest: None,
-    }
 }

@@ -223,7 +223,7 @@ mod tests {
 
     use super::*;
     use crate::evaluator::EvaluatorConfig;
-    use crate::quality::test_fixtures::{corpus_of, moving, tiny_prior};
+    use crate::quality::test_fixtures::{corpus_of, moving};
     use crate::representation::MeanStd;
     use crate::text::MINILM_NAME;
 
@@ -249,7 +249,7 @@ mod tests {
                 .collect(),
         );
         let device = Device::Cpu;
-        let prior = tiny_prior(&["a person walks forward", "a person stands still"]);
+        let prior = Prior::tiny(&["a person walks forward", "a person stands still"]);
         let mean_std = MeanStd::from_vecs(vec![0.0; FEATURE_DIM], vec![1.0; FEATURE_DIM], &device).unwrap();
         let evaluator =
             Evaluator::init_seeded(EvaluatorConfig::default(), mean_std, &VarMap::new(), &device, 3).unwrap();
