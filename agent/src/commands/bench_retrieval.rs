@@ -4,16 +4,13 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Context;
 use clap::Args;
-use motion_core::constraints::CompiledProgram;
 use motion_core::rgdno::candidates::Crop;
-use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalQuery};
+use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig};
 use serde::Serialize;
 
 use super::bench::{median, peak_rss_mib};
-use super::load::load_program;
-use super::run::retrieval_source;
+use super::retrieve::RetrievalTask;
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -59,36 +56,23 @@ struct Figures {
 }
 
 pub fn run(args: BenchRetrievalArgs) -> anyhow::Result<()> {
-    let program = load_program(&args.program)?;
-    let groups = program
-        .constraint_groups()
-        .with_context(|| format!("{} has no relational parse: nothing to retrieve for", args.program.display()))?;
-    let most_difficult = program.relational_parse.as_ref().map(|p| p.most_difficult.clone()).unwrap_or_default();
     let device = candle_core::Device::Cpu;
-    let compiled = CompiledProgram::compile(&program, &device)?.subset(&groups.retrieval);
-    let source = retrieval_source(args.database.as_deref());
-    let clock = Instant::now();
-    let (database, _) = source.open().with_context(|| format!("opening {source}"))?;
-    let open_s = clock.elapsed().as_secs_f64();
+    let task = RetrievalTask::open(&args.program, args.database.as_deref(), &device)?;
+    let RetrievalTask { database, source, compiled, open_s, .. } = &task;
     let config = RetrievalConfig::default();
-    let query = RetrievalQuery {
-        program: &compiled,
-        most_difficult: &most_difficult,
-        prompt: &program.text,
-        counting: !compiled.count_targets().is_empty(),
-    };
-    let first = retrieve(&database, &query, &config, &device)?;
+    let query = task.query();
+    let first = retrieve(database, &query, &config, &device)?;
     let mut times = Vec::with_capacity(args.reps);
     for _ in 0..args.reps {
         let clock = Instant::now();
-        retrieve(&database, &query, &config, &device)?;
+        retrieve(database, &query, &config, &device)?;
         times.push(clock.elapsed().as_secs_f64());
     }
     let figures = Figures {
         database: source.to_string(),
         clips: database.clips(),
         hours: database.seconds() / 3600.0,
-        open_s,
+        open_s: *open_s,
         bytes_held: database.bytes(),
         frames: compiled.frames(),
         candidates: first.candidates,
@@ -118,7 +102,7 @@ pub fn run(args: BenchRetrievalArgs) -> anyhow::Result<()> {
         "{} ({} frames, C_R = {:?}): {} candidate crops ({:.1} MB of index per query), {} after the semantic check",
         args.program.display(),
         figures.frames,
-        groups.retrieval,
+        task.retrieval,
         figures.candidates,
         mb(figures.candidate_bytes),
         figures.consistent

@@ -1,11 +1,14 @@
 //! `mogen retrieve`: RG-DNO's constraint-based retrieval for a program, on its own.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use candle_core::Device;
 use clap::Args;
 use motion_core::constraints::CompiledProgram;
+use motion_core::program::TaskProgram;
+use motion_core::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
 use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalQuery, Retrieved};
 
 use super::load::load_program;
@@ -31,31 +34,65 @@ pub struct RetrieveArgs {
     per_clip: bool,
 }
 
+/// What a retrieval command works on: the program, its retrieval group C_R compiled, its most
+/// difficult constraint c_D, and the retrieval database opened (with the seconds that took).
+pub struct RetrievalTask {
+    /// The program.
+    pub program: TaskProgram,
+    /// C_R's constraint ids.
+    pub retrieval: Vec<String>,
+    /// C_R compiled.
+    pub compiled: CompiledProgram,
+    /// c_D's id.
+    pub most_difficult: String,
+    /// Where the database came from.
+    pub source: RetrievalSource,
+    /// The database.
+    pub database: RetrievalDatabase,
+    /// Seconds opening the database took.
+    pub open_s: f64,
+}
+
+impl RetrievalTask {
+    /// Reads the program at `program` (it needs a relational parse) and opens `database` (the
+    /// shipped corpus's train split when `None`).
+    pub fn open(program: &Path, database: Option<&Path>, device: &Device) -> anyhow::Result<Self> {
+        let task = load_program(program)?;
+        let groups = task
+            .constraint_groups()
+            .with_context(|| format!("{} has no relational parse: nothing to retrieve for", program.display()))?;
+        let most_difficult = task.relational_parse.as_ref().map(|p| p.most_difficult.clone()).unwrap_or_default();
+        let compiled = CompiledProgram::compile(&task, device)?.subset(&groups.retrieval);
+        let source = retrieval_source(database);
+        let clock = std::time::Instant::now();
+        let (database, _) = source.open().with_context(|| format!("opening {source}"))?;
+        let open_s = clock.elapsed().as_secs_f64();
+        Ok(Self { program: task, retrieval: groups.retrieval, compiled, most_difficult, source, database, open_s })
+    }
+
+    /// The retrieval query of the task.
+    pub fn query(&self) -> RetrievalQuery<'_> {
+        RetrievalQuery {
+            program: &self.compiled,
+            most_difficult: &self.most_difficult,
+            prompt: &self.program.text,
+            counting: !self.compiled.count_targets().is_empty(),
+        }
+    }
+}
+
 pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
-    let program = load_program(&args.program)?;
-    let groups = program
-        .constraint_groups()
-        .with_context(|| format!("{} has no relational parse: nothing to retrieve for", args.program.display()))?;
-    let most_difficult = program.relational_parse.as_ref().map(|p| p.most_difficult.clone()).unwrap_or_default();
-    let device = candle_core::Device::Cpu;
-    let compiled = CompiledProgram::compile(&program, &device)?.subset(&groups.retrieval);
-    let source = retrieval_source(args.database.as_deref());
-    let clock = std::time::Instant::now();
-    let (database, _) = source.open().with_context(|| format!("opening {source}"))?;
-    let opened = clock.elapsed().as_secs_f64();
+    let device = Device::Cpu;
+    let task = RetrievalTask::open(&args.program, args.database.as_deref(), &device)?;
+    let RetrievalTask { database, source, most_difficult, open_s: opened, .. } = &task;
     let config = RetrievalConfig { related_weight: args.related_weight, top_k: args.top, ..RetrievalConfig::default() };
-    let query = RetrievalQuery {
-        program: &compiled,
-        most_difficult: &most_difficult,
-        prompt: &program.text,
-        counting: !compiled.count_targets().is_empty(),
-    };
+    let query = task.query();
     let clock = std::time::Instant::now();
-    let found = retrieve(&database, &query, &config, &device)?;
+    let found = retrieve(database, &query, &config, &device)?;
     println!(
         "C_R = {:?} (c_D = {most_difficult}, others weighted {}); {source}: {} clips, {} candidates, {} after the \
          semantic check; opened in {opened:.1} s, scored in {:.2} s",
-        groups.retrieval,
+        task.retrieval,
         config.related_weight,
         database.clips(),
         found.candidates,
@@ -73,7 +110,7 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     if args.per_clip {
         let shortlist = RetrievalConfig { top_k: config.exact_shortlist, ..config };
         let mut per_clip = BTreeMap::new();
-        for r in retrieve(&database, &query, &shortlist, &device)?.retrieved {
+        for r in retrieve(database, &query, &shortlist, &device)?.retrieved {
             per_clip.entry(r.source.clip.clone()).or_insert(r);
         }
         println!("best of each clip in the shortlist:");
