@@ -15,7 +15,7 @@ use motion_core::quality::families::{family_report, Family, FamilyConfig};
 use motion_core::quality::text_motion::{
     text_motion_report, TextMotionConfig, TextMotionReport, CLEANED, HELD_OUT, SAMPLES, TRAIN,
 };
-use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, QualityConfig};
+use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, QualityConfig, ReportSampling};
 use motion_core::render::{motion_strip, StripRow};
 
 use crate::paths;
@@ -39,16 +39,16 @@ pub struct ReportArgs {
     #[arg(long = "family", value_parser = family_by_name)]
     families: Vec<Family>,
     /// Samples per label (per family with the corpus).
-    #[arg(long, default_value_t = QualityConfig::default().samples_per_label)]
+    #[arg(long, default_value_t = ReportSampling::default().samples)]
     samples: usize,
     /// Frames per sample.
-    #[arg(long, default_value_t = QualityConfig::default().frames)]
+    #[arg(long, default_value_t = ReportSampling::default().frames)]
     frames: usize,
     /// DDIM steps.
-    #[arg(long, default_value_t = QualityConfig::default().ddim_steps)]
+    #[arg(long, default_value_t = ReportSampling::default().ddim_steps)]
     steps: usize,
     /// Classifier-free guidance scale (1 = conditional model alone).
-    #[arg(long, default_value_t = QualityConfig::default().guidance, value_parser = super::flags::guidance)]
+    #[arg(long, default_value_t = ReportSampling::default().guidance, value_parser = super::flags::guidance)]
     guidance: f64,
     /// Only this label (repeatable; all labels when absent), e.g. "a person walks forward".
     #[arg(long = "label")]
@@ -89,6 +89,22 @@ pub struct ReportArgs {
     out: PathBuf,
 }
 
+/// The motion-metric columns of both reports' tables, in [`metric_cells`]' order.
+const METRIC_COLUMNS: &str = "steps/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | bone range (m) | deepest joint under floor (m) | lower toe y (m) | airborne | turn ° (left / right) | spikes | head y (m) | travel (m)";
+
+impl ReportArgs {
+    /// The sampling settings of the flags.
+    fn sampling(&self) -> ReportSampling {
+        ReportSampling {
+            samples: self.samples,
+            frames: self.frames,
+            ddim_steps: self.steps,
+            guidance: self.guidance,
+            seed: self.seed,
+        }
+    }
+}
+
 /// A family by its [`Family::name`].
 fn family_by_name(name: &str) -> Result<Family, String> {
     Family::ALL.into_iter().find(|f| f.name() == name).ok_or_else(|| {
@@ -106,15 +122,8 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     };
     let db = MotionDatabase::load(database)
         .with_context(|| format!("reading {} (build it with `mogen data build`)", database.display()))?;
-    let config = QualityConfig {
-        samples_per_label: args.samples,
-        frames: args.frames,
-        ddim_steps: args.steps,
-        guidance: args.guidance,
-        seed: args.seed,
-        labels: args.labels,
-    };
-    let metric_columns = "steps/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | bone range (m) | deepest joint under floor (m) | lower toe y (m) | airborne | turn ° (left / right) | spikes | head y (m) | travel (m)";
+    let config = QualityConfig { sampling: args.sampling(), labels: args.labels };
+    let metric_columns = METRIC_COLUMNS;
     let header = format!("| label | {metric_columns} | nearest train (m) | data spacing (m) | diversity (m) |");
     let decode = format!(
         "Root decode: `{}` (samples and training data alike). Each cell: generated / training data. The samples as the network made them, before the foot clean-up:",
@@ -247,18 +256,10 @@ fn run_families(
 ) -> anyhow::Result<()> {
     let corpus =
         corpus_file::load(&args.corpus).with_context(|| format!("reading the corpus {}", args.corpus.display()))?;
-    let config = FamilyConfig {
-        samples: args.samples,
-        frames: args.frames,
-        ddim_steps: args.steps,
-        guidance: args.guidance,
-        seed: args.seed,
-        families: args.families.clone(),
-        ..FamilyConfig::default()
-    };
+    let config = FamilyConfig { sampling: args.sampling(), families: args.families.clone(), ..FamilyConfig::default() };
     let strips = args.out.join("families");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
-    let metric_columns = "steps/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | bone range (m) | deepest joint under floor (m) | lower toe y (m) | airborne | turn ° (left / right) | spikes | head y (m) | travel (m)";
+    let metric_columns = METRIC_COLUMNS;
     let intro = format!(
         "Prior `{}` against the held-out (test-split) windows of `{}`, root decode `{}`, {} samples per family ({} frames, {} DDIM steps, guidance {}). Each metric cell: samples / held-out capture; the detector cell: share of samples, cleaned samples and held-out windows passing it.",
         args.prior.display(),

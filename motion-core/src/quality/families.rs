@@ -23,7 +23,7 @@
 use candle_core::{DType, Device, Tensor};
 use serde::Serialize;
 
-use super::{descriptors, mean_pairwise, nearest_distances};
+use super::{descriptors, mean_pairwise, nearest_distances, ReportSampling};
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::corpus::caption::Action;
 use crate::corpus::skill::Skill;
@@ -208,16 +208,9 @@ fn detected_share(family: Family, motions: &[Vec<Pose>]) -> Option<f64> {
 /// Settings of [`family_report`].
 #[derive(Debug, Clone)]
 pub struct FamilyConfig {
-    /// Samples per family, split evenly between its prompts (default 32).
-    pub samples: usize,
-    /// Frames per sample (default 120: a corpus window).
-    pub frames: usize,
-    /// DDIM steps (default 50).
-    pub ddim_steps: usize,
-    /// Guidance scale (default 2.5).
-    pub guidance: f64,
-    /// Seed of the first family's noise; family i uses seed + 100·i (+ the prompt's index).
-    pub seed: u64,
+    /// The samples per family, split evenly between its prompts; family i's noise from
+    /// seed + 100·i (+ the prompt's index).
+    pub sampling: ReportSampling,
     /// Held-out windows per family, at most (default 64), the first in corpus order.
     pub max_held_out: usize,
     /// Only these families (all when empty).
@@ -226,15 +219,7 @@ pub struct FamilyConfig {
 
 impl Default for FamilyConfig {
     fn default() -> Self {
-        Self {
-            samples: 32,
-            frames: 120,
-            ddim_steps: 50,
-            guidance: Guidance::MDM_SCALE,
-            seed: 0,
-            max_held_out: 64,
-            families: Vec::new(),
-        }
+        Self { sampling: ReportSampling::default(), max_held_out: 64, families: Vec::new() }
     }
 }
 
@@ -318,7 +303,8 @@ pub fn family_report(
     let families = if config.families.is_empty() { Family::ALL.to_vec() } else { config.families.clone() };
     // Descriptors compare the first frames that every motion has: samples have
     // `config.frames`, windows one frame fewer than their poses.
-    let compared = config.frames.min(crate::corpus::WINDOW_FRAMES - 1);
+    let sampling = config.sampling;
+    let compared = sampling.frames.min(crate::corpus::WINDOW_FRAMES - 1);
     // Each training window's descriptor as it is read (its features would take 1 GB at once).
     let descriptor_row = |f: Tensor| -> candle_core::Result<Option<Tensor>> {
         if f.dims()[0] < compared {
@@ -339,17 +325,17 @@ pub fn family_report(
         let mut samples = Vec::new();
         let mut sample_features = Vec::new();
         for (k, prompt) in prompts.iter().enumerate() {
-            let batch = config.samples / prompts.len() + usize::from(k < config.samples % prompts.len());
+            let batch = sampling.samples / prompts.len() + usize::from(k < sampling.samples % prompts.len());
             if batch == 0 {
                 continue;
             }
             let request = Sampling {
                 prompt,
-                frames: config.frames,
+                frames: sampling.frames,
                 batch,
-                seed: config.seed + 100 * i as u64 + k as u64,
-                steps: config.ddim_steps,
-                guidance: Guidance { scale: config.guidance },
+                seed: sampling.seed + 100 * i as u64 + k as u64,
+                steps: sampling.ddim_steps,
+                guidance: Guidance { scale: sampling.guidance },
             };
             let x = prior.sample(&request, device)?;
             let raw = prior.to_features(&x).map_err(tensor)?;
@@ -450,9 +436,7 @@ mod tests {
         let corpus = corpus_of(vec![(Split::Train, walk.clone(), "walk"), (Split::Test, walk, "walk")]);
         let prior = Prior::tiny(&["a person walks forward"]);
         let config = FamilyConfig {
-            samples: 3,
-            frames: 40,
-            ddim_steps: 2,
+            sampling: ReportSampling { samples: 3, frames: 40, ddim_steps: 2, ..ReportSampling::default() },
             families: vec![Family::Walk],
             ..FamilyConfig::default()
         };

@@ -45,34 +45,34 @@ pub struct LabelQuality {
     pub sample_diversity_m: f64,
 }
 
-/// Settings of the report.
-#[derive(Debug, Clone)]
-pub struct QualityConfig {
-    /// Samples per label (default 32).
-    pub samples_per_label: usize,
-    /// Frames per sample (default 120, 6 s).
+/// How the prior's reports draw their unconstrained samples.
+#[derive(Debug, Clone, Copy)]
+pub struct ReportSampling {
+    /// Samples per label or per family (default 32).
+    pub samples: usize,
+    /// Frames per sample (default 120, 6 s: a corpus window).
     pub frames: usize,
     /// DDIM steps (default 50).
     pub ddim_steps: usize,
     /// Guidance scale (default 2.5).
     pub guidance: f64,
-    /// Seed of the first label's noise; label i uses seed + i.
+    /// Seed of the first label's or family's noise.
     pub seed: u64,
-    /// Only these labels (all of the database's when empty).
-    pub labels: Vec<String>,
 }
 
-impl Default for QualityConfig {
+impl Default for ReportSampling {
     fn default() -> Self {
-        Self {
-            samples_per_label: 32,
-            frames: 120,
-            ddim_steps: 50,
-            guidance: Guidance::MDM_SCALE,
-            seed: 0,
-            labels: Vec::new(),
-        }
+        Self { samples: 32, frames: 120, ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0 }
     }
+}
+
+/// Settings of the per-label report.
+#[derive(Debug, Clone, Default)]
+pub struct QualityConfig {
+    /// The samples (label i's noise from seed + i).
+    pub sampling: ReportSampling,
+    /// Only these labels (all of the database's when empty).
+    pub labels: Vec<String>,
 }
 
 /// Joint positions of normalised features `[batch, frames, 263]` as per-sample pose lists.
@@ -90,7 +90,7 @@ pub fn quality_report(
     mut on_label: impl FnMut(&LabelQuality),
 ) -> Result<Vec<LabelQuality>, PriorError> {
     let fail = |e: candle_core::Error| PriorError::Compute { what: "the quality report", message: e.to_string() };
-    let t = config.frames;
+    let t = config.sampling.frames;
     // Every training window long enough, cropped to its first `t` frames.
     let crops: Vec<(usize, String, Tensor)> = db
         .windows()
@@ -114,10 +114,10 @@ pub fn quality_report(
         let request = Sampling {
             prompt: label,
             frames: t,
-            batch: config.samples_per_label,
-            seed: config.seed + i as u64,
-            steps: config.ddim_steps,
-            guidance: Guidance { scale: config.guidance },
+            batch: config.sampling.samples,
+            seed: config.sampling.seed + i as u64,
+            steps: config.sampling.ddim_steps,
+            guidance: Guidance { scale: config.sampling.guidance },
         };
         let x = prior.sample(&request, device)?;
         let raw = prior.to_features(&x).map_err(fail)?;
