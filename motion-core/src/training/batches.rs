@@ -438,6 +438,21 @@ pub(super) mod tests {
         assert!(err.to_string().contains("no validation clip"), "{err}");
     }
 
+    /// What the PyTorch mirror reads: the caption table encoded elsewhere, row by row in the
+    /// order of `captions()`, is the training set's table; the sequences are its sequences.
+    #[test]
+    fn captioned_sequences_are_the_training_set_before_encoding() {
+        let corpus = two_clip_corpus([Split::Train, Split::Test]);
+        let sequences = CaptionedSequences::from_corpus(&corpus, Split::Train, None, &Device::Cpu).unwrap();
+        let captions: Vec<&str> = sequences.captions().iter().map(String::as_str).collect();
+        assert!(captions.iter().any(|c| c.contains("right")) && captions.iter().any(|c| c.contains("left")));
+        let table = vocabulary().encode(&captions, &Device::Cpu).unwrap();
+        let stretches: Vec<usize> = sequences.sequences().map(|(_, s)| s.len()).collect();
+        let set = sequences.encode(vocabulary(), |_, _| {}).unwrap();
+        assert_eq!(table.to_vec2::<f32>().unwrap(), set.text.to_vec2::<f32>().unwrap());
+        assert_eq!(stretches, set.sequences.iter().map(|s| s.captions.len()).collect::<Vec<_>>());
+    }
+
     #[test]
     fn batches_have_one_crop_length_and_encoded_captions() {
         let corpus = two_clip_corpus([Split::Train, Split::Train]);
