@@ -7,10 +7,17 @@ use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-/// What the installed binary needs: the prior, the recorded LLM replies, the task programs and
-/// the mocap catalog with its clips, and the motion corpus.
-const EMBEDDED: [&str; 5] =
-    ["model/prior.safetensors", "llm/recorded", "tasks", "mocap", "corpus/corpus.safetensors.gz"];
+/// What the installed binary needs: the prior and the sentence encoder it is conditioned on
+/// (with its licence and provenance), the recorded LLM replies, the task programs, the mocap
+/// catalog with its clips, and the motion corpus.
+const EMBEDDED: [&str; 6] = [
+    "model/prior.safetensors",
+    "text/all-MiniLM-L6-v2",
+    "llm/recorded",
+    "tasks",
+    "mocap",
+    "corpus/corpus.safetensors.gz",
+];
 
 fn files_under(path: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
     if path.is_dir() {

@@ -1,23 +1,21 @@
 //! The shipped prior (`fixtures/model/prior.safetensors`): determinism, inversion, and the
-//! quality of unconstrained walks against the training walks.
+//! quality of unconstrained walks, all against held-out capture: walking windows of the corpus's
+//! test split (subjects the prior never saw), through the same decode.
 
 // Test helpers may unwrap: a failure is the test failing.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use candle_core::{Device, Tensor};
 use e2e_tests::fixtures;
-use motion_core::cleanup::{foot_lock, FootLockConfig};
-use motion_core::database::catalog::Catalog;
+use motion_core::corpus::{file as corpus_file, Corpus, Split};
+use motion_core::database::catalog::SourceClip;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
 use motion_core::diffusion::Guidance;
+use motion_core::import::MocapClip;
 use motion_core::inversion::{invert_motion, InversionConfig};
-use motion_core::metrics::{
-    bone_length_range, foot_skate_ratio, max_acceleration, mean_acceleration, pace, root_travel, spike_frames,
-    stance_toe_height, toe_flicker,
-};
-use motion_core::motion::tensor_to_poses;
 use motion_core::prior::{Prior, Sampling};
-use motion_core::quality::{self, denoising_fidelity, joints_of};
+use motion_core::quality::families::{family_report, Family, FamilyConfig};
+use motion_core::quality::{self, denoising_fidelity, joints_of, ReportSampling};
 use motion_core::skeleton::{Joint, Pose};
 
 const WALK: &str = "a person walks forward";
@@ -26,9 +24,44 @@ fn prior() -> Prior {
     Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &Device::Cpu).unwrap()
 }
 
+fn corpus() -> Corpus {
+    corpus_file::load(&fixtures().join("corpus/corpus.safetensors.gz")).unwrap()
+}
+
+/// A held-out corpus window as a clip (20 fps, played once).
+struct Window(Vec<Pose>);
+
+impl MocapClip for Window {
+    fn duration_s(&self) -> f64 {
+        (self.0.len() - 1) as f64 / 20.0
+    }
+    fn is_cyclic(&self) -> bool {
+        false
+    }
+    fn pose_at(&self, t_s: f64) -> Pose {
+        self.0[((t_s * 20.0).round() as usize).min(self.0.len() - 1)]
+    }
+}
+
+/// The first 4 held-out walking windows (`Family::Walk`: straight forward walks of the test
+/// split), labelled `WALK`.
 fn database() -> MotionDatabase {
-    let (sources, _) = Catalog::read(&fixtures().join("mocap/catalog.json")).unwrap().load().unwrap();
-    let walks: Vec<_> = sources.into_iter().filter(|s| s.label == WALK).collect();
+    let corpus = corpus();
+    let walks: Vec<SourceClip> = corpus
+        .windows
+        .iter()
+        .filter(|w| {
+            let clip = &corpus.clips[w.clip];
+            clip.split == Split::Test && Family::Walk.holds(corpus.window_joints(w), &w.tags, &clip.description)
+        })
+        .take(4)
+        .map(|w| SourceClip {
+            name: corpus.clips[w.clip].name.clone(),
+            label: WALK.to_owned(),
+            clip: Box::new(Window(corpus.window_joints(w).to_vec())),
+        })
+        .collect();
+    assert_eq!(walks.len(), 4);
     MotionDatabase::build(&walks, &DatabaseConfig { speeds: vec![1.0], mirror: false, ..DatabaseConfig::default() })
         .unwrap()
 }
@@ -135,7 +168,7 @@ fn the_polish_starts_on_the_unit_rms_shell_and_stays_near_it() {
     }
 }
 
-fn walk_samples_and_data() -> (Vec<Vec<Pose>>, Vec<Vec<Pose>>) {
+fn walk_samples() -> Vec<Vec<Pose>> {
     let p = prior();
     let x = p
         .sample(
@@ -143,27 +176,12 @@ fn walk_samples_and_data() -> (Vec<Vec<Pose>>, Vec<Vec<Pose>>) {
             &Device::Cpu,
         )
         .unwrap();
-    let samples = joints_of(&p, &x).unwrap();
-    let db = database();
-    let crops: Vec<Tensor> = db
-        .windows()
-        .iter()
-        .filter(|w| w.frames >= 120)
-        .map(|w| db.window_tensor(w, &Device::Cpu).unwrap().narrow(0, 0, 120).unwrap())
-        .collect();
-    // The data's root goes through the same decode as the samples'.
-    let data = p.root_decode.apply(&Tensor::stack(&crops, 0).unwrap()).unwrap();
-    let data = tensor_to_poses(&p.joints_of(&data).unwrap()).unwrap();
-    (samples, data)
-}
-
-fn mean(v: &[Vec<Pose>], f: &dyn Fn(&[Pose]) -> f64) -> f64 {
-    v.iter().map(|m| f(m)).sum::<f64>() / v.len() as f64
+    joints_of(&p, &x).unwrap()
 }
 
 #[test]
 fn walks_stand_tall_and_differ_across_seeds() {
-    let (samples, _) = walk_samples_and_data();
+    let samples = walk_samples();
     for m in &samples {
         for pose in m {
             let h = pose[Joint::Head.index()].y;
@@ -176,51 +194,53 @@ fn walks_stand_tall_and_differ_across_seeds() {
     assert!(spread > 0.1, "all samples end within {spread} m of each other");
 }
 
-/// Issue 14's figures for walks, against the training walks on the same decode: the legs
-/// alternate at the data's rate (±25 %), the walk travels as far (±30 %), toes flicker and joints
-/// accelerate no more than 1.5x the data (max acceleration 2x), bones keep their lengths within
-/// 1 cm, no one-frame spikes, and the lower toe meets the floor within 2 cm of the data's.
+/// Issue 40's bars for walks, on what `mogen report prior` measures (its walk row in
+/// `fixtures/model/report.md`: 32 samples, half of them of the paraphrase "someone strolls
+/// ahead", against up to 64 held-out walking windows): GMD foot
+/// skating at most 1.5x the held-out walks' on the network's output and 1.25x after the foot
+/// clean-up; the legs alternate at the held-out rate (±25 %); toes flicker and joints accelerate
+/// at most 1.5x as much; bones keep their lengths within 1 cm; the lower toe meets the floor
+/// within 2 cm of the data's. Travel is not judged here: the held-out walking windows include slow
+/// walks and pauses (2.5 m in 6 s against the samples' 5.7 m; `fixtures/model/MODEL_CARD.md`).
 #[test]
-fn walks_alternate_legs_and_move_like_the_training_walks() {
-    let (samples, data) = walk_samples_and_data();
-    let figure = |name: &str, f: &dyn Fn(&[Pose]) -> f64| {
-        let (g, d) = (mean(&samples, f), mean(&data, f));
-        println!("{name}: samples {g:.4}, training walks {d:.4}");
-        (g, d)
-    };
-    let (pace_gen, pace_data) = figure("steps per second", &|m| pace(m).0);
-    let (travel_gen, travel_data) = figure("travel (m)", &root_travel);
-    let (flicker_gen, flicker_data) = figure("toe flicker", &toe_flicker);
-    let (acc_gen, acc_data) = figure("mean acceleration", &mean_acceleration);
-    let (max_gen, max_data) = figure("max acceleration", &max_acceleration);
-    let (toe_gen, toe_data) = figure("lower toe height (m)", &stance_toe_height);
-    let (bones, _) = figure("bone length range (m)", &bone_length_range);
-    let (spikes, _) = figure("spike frames", &|m| spike_frames(m) as f64);
-    assert!((pace_gen / pace_data - 1.0).abs() <= 0.25, "{pace_gen} steps/s against {pace_data}");
-    assert!((travel_gen / travel_data - 1.0).abs() <= 0.3, "{travel_gen} m against {travel_data} m");
-    assert!(flicker_gen <= 1.5 * flicker_data, "flicker {flicker_gen} against {flicker_data}");
+fn walks_skate_and_move_like_held_out_walks() {
+    let config = FamilyConfig { sampling: ReportSampling::default(), max_held_out: 64, families: vec![Family::Walk] };
+    let row = family_report(&prior(), &corpus(), &config, &Device::Cpu, |_, _| {}).unwrap().remove(0);
+    let (s, c, d) = (&row.samples, &row.cleaned, &row.held_out);
+    println!("samples {s:?}\ncleaned {c:?}\nheld-out {d:?}");
+    assert!(d.count >= 32, "{} held-out walks", d.count);
     assert!(
-        acc_gen <= 1.5 * acc_data && max_gen <= 2.0 * max_data,
-        "acc {acc_gen}/{max_gen} against {acc_data}/{max_data}"
+        s.foot_skate_ratio <= 1.5 * d.foot_skate_ratio,
+        "skate {} against {}",
+        s.foot_skate_ratio,
+        d.foot_skate_ratio
     );
-    assert!((toe_gen - toe_data).abs() <= 0.02, "lower toe at {toe_gen} m against {toe_data} m");
-    assert!(bones <= 0.01 && spikes == 0.0, "bones vary by {bones} m, {spikes} spikes");
-}
-
-/// Issue 3's bar: unconstrained walks skate at most 1.5x as much as the training walks, judged on
-/// what a user gets: the samples after the contact-aware clean-up (`motion_core::cleanup::
-/// foot_lock`, as `mogen sample` applies it). The temporally coherent prior shipped since
-/// session 9 misses it: its stance feet slide inside the root-relative features (skate 0.53
-/// against 0.17 in `report.md`), and the clean-up, which holds a foot at most 15 cm from where the
-/// network put it, brings these 8 walks to 0.43 against the training walks' 0.15 (session 11).
-#[test]
-#[ignore = "known miss: after the foot clean-up the walks skate 2.8x the training walks (0.43 against 0.15)"]
-fn walks_skate_at_most_one_and_a_half_times_the_training_walks() {
-    let (samples, data) = walk_samples_and_data();
-    let cleaned: Vec<Vec<Pose>> =
-        samples.iter().map(|m| foot_lock(m, None, &FootLockConfig::default()).unwrap().poses).collect();
-    let skate_gen = mean(&cleaned, &foot_skate_ratio);
-    let skate_data = mean(&data, &foot_skate_ratio);
-    println!("foot skate ratio: samples {skate_gen:.4}, training walks {skate_data:.4}");
-    assert!(skate_gen <= 1.5 * skate_data, "samples skate {skate_gen}, data {skate_data}");
+    assert!(
+        c.foot_skate_ratio <= 1.25 * d.foot_skate_ratio,
+        "cleaned skate {} against {}",
+        c.foot_skate_ratio,
+        d.foot_skate_ratio
+    );
+    assert!(
+        (s.pace_steps_per_s / d.pace_steps_per_s - 1.0).abs() <= 0.25,
+        "{} alternations/s against {}",
+        s.pace_steps_per_s,
+        d.pace_steps_per_s
+    );
+    assert!(s.toe_flicker <= 1.5 * d.toe_flicker, "flicker {} against {}", s.toe_flicker, d.toe_flicker);
+    assert!(
+        s.mean_acceleration <= 1.5 * d.mean_acceleration && s.max_acceleration <= 1.5 * d.max_acceleration,
+        "acceleration {}/{} against {}/{}",
+        s.mean_acceleration,
+        s.max_acceleration,
+        d.mean_acceleration,
+        d.max_acceleration
+    );
+    assert!(
+        (s.stance_toe_height_m - d.stance_toe_height_m).abs() <= 0.02,
+        "lower toe {} against {}",
+        s.stance_toe_height_m,
+        d.stance_toe_height_m
+    );
+    assert!(s.bone_length_range_m <= 0.01, "bones vary by {} m", s.bone_length_range_m);
 }
