@@ -16,7 +16,7 @@ use motion_core::inversion::{invert_motion, InversionConfig};
 use motion_core::prior::{Prior, Sampling};
 use motion_core::quality::families::{family_report, Family, FamilyConfig};
 use motion_core::quality::{self, denoising_fidelity, joints_of, ReportSampling};
-use motion_core::skeleton::{Joint, Pose};
+use motion_core::skeleton::{Joint, Pose, FPS};
 
 const WALK: &str = "a person walks forward";
 
@@ -28,18 +28,18 @@ fn corpus() -> Corpus {
     corpus_file::load(&fixtures().join("corpus/corpus.safetensors.gz")).unwrap()
 }
 
-/// A held-out corpus window as a clip (20 fps, played once).
+/// A held-out corpus window as a clip (the corpus's `FPS`, played once).
 struct Window(Vec<Pose>);
 
 impl MocapClip for Window {
     fn duration_s(&self) -> f64 {
-        (self.0.len() - 1) as f64 / 20.0
+        (self.0.len() - 1) as f64 / FPS
     }
     fn is_cyclic(&self) -> bool {
         false
     }
     fn pose_at(&self, t_s: f64) -> Pose {
-        self.0[((t_s * 20.0).round() as usize).min(self.0.len() - 1)]
+        self.0[((t_s * FPS).round() as usize).min(self.0.len() - 1)]
     }
 }
 
