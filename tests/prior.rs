@@ -7,7 +7,7 @@
 
 use candle_core::{Device, Tensor};
 use e2e_tests::fixtures;
-use motion_core::corpus::{file as corpus_file, Corpus, Split};
+use motion_core::corpus::{file as corpus_file, Corpus};
 use motion_core::database::catalog::SourceClip;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
 use motion_core::diffusion::Guidance;
@@ -47,13 +47,8 @@ impl MocapClip for Window {
 /// split), labelled `WALK`.
 fn database() -> MotionDatabase {
     let corpus = corpus();
-    let walks: Vec<SourceClip> = corpus
-        .windows
-        .iter()
-        .filter(|w| {
-            let clip = &corpus.clips[w.clip];
-            clip.split == Split::Test && Family::Walk.holds(corpus.window_joints(w), &w.tags, &clip.description)
-        })
+    let walks: Vec<SourceClip> = Family::Walk
+        .held_out(&corpus)
         .take(4)
         .map(|w| SourceClip {
             name: corpus.clips[w.clip].name.clone(),

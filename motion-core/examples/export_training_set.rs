@@ -10,8 +10,10 @@
 //!   row by row): per split `S` in `train`, `validation`, `S.x` `[rows, 263]` (the sequences one
 //!   after the other, normalised with the train split's statistics), `S.sequences` `[n, 2]`
 //!   (first row, frames), `S.stretches` `[m, 4]` (sequence, first frame, first phrasing, number
-//!   of phrasings), `S.phrasings` `[p]` (caption rows), `S.text` `[rows, 384]`; and
-//!   `mean`, `std` `[263]`; all f32, with the rest skeleton as JSON in the header metadata. Run where the training runs (the features of 11.6 h are 0.9 GB).
+//!   of phrasings), `S.phrasings` `[p]` (caption rows), `S.text` `[rows, 384]`,
+//!   `S.families` `[m]` (each stretch's skill family of the prior report, its index in
+//!   `Family::ALL` or -1 for none: what `Family::holds` says of the window, mirrored for the
+//!   mirrored copies, so a trainer can balance the skills); and `mean`, `std` `[263]`; all f32, with the rest skeleton as JSON in the header metadata. Run where the training runs (the features of 11.6 h are 0.9 GB).
 //! - `database DB OUT`: a motion database's windows with label ids and a vocabulary (`x`,
 //!   `windows` `[n, 3]` = first row, frames, label; `label_text`, `mean`, `std`, and
 //!   `OUT.vocab.json`).
@@ -22,8 +24,10 @@ use std::error::Error;
 use std::path::Path;
 
 use candle_core::{Device, Tensor};
-use motion_core::corpus::{file as corpus_file, Split};
+use motion_core::corpus::{file as corpus_file, Corpus, Split};
 use motion_core::database::{MotionDatabase, Window};
+use motion_core::motion::mirror;
+use motion_core::quality::families::Family;
 use motion_core::representation::RestSkeleton;
 use motion_core::skeleton::rest_bone_lengths;
 use motion_core::text::vocabulary::VocabularyEncoder;
@@ -45,10 +49,9 @@ fn main() -> Result<(), Box<dyn Error>> {
 }
 
 /// Both splits' sequences, the validation split normalised with the train split's statistics.
-fn splits(corpus: &str) -> Result<Vec<CaptionedSequences>, Box<dyn Error>> {
-    let corpus = corpus_file::load(Path::new(corpus))?;
-    let train = CaptionedSequences::from_corpus(&corpus, Split::Train, None, &Device::Cpu)?;
-    let validation = CaptionedSequences::from_corpus(&corpus, Split::Validation, Some(train.mean_std()), &Device::Cpu)?;
+fn splits(corpus: &Corpus) -> Result<Vec<CaptionedSequences>, Box<dyn Error>> {
+    let train = CaptionedSequences::from_corpus(corpus, Split::Train, None, &Device::Cpu)?;
+    let validation = CaptionedSequences::from_corpus(corpus, Split::Validation, Some(train.mean_std()), &Device::Cpu)?;
     Ok(vec![train, validation])
 }
 
@@ -56,7 +59,7 @@ fn captions(corpus: &str, text_models: &str, out: &str) -> Result<(), Box<dyn Er
     let encoder = ConditionEncoder::sentence(MINILM_NAME, Path::new(text_models), &Device::Cpu)?;
     let mut tensors = Vec::new();
     let mut metadata = HashMap::new();
-    for (sequences, (_, name)) in splits(corpus)?.iter().zip(SPLITS) {
+    for (sequences, (_, name)) in splits(&corpus_file::load(Path::new(corpus))?)?.iter().zip(SPLITS) {
         let captions: Vec<&str> = sequences.captions().iter().map(String::as_str).collect();
         let mut rows = Vec::new();
         for (k, chunk) in captions.chunks(256).enumerate() {
@@ -75,12 +78,13 @@ fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn 
     let bytes = std::fs::read(captions)?;
     let meta = motion_core::tensor_file::read_metadata(&bytes)?;
     let tables = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)?;
-    let splits = splits(corpus)?;
+    let corpus = corpus_file::load(Path::new(corpus))?;
+    let splits = splits(&corpus)?;
     let mut tensors = vec![
         ("mean".to_owned(), splits[0].mean_std().mean().clone()),
         ("std".to_owned(), splits[0].mean_std().std().clone()),
     ];
-    for (sequences, (_, name)) in splits.iter().zip(SPLITS) {
+    for (sequences, (split, name)) in splits.iter().zip(SPLITS) {
         let stored: Vec<String> =
             serde_json::from_str(meta.get(&format!("{name}.captions")).ok_or("no captions in the captions file")?)?;
         if stored != sequences.captions() {
@@ -102,6 +106,8 @@ fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn 
         let (n, m, p) = (rows.len() / 2, stretches.len() / 4, phrasings.len());
         tensors.push((format!("{name}.x"), Tensor::cat(&x, 0)?));
         tensors.push((format!("{name}.sequences"), Tensor::from_vec(rows, (n, 2), &Device::Cpu)?));
+        let families = stretch_families(&corpus, split, &stretches)?;
+        tensors.push((format!("{name}.families"), Tensor::from_vec(families, m, &Device::Cpu)?));
         tensors.push((format!("{name}.stretches"), Tensor::from_vec(stretches, (m, 4), &Device::Cpu)?));
         tensors.push((format!("{name}.phrasings"), Tensor::from_vec(phrasings, p, &Device::Cpu)?));
         tensors.push((format!("{name}.text"), text.clone()));
@@ -113,6 +119,42 @@ fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn 
     let metadata = HashMap::from([("rest_skeleton".to_owned(), serde_json::to_string(&rest)?)]);
     motion_core::tensor_file::write_safetensors(Path::new(out), &tensors, metadata)?;
     Ok(())
+}
+
+/// The skill family ([`Family::ALL`] index, -1 for none) of each stretch of `stretches`
+/// (`[m, 4]` flattened, in `CaptionedSequences`' order: each clip of the split with windows,
+/// then its mirrored copy, one stretch per window in the order of their first frames), checked
+/// against the stretches' sequences.
+fn stretch_families(corpus: &Corpus, split: Split, stretches: &[i64]) -> Result<Vec<i64>, Box<dyn Error>> {
+    let mut families = Vec::with_capacity(stretches.len() / 4);
+    let mut sequence = 0;
+    for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == split) {
+        let mut windows: Vec<_> = corpus.windows.iter().filter(|w| w.clip == index).collect();
+        if windows.is_empty() {
+            continue;
+        }
+        windows.sort_by_key(|w| w.start);
+        for mirrored in [false, true] {
+            for window in &windows {
+                let poses = corpus.window_joints(window);
+                let (poses, tags) = if mirrored {
+                    (mirror(poses), window.tags.mirrored())
+                } else {
+                    (poses.to_vec(), window.tags.clone())
+                };
+                if stretches.get(families.len() * 4) != Some(&sequence) {
+                    return Err(format!("clip {}: the stretches are not one per window", clip.name).into());
+                }
+                let family = Family::ALL.iter().position(|f| f.holds(&poses, &tags, &clip.description));
+                families.push(family.map_or(-1, |f| f as i64));
+            }
+            sequence += 1;
+        }
+    }
+    if families.len() * 4 != stretches.len() {
+        return Err("fewer windows than stretches".into());
+    }
+    Ok(families)
 }
 
 fn database(db_path: &str, out: &str) -> Result<(), Box<dyn Error>> {

@@ -28,7 +28,7 @@ use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::corpus::caption::Action;
 use crate::corpus::skill::Skill;
 use crate::corpus::tags::{standing_pelvis_height, MotionTags, TravelDirection};
-use crate::corpus::{Corpus, Split};
+use crate::corpus::{Corpus, CorpusWindow, Split};
 use crate::diffusion::Guidance;
 use crate::metrics::MetricMeans;
 use crate::motion::tensor_to_poses;
@@ -125,8 +125,17 @@ impl Family {
         }
     }
 
-    /// Whether a held-out window (its poses and tags) of a take with this description is an
-    /// example of the family.
+    /// The held-out (test-split) windows of `corpus` that are examples of the family
+    /// ([`Family::holds`]), in corpus order.
+    pub fn held_out<'a>(self, corpus: &'a Corpus) -> impl Iterator<Item = &'a CorpusWindow> + 'a {
+        corpus.windows.iter().filter(move |w| {
+            let clip = &corpus.clips[w.clip];
+            clip.split == Split::Test && self.holds(corpus.window_joints(w), &w.tags, &clip.description)
+        })
+    }
+
+    /// Whether a window (its poses and tags) of a take with this description is an example of
+    /// the family.
     pub fn holds(self, poses: &[Pose], tags: &MotionTags, description: &str) -> bool {
         let action = Action::of(tags);
         let straight = tags.turn_left().is_none();
@@ -249,28 +258,17 @@ pub struct FamilyQuality {
     pub sample_diversity_m: f64,
 }
 
-/// `map` of the raw features `[frames, 263]` (the poses through feature extraction) of at most
-/// `max` corpus windows of `split` that `keep` accepts, in corpus order (`map` giving `None`
-/// drops a window).
-fn window_features(
+/// `map` of the raw features `[frames, 263]` (the poses through feature extraction) of
+/// `windows` (`map` giving `None` drops a window).
+fn window_features<'a>(
     corpus: &Corpus,
-    split: Split,
-    max: usize,
-    keep: impl Fn(&[Pose], &MotionTags, &str) -> bool,
+    windows: impl Iterator<Item = &'a CorpusWindow>,
     map: impl Fn(Tensor) -> candle_core::Result<Option<Tensor>>,
     device: &Device,
 ) -> candle_core::Result<Vec<Tensor>> {
     let mut out = Vec::new();
-    for window in &corpus.windows {
-        let clip = &corpus.clips[window.clip];
-        if out.len() >= max {
-            break;
-        }
-        let poses = corpus.window_joints(window);
-        if clip.split != split || !keep(poses, &window.tags, &clip.description) {
-            continue;
-        }
-        let Ok(extracted) = extract_features(poses) else { continue };
+    for window in windows {
+        let Ok(extracted) = extract_features(corpus.window_joints(window)) else { continue };
         let n = extracted.features.len();
         let flat: Vec<f32> = extracted.features.into_iter().flatten().collect();
         out.extend(map(Tensor::from_vec(flat, (n, FEATURE_DIM), device)?)?);
@@ -312,8 +310,8 @@ pub fn family_report(
         }
         Ok(Some(descriptors_of(&[f], compared, device)?.squeeze(0)?))
     };
-    let training =
-        window_features(corpus, Split::Train, usize::MAX, |_, _, _| true, descriptor_row, device).map_err(tensor)?;
+    let train_windows = corpus.windows.iter().filter(|w| corpus.clips[w.clip].split == Split::Train);
+    let training = window_features(corpus, train_windows, descriptor_row, device).map_err(tensor)?;
     let training = if training.is_empty() {
         Tensor::zeros((0, compared * RIC.len()), DType::F32, device).map_err(tensor)?
     } else {
@@ -349,15 +347,9 @@ pub fn family_report(
             .map(|m| foot_lock(m, None, &FootLockConfig::default()).map(|c| c.poses))
             .collect::<Result<_, _>>()
             .map_err(|e| fail(e.to_string()))?;
-        let held_out_features = window_features(
-            corpus,
-            Split::Test,
-            config.max_held_out,
-            |poses, tags, description| family.holds(poses, tags, description),
-            |f| Ok(Some(f)),
-            device,
-        )
-        .map_err(tensor)?;
+        let held_out_features =
+            window_features(corpus, family.held_out(corpus).take(config.max_held_out), |f| Ok(Some(f)), device)
+                .map_err(tensor)?;
         let mut held_out = Vec::new();
         for features in &held_out_features {
             // The data's root goes through the same decode as the samples'.

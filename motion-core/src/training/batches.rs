@@ -9,9 +9,12 @@
 //!   its 6 s windows a captioned stretch with all its phrasings (mirrored copies with "left" and
 //!   "right" swapped), encoded by a sentence encoder; batches drawn uniformly over all crops.
 //!
-//! A crop takes the captions of the stretch that holds its middle frame: a crop is at most
-//! [`TrainConfig::max_frames`] (9.8 s) long and windows start every 2 s, so the caption
-//! describes the crop's central seconds.
+//! A crop takes the captions of the window centred nearest its middle frame: each window's
+//! captioned stretch is the frames nearer its centre than any other window's (windows of 6 s
+//! every 2 s: the 2 s around its centre), so the caption describes the crop's central seconds.
+//! (Until session 30 the stretch began at the window's first frame, so a crop's caption
+//! described a window starting 1–3 s after the crop did, and a turn in a crop's first seconds
+//! could sit under "walks forward".)
 
 use std::collections::BTreeMap;
 
@@ -236,6 +239,18 @@ impl TrainingSet {
     }
 }
 
+/// The captioned stretches of windows given by `(centre frame, captions)`: each window's
+/// stretch starts halfway between the previous window's centre and its own (the first at frame
+/// 0), so the stretch holding a frame is the window centred nearest it.
+fn nearest_centre_stretches(mut windows: Captions) -> Captions {
+    windows.sort_by_key(|(centre, _)| *centre);
+    let centres: Vec<usize> = windows.iter().map(|(centre, _)| *centre).collect();
+    for (i, (start, _)) in windows.iter_mut().enumerate() {
+        *start = if i == 0 { 0 } else { (centres[i - 1] + centres[i]).div_ceil(2) };
+    }
+    windows
+}
+
 /// A corpus split ready to train on before its captions are encoded: every clip and its
 /// mirrored copy as normalised features, each window's phrasings as rows of a caption table.
 /// [`CaptionedSequences::encode`] makes the [`TrainingSet`]; the arrays are also what the
@@ -285,12 +300,10 @@ impl CaptionedSequences {
                             *rows.entry(caption).or_insert(next)
                         })
                         .collect();
-                    captions.push((window.start, ids));
+                    captions.push((window.start + window.frames / 2, ids));
                 }
-                captions.sort_by_key(|(start, _)| *start);
-                if let Some(first) = captions.first_mut() {
-                    first.0 = 0;
-                    raw.push((extracted.features, captions));
+                if !captions.is_empty() {
+                    raw.push((extracted.features, nearest_centre_stretches(captions)));
                 }
             }
         }
@@ -417,9 +430,14 @@ pub(super) mod tests {
         assert_eq!(set.captions(), windows * 3);
         assert_eq!(set.sequences[0].frames(), 199, "features have one frame fewer than poses");
         assert!((set.seconds() - 2.0 * 199.0 / 20.0).abs() < 1e-9);
-        // A crop's captions are those of the window holding its middle frame.
-        assert_eq!(set.sequences[0].captions_at(0), set.sequences[0].captions[0].1.as_slice());
-        assert_eq!(set.sequences[0].captions_at(41), set.sequences[0].captions[1].1.as_slice());
+        // A crop's captions are those of the window centred nearest its middle frame: windows
+        // [0, 120), [40, 160), [80, 200) have centres 60, 100, 140, so a crop of frames 0-119
+        // (middle 60) is described by the first, one of 30-149 (middle 90) by the second.
+        let window = |i: usize| set.sequences[0].captions[i].1.as_slice();
+        assert_eq!(set.sequences[0].captions.iter().map(|(s, _)| *s).collect::<Vec<_>>(), [0, 80, 120]);
+        for (middle, nearest) in [(0, 0), (60, 0), (79, 0), (80, 1), (90, 1), (119, 1), (120, 2), (198, 2)] {
+            assert_eq!(set.sequences[0].captions_at(middle), window(nearest), "middle frame {middle}");
+        }
         // The mirrored copy's "left" caption is the original's with "right".
         let original = &set.sequences[0].captions[0].1;
         let mirrored = &set.sequences[1].captions[0].1;
