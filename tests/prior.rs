@@ -7,6 +7,7 @@
 
 use candle_core::{Device, Tensor};
 use e2e_tests::fixtures;
+use motion_core::corpus::family::Family;
 use motion_core::corpus::{file as corpus_file, Corpus};
 use motion_core::database::catalog::SourceClip;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
@@ -14,7 +15,7 @@ use motion_core::diffusion::Guidance;
 use motion_core::import::MocapClip;
 use motion_core::inversion::{invert_motion, InversionConfig};
 use motion_core::prior::{Prior, Sampling};
-use motion_core::quality::families::{family_report, Family, FamilyConfig};
+use motion_core::quality::families::{family_report, FamilyConfig};
 use motion_core::quality::{self, denoising_fidelity, joints_of, ReportSampling};
 use motion_core::skeleton::{Joint, Pose, FPS};
 

@@ -11,9 +11,10 @@
 //!   after the other, normalised with the train split's statistics), `S.sequences` `[n, 2]`
 //!   (first row, frames), `S.stretches` `[m, 4]` (sequence, first frame, first phrasing, number
 //!   of phrasings), `S.phrasings` `[p]` (caption rows), `S.text` `[rows, 384]`,
-//!   `S.families` `[m]` (each stretch's skill family of the prior report, its index in
-//!   `Family::ALL` or -1 for none: what `Family::holds` says of the window, mirrored for the
-//!   mirrored copies, so a trainer can balance the skills); and `mean`, `std` `[263]`; all f32, with the rest skeleton as JSON in the header metadata. Run where the training runs (the features of 11.6 h are 0.9 GB).
+//!   `S.families` `[m]` (each stretch's skill family, `training::Stretch::family`, as its index
+//!   in `Family::ALL` or -1 for none, so a trainer can balance the skills); and `mean`, `std`
+//!   `[263]`; all f32, with the rest skeleton as JSON in the header metadata. Run where the
+//!   training runs (the features of 11.6 h are 0.9 GB).
 //! - `database DB OUT`: a motion database's windows with label ids and a vocabulary (`x`,
 //!   `windows` `[n, 3]` = first row, frames, label; `label_text`, `mean`, `std`, and
 //!   `OUT.vocab.json`).
@@ -24,10 +25,9 @@ use std::error::Error;
 use std::path::Path;
 
 use candle_core::{Device, Tensor};
+use motion_core::corpus::family::Family;
 use motion_core::corpus::{file as corpus_file, Corpus, Split};
 use motion_core::database::{MotionDatabase, Window};
-use motion_core::motion::mirror;
-use motion_core::quality::families::Family;
 use motion_core::representation::RestSkeleton;
 use motion_core::skeleton::rest_bone_lengths;
 use motion_core::text::vocabulary::VocabularyEncoder;
@@ -84,7 +84,7 @@ fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn 
         ("mean".to_owned(), splits[0].mean_std().mean().clone()),
         ("std".to_owned(), splits[0].mean_std().std().clone()),
     ];
-    for (sequences, (split, name)) in splits.iter().zip(SPLITS) {
+    for (sequences, (_, name)) in splits.iter().zip(SPLITS) {
         let stored: Vec<String> =
             serde_json::from_str(meta.get(&format!("{name}.captions")).ok_or("no captions in the captions file")?)?;
         if stored != sequences.captions() {
@@ -92,13 +92,16 @@ fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn 
         }
         let text = tables.get(&format!("{name}.text")).ok_or("no caption table")?;
         let (mut x, mut rows, mut stretches, mut phrasings) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut families = Vec::new();
         let mut first_row = 0i64;
         for (i, (features, captioned)) in sequences.sequences().enumerate() {
             let frames = features.dim(0)? as i64;
             rows.extend([first_row, frames]);
-            for (start, ids) in captioned {
-                stretches.extend([i as i64, *start as i64, phrasings.len() as i64, ids.len() as i64]);
-                phrasings.extend(ids.iter().map(|&id| i64::from(id)));
+            for stretch in captioned {
+                stretches.extend([i as i64, stretch.start as i64, phrasings.len() as i64, stretch.rows.len() as i64]);
+                phrasings.extend(stretch.rows.iter().map(|&id| i64::from(id)));
+                let family = stretch.family.and_then(|f| Family::ALL.iter().position(|g| *g == f));
+                families.push(family.map_or(-1, |f| f as i64));
             }
             x.push(features.clone());
             first_row += frames;
@@ -106,7 +109,6 @@ fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn 
         let (n, m, p) = (rows.len() / 2, stretches.len() / 4, phrasings.len());
         tensors.push((format!("{name}.x"), Tensor::cat(&x, 0)?));
         tensors.push((format!("{name}.sequences"), Tensor::from_vec(rows, (n, 2), &Device::Cpu)?));
-        let families = stretch_families(&corpus, split, &stretches)?;
         tensors.push((format!("{name}.families"), Tensor::from_vec(families, m, &Device::Cpu)?));
         tensors.push((format!("{name}.stretches"), Tensor::from_vec(stretches, (m, 4), &Device::Cpu)?));
         tensors.push((format!("{name}.phrasings"), Tensor::from_vec(phrasings, p, &Device::Cpu)?));
@@ -119,42 +121,6 @@ fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn 
     let metadata = HashMap::from([("rest_skeleton".to_owned(), serde_json::to_string(&rest)?)]);
     motion_core::tensor_file::write_safetensors(Path::new(out), &tensors, metadata)?;
     Ok(())
-}
-
-/// The skill family ([`Family::ALL`] index, -1 for none) of each stretch of `stretches`
-/// (`[m, 4]` flattened, in `CaptionedSequences`' order: each clip of the split with windows,
-/// then its mirrored copy, one stretch per window in the order of their first frames), checked
-/// against the stretches' sequences.
-fn stretch_families(corpus: &Corpus, split: Split, stretches: &[i64]) -> Result<Vec<i64>, Box<dyn Error>> {
-    let mut families = Vec::with_capacity(stretches.len() / 4);
-    let mut sequence = 0;
-    for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == split) {
-        let mut windows: Vec<_> = corpus.windows.iter().filter(|w| w.clip == index).collect();
-        if windows.is_empty() {
-            continue;
-        }
-        windows.sort_by_key(|w| w.start);
-        for mirrored in [false, true] {
-            for window in &windows {
-                let poses = corpus.window_joints(window);
-                let (poses, tags) = if mirrored {
-                    (mirror(poses), window.tags.mirrored())
-                } else {
-                    (poses.to_vec(), window.tags.clone())
-                };
-                if stretches.get(families.len() * 4) != Some(&sequence) {
-                    return Err(format!("clip {}: the stretches are not one per window", clip.name).into());
-                }
-                let family = Family::ALL.iter().position(|f| f.holds(&poses, &tags, &clip.description));
-                families.push(family.map_or(-1, |f| f as i64));
-            }
-            sequence += 1;
-        }
-    }
-    if families.len() * 4 != stretches.len() {
-        return Err("fewer windows than stretches".into());
-    }
-    Ok(families)
 }
 
 fn database(db_path: &str, out: &str) -> Result<(), Box<dyn Error>> {

@@ -6,12 +6,13 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use motion_core::cleanup::{foot_lock, FootLockConfig};
+use motion_core::corpus::family::Family;
 use motion_core::corpus::file as corpus_file;
 use motion_core::database::MotionDatabase;
 use motion_core::inversion::InversionConfig;
 use motion_core::metrics::MetricMeans;
 use motion_core::prior::{RootDecode, Sampling};
-use motion_core::quality::families::{family_report, Family, FamilyConfig};
+use motion_core::quality::families::{family_report, FamilyConfig};
 use motion_core::quality::text_motion::{
     text_motion_report, TextMotionConfig, TextMotionReport, CLEANED, HELD_OUT, SAMPLES, TRAIN,
 };

@@ -46,6 +46,12 @@ pub struct TrainArgs {
     /// Resumable checkpoint file (written every --checkpoint-every steps; resumed if present).
     #[arg(long, default_value = "out/train_checkpoint.safetensors")]
     checkpoint: PathBuf,
+    /// Fine-tune this prior (a file written by `mogen train`, e.g. the shipped one) instead of
+    /// starting from random weights: its weights start the model and its EMA at step 0. It must
+    /// be of the size given here and trained on the same data (its normalisation is checked).
+    /// Only for a new run: with an existing --checkpoint, resume without it.
+    #[arg(long)]
+    init: Option<PathBuf>,
     /// Optimiser steps.
     #[arg(long, default_value_t = TrainConfig::default().steps)]
     steps: usize,
@@ -58,6 +64,16 @@ pub struct TrainArgs {
     /// Longest crop in frames (20 fps).
     #[arg(long, default_value_t = TrainConfig::default().max_frames)]
     max_frames: usize,
+    /// Corpus: draw crops by skill family (walk, run, turn, ..., crawl, or none), a family with
+    /// probability proportional to its frames to this power (1: as the data has them; 0: every
+    /// family alike; 0.5 draws the rare skills 4-12x as often), instead of uniformly over the
+    /// data. The validation loss still draws uniformly.
+    #[arg(long, value_parser = super::flags::weight)]
+    family_balance: Option<f64>,
+    /// EMA decay of the shipped weights (0.999 averages about the last 1,000 steps; small
+    /// batches call for more).
+    #[arg(long, default_value_t = TrainConfig::default().ema_decay, value_parser = super::flags::fraction)]
+    ema_decay: f64,
     /// Weight of the root features (yaw velocity, x/z velocity, height) in the x0 MSE
     /// (1 = MDM's plain MSE; 25 = HumanML3D's feat_bias 5).
     #[arg(long, default_value_t = TrainConfig::default().root_weight, value_parser = super::flags::weight)]
@@ -156,6 +172,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         batch_size: args.batch_size,
         lr: args.lr,
         max_frames: args.max_frames,
+        family_balance: args.family_balance,
+        ema_decay: args.ema_decay,
         checkpoint_every: args.checkpoint_every,
         root_weight: args.root_weight,
         ric_weight: args.ric_weight,
@@ -170,11 +188,21 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     };
     let mut trainer = Trainer::new(data, model, config.clone(), &device).context("setting up training")?;
     if args.checkpoint.exists() {
+        if let Some(init) = &args.init {
+            anyhow::bail!(
+                "--init {}: the checkpoint {} exists, so the run resumes from it; drop --init (or move the checkpoint away to start over)",
+                init.display(),
+                args.checkpoint.display()
+            );
+        }
         let state = trainer.resume(&args.checkpoint).context("resuming from the checkpoint")?;
         eprintln!("resumed {} at step {}", args.checkpoint.display(), state.step);
         if let Some(csv) = &args.loss_csv {
             drop_rows_after(csv, state.step)?;
         }
+    } else if let Some(init) = &args.init {
+        trainer.init_from_prior(init).with_context(|| format!("starting from the prior {}", init.display()))?;
+        eprintln!("fine-tuning {} from step 0", init.display());
     }
     eprintln!(
         "training {} parameters on {:.2} h of motion ({} sequences, {} captions), {} steps of batch {}",
@@ -185,6 +213,18 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         config.steps,
         config.batch_size
     );
+    if let Some(alpha) = config.family_balance {
+        let shares: Vec<String> = trainer
+            .data()
+            .family_shares(alpha)
+            .into_iter()
+            .map(|(family, data, drawn)| {
+                let name = family.map_or("none", |f| f.name());
+                format!("{name} {:.1} % -> {:.1} %", 100.0 * data, 100.0 * drawn)
+            })
+            .collect();
+        eprintln!("crops by skill family (frames of the data -> crops drawn): {}", shares.join(", "));
+    }
     let bar = ProgressBar::new(config.steps as u64).with_position(trainer.step() as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}")

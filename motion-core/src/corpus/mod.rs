@@ -14,6 +14,7 @@
 
 pub mod caption;
 pub mod cmu;
+pub mod family;
 pub mod file;
 pub mod hdm05;
 pub mod prepare;

@@ -69,4 +69,35 @@ impl Trainer {
         self.step = step;
         Ok(TrainState { step })
     }
+
+    /// Starts a fine-tune of a written prior (a file of [`Prior::write`](crate::prior::Prior::write)):
+    /// its weights become the model's and the EMA's, at step 0 with fresh optimiser moments.
+    /// The prior must be of this model's size and normalised with this training set's
+    /// statistics (the same corpus split), so that its weights mean the same here.
+    pub fn init_from_prior(&mut self, path: &Path) -> Result<(), TrainError> {
+        let err = |message: String| TrainError::Checkpoint { path: path.into(), message };
+        let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
+        let meta = read_metadata(&bytes).map_err(err)?;
+        let saved_cfg = meta.get("mdm_config").ok_or_else(|| err("no mdm_config in metadata".into()))?;
+        let saved: MdmConfig = serde_json::from_str(saved_cfg).map_err(|e| err(format!("mdm_config: {e}")))?;
+        if saved != self.model_config {
+            return Err(err(format!("the model differs: the prior is {saved_cfg}")));
+        }
+        let tensors = candle_core::safetensors::load_buffer(&bytes, &self.device).map_err(|e| err(e.to_string()))?;
+        let stats = self.data.mean_std();
+        for (key, ours) in [("normalization.mean", stats.mean()), ("normalization.std", stats.std())] {
+            let theirs = tensors.get(key).ok_or_else(|| err(format!("missing `{key}`")))?;
+            let gap = (theirs - ours)?.abs()?.max_all()?.to_scalar::<f32>()?;
+            if gap.is_nan() || gap > 1e-4 {
+                return Err(err(format!("`{key}` differs from this training set's by {gap}: trained on other data")));
+            }
+        }
+        for (i, (name, var)) in self.vars.iter().enumerate() {
+            let w = tensors.get(name).ok_or_else(|| err(format!("missing `{name}`")))?;
+            var.set(w)?;
+            self.ema[i] = w.copy()?.detach();
+        }
+        self.step = 0;
+        Ok(())
+    }
 }

@@ -7,7 +7,7 @@ mod batches;
 mod checkpoint;
 mod geometric;
 
-pub use batches::{Batch, CaptionedSequences, TrainingSet};
+pub use batches::{Batch, CaptionedSequences, Stretch, TrainingSet};
 pub use checkpoint::TrainState;
 pub use geometric::{GeometricLoss, GeometricTerms, CONTACT_SPEED_M_PER_S};
 
@@ -57,6 +57,13 @@ pub struct TrainConfig {
     /// Sample a database's labels uniformly instead of by seconds of data; default true (its
     /// longest clips would otherwise dominate). The corpus is always drawn by seconds of data.
     pub balance_labels: bool,
+    /// Draw a corpus's crops by skill family ([`Family`](crate::corpus::family::Family), from
+    /// the family of the window centred nearest the crop's middle): a family with probability
+    /// proportional to its frames to this power (1: as the data has them, 0: every family
+    /// alike), then a crop centred in it; default `None` (crops uniformly over the data). At 0.5
+    /// the rare skills (run, hop, sit down, crawl, one-leg balance) are drawn 4–12× as often as
+    /// the data holds them. The validation loss always draws uniformly.
+    pub family_balance: Option<f64>,
     /// Weight of the four root features (yaw velocity, x/z velocity, height) in the x0 MSE,
     /// relative to 1 for the others; default 1.0 (MDM's plain MSE). 25 matches HumanML3D's
     /// `feat_bias` = 5 on the root's std. The root velocity is integrated into the whole
@@ -112,6 +119,7 @@ impl Default for TrainConfig {
             min_frames: 40,
             max_frames: 196,
             balance_labels: true,
+            family_balance: None,
             root_weight: 1.0,
             ric_weight: 1.0,
             snr_gamma: 0.0,
@@ -390,9 +398,10 @@ impl Trainer {
         let vb = candle_nn::VarBuilder::from_tensors(tensors, DType::F32, &self.device);
         let model = Mdm::new(self.model_config.clone(), vb)?;
         let mut rng = StdRng::seed_from_u64(seed);
+        let uniform = TrainConfig { family_balance: None, ..self.config.clone() };
         let mut sum = 0.0;
         for _ in 0..batches.max(1) {
-            let batch = held_out.sample(&self.config, &mut rng)?;
+            let batch = held_out.sample(&uniform, &mut rng)?;
             let t = self.schedule.sample_timesteps(batch.x0.dim(0)?, 0.0, &mut rng, &self.device)?;
             let noise = gaussian_from_rng(batch.x0.shape(), &mut rng, &self.device)?;
             let x_t = self.schedule.q_sample(&batch.x0, &t, &noise)?;

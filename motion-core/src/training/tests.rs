@@ -63,6 +63,33 @@ fn a_resumed_run_matches_an_uninterrupted_one_and_keeps_no_graph() {
     assert!(Prior::load(&prior_path, dir.path(), &dev).is_ok());
 }
 
+/// `--init`: a fine-tune starts at step 0 with the written prior's weights as both the model's
+/// and the EMA's; a prior of another size is refused with the reason.
+#[test]
+fn a_fine_tune_starts_from_a_written_prior() {
+    let (data, model, train) = tiny_run();
+    let dev = Device::Cpu;
+    let mut trained = Trainer::new(data.clone(), model.clone(), train.clone(), &dev).unwrap();
+    trained.run(None, None, |_, _| Ok(())).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let prior = dir.path().join("prior.safetensors");
+    trained.save_prior(&prior).unwrap();
+    let fresh = TrainConfig { seed: 5, ..train.clone() };
+    let mut tuned = Trainer::new(data.clone(), model.clone(), fresh.clone(), &dev).unwrap();
+    tuned.init_from_prior(&prior).unwrap();
+    assert_eq!(tuned.step(), 0);
+    for (((name, var), ema), shipped) in tuned.vars.iter().zip(&tuned.ema).zip(&trained.ema) {
+        for t in [var.as_tensor(), ema] {
+            let d = (t - shipped).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+            assert!(d == 0.0, "{name}: differs from the prior's EMA by {d}");
+        }
+    }
+    let wider = MdmConfig { latent_dim: 32, ..model };
+    let mut other = Trainer::new(data, wider, fresh, &dev).unwrap();
+    let err = other.init_from_prior(&prior).unwrap_err().to_string();
+    assert!(err.contains("the model differs"), "{err}");
+}
+
 /// Sharding splits the batch, not the objective: without dropout (the only draw made per
 /// shard) one shard and three uneven ones give the same training, and the number of
 /// threads does not change a sharded run at all.

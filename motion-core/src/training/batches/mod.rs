@@ -7,7 +7,8 @@
 //!   [`VocabularyEncoder`] over the labels, batches balanced over labels;
 //! - the [`Corpus`]: every clip of a split and its left/right mirrored copy a sequence, each of
 //!   its 6 s windows a captioned stretch with all its phrasings (mirrored copies with "left" and
-//!   "right" swapped), encoded by a sentence encoder; batches drawn uniformly over all crops.
+//!   "right" swapped) and its skill [`Family`], encoded by a sentence encoder; batches drawn
+//!   uniformly over all crops, or by family ([`TrainConfig::family_balance`]).
 //!
 //! A crop takes the captions of the window centred nearest its middle frame: each window's
 //! captioned stretch is the frames nearer its centre than any other window's (windows of 6 s
@@ -21,7 +22,12 @@ use std::collections::BTreeMap;
 use candle_core::{Device, Tensor};
 use rand::Rng;
 
+mod family_balance;
+
+use family_balance::FamilyStretches;
+
 use super::{TrainConfig, TrainError};
+use crate::corpus::family::Family;
 use crate::corpus::{Corpus, Split};
 use crate::database::{mirror_label, MotionDatabase};
 use crate::motion::mirror;
@@ -42,17 +48,26 @@ pub struct Batch {
     pub text: Tensor,
 }
 
-/// `(first frame, rows of the condition table)` of each captioned stretch of a sequence.
-type Captions = Vec<(usize, Vec<u32>)>;
+/// The frames of a sequence that one caption describes: from `start` to the next stretch's
+/// start (or the sequence's end).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stretch {
+    /// First frame.
+    pub start: usize,
+    /// Rows of the condition table: the phrasings of its caption.
+    pub rows: Vec<u32>,
+    /// The skill family of the corpus window it belongs to ([`Family::holds`], on the mirrored
+    /// window for a mirrored copy); `None` for a window of no family and for database windows.
+    pub family: Option<Family>,
+}
 
 /// One normalised feature sequence and the captions of its stretches.
 #[derive(Debug, Clone)]
 struct Sequence {
     /// `[frames, 263]`, normalised.
     features: Tensor,
-    /// `(first frame, rows of the condition table)` of each captioned stretch, by first frame;
-    /// the first starts at frame 0.
-    captions: Captions,
+    /// The captioned stretches, by first frame; the first starts at frame 0.
+    stretches: Vec<Stretch>,
     /// Balancing group (the label of a database window).
     group: usize,
 }
@@ -64,8 +79,13 @@ impl Sequence {
 
     /// The condition rows of the stretch holding `frame`.
     fn captions_at(&self, frame: usize) -> &[u32] {
-        let i = self.captions.partition_point(|(start, _)| *start <= frame).saturating_sub(1);
-        &self.captions[i].1
+        let i = self.stretches.partition_point(|s| s.start <= frame).saturating_sub(1);
+        &self.stretches[i].rows
+    }
+
+    /// Frames of stretch `i`.
+    fn stretch_frames(&self, i: usize) -> usize {
+        self.stretches.get(i + 1).map_or(self.frames(), |next| next.start) - self.stretches[i].start
     }
 }
 
@@ -80,6 +100,8 @@ pub struct TrainingSet {
     rest: Option<RestSkeleton>,
     /// Sequence indices per balancing group (groups with no sequence left out).
     groups: Vec<Vec<usize>>,
+    /// The stretches of each skill family (and of none), for [`TrainConfig::family_balance`].
+    families: Vec<FamilyStretches>,
     /// Draw groups uniformly (a database's labels) instead of crops uniformly (the corpus).
     balance: bool,
     /// Seconds of motion, mirrored copies included.
@@ -105,7 +127,8 @@ impl TrainingSet {
                 .binary_search_by(|l| l.as_str().cmp(db.label(w)))
                 .map_err(|_| TrainError::Data(format!("window {w:?} has a label missing from the label list")))?;
             let features = mean_std.normalize(&db.window_tensor(w, device)?)?;
-            sequences.push(Sequence { features, captions: vec![(0, vec![label as u32])], group: label });
+            let stretches = vec![Stretch { start: 0, rows: vec![label as u32], family: None }];
+            sequences.push(Sequence { features, stretches, group: label });
         }
         let seconds = db.total_frames() as f64 / crate::skeleton::FPS;
         Self::assemble(
@@ -151,7 +174,8 @@ impl TrainingSet {
             groups[s.group].push(i);
         }
         groups.retain(|g| !g.is_empty());
-        Ok(Self { sequences, text, encoder, mean_std, rest, groups, balance, seconds })
+        let families = FamilyStretches::of(&sequences);
+        Ok(Self { sequences, text, encoder, mean_std, rest, groups, families, balance, seconds })
     }
 
     /// The text encoder whose vectors the condition table holds.
@@ -191,12 +215,27 @@ impl TrainingSet {
 
     /// One batch: a crop length uniform in `[min_frames, max_frames]` (shortened to the longest
     /// sequence when none is long enough), then `batch_size` crops of sequences at least that
-    /// long (a group drawn uniformly, then a sequence of it, when balancing; otherwise a crop
-    /// drawn uniformly among all crops of that length), each at a random offset, with one of the
-    /// phrasings of its middle frame's stretch.
+    /// long, each with one of the phrasings of its middle frame's stretch. A crop is drawn
+    /// - with label balancing (a database): a group uniformly, then a sequence of it, then an
+    ///   offset uniformly;
+    /// - with [`TrainConfig::family_balance`] = α: a skill family with probability proportional
+    ///   to its frames^α, then a middle frame uniformly over that family's stretches (in
+    ///   sequences long enough; any stretch when none is), the crop centred on it (moved
+    ///   inside the sequence at its ends);
+    /// - otherwise uniformly among all crops of that length.
     pub fn sample(&self, config: &TrainConfig, rng: &mut impl Rng) -> Result<Batch, TrainError> {
         if config.min_frames > config.max_frames || config.batch_size == 0 || config.min_frames < 2 {
             return Err(TrainError::Data("need batch_size > 0 and 2 <= min_frames <= max_frames".into()));
+        }
+        if let Some(alpha) = config.family_balance {
+            if self.balance {
+                return Err(TrainError::Data(
+                    "family balance draws a corpus's crops; a database balances labels".into(),
+                ));
+            }
+            if !(alpha.is_finite() && alpha >= 0.0) {
+                return Err(TrainError::Data(format!("family balance {alpha}: need a finite power >= 0")));
+            }
         }
         let longest = self.sequences.iter().map(Sequence::frames).max().unwrap_or(0);
         if longest < config.min_frames {
@@ -218,18 +257,23 @@ impl TrainingSet {
                 Some(*sum)
             })
             .collect();
+        let by_family = config.family_balance.map(|alpha| self.family_draw(alpha, frames));
         let mut crops = Vec::with_capacity(config.batch_size);
         let mut rows = Vec::with_capacity(config.batch_size);
         for _ in 0..config.batch_size {
-            let i = if self.balance {
-                let pool = pools[rng.random_range(0..pools.len())];
-                pool[rng.random_range(0..pool.len())]
+            let (i, offset) = if let Some(draw) = &by_family {
+                draw.crop(self, frames, rng)
             } else {
-                let crop = rng.random_range(0..*cumulative.last().unwrap_or(&1));
-                pools[0][cumulative.partition_point(|&c| c <= crop)]
+                let i = if self.balance {
+                    let pool = pools[rng.random_range(0..pools.len())];
+                    pool[rng.random_range(0..pool.len())]
+                } else {
+                    let crop = rng.random_range(0..*cumulative.last().unwrap_or(&1));
+                    pools[0][cumulative.partition_point(|&c| c <= crop)]
+                };
+                (i, rng.random_range(0..=self.sequences[i].frames() - frames))
             };
             let sequence = &self.sequences[i];
-            let offset = rng.random_range(0..=sequence.frames() - frames);
             crops.push(sequence.features.narrow(0, offset, frames)?);
             let phrasings = sequence.captions_at(offset + frames / 2);
             rows.push(phrasings[rng.random_range(0..phrasings.len())]);
@@ -239,20 +283,21 @@ impl TrainingSet {
     }
 }
 
-/// The captioned stretches of windows given by `(centre frame, captions)`: each window's
-/// stretch starts halfway between the previous window's centre and its own (the first at frame
-/// 0), so the stretch holding a frame is the window centred nearest it.
-fn nearest_centre_stretches(mut windows: Captions) -> Captions {
-    windows.sort_by_key(|(centre, _)| *centre);
-    let centres: Vec<usize> = windows.iter().map(|(centre, _)| *centre).collect();
-    for (i, (start, _)) in windows.iter_mut().enumerate() {
-        *start = if i == 0 { 0 } else { (centres[i - 1] + centres[i]).div_ceil(2) };
+/// The captioned stretches of windows given as stretches starting at their centre frames: each
+/// window's stretch starts halfway between the previous window's centre and its own (the first
+/// at frame 0), so the stretch holding a frame is the window centred nearest it.
+fn nearest_centre_stretches(mut windows: Vec<Stretch>) -> Vec<Stretch> {
+    windows.sort_by_key(|w| w.start);
+    let centres: Vec<usize> = windows.iter().map(|w| w.start).collect();
+    for (i, window) in windows.iter_mut().enumerate() {
+        window.start = if i == 0 { 0 } else { (centres[i - 1] + centres[i]).div_ceil(2) };
     }
     windows
 }
 
 /// A corpus split ready to train on before its captions are encoded: every clip and its
-/// mirrored copy as normalised features, each window's phrasings as rows of a caption table.
+/// mirrored copy as normalised features, each window's phrasings as rows of a caption table and
+/// its skill family.
 /// [`CaptionedSequences::encode`] makes the [`TrainingSet`]; the arrays are also what the
 /// PyTorch mirror of the trainer reads (`motion-core/examples/export_training_set.rs`), with the
 /// captions encoded where the sentence encoder is.
@@ -281,7 +326,7 @@ impl CaptionedSequences {
         }
         let mut rows: BTreeMap<String, u32> = BTreeMap::new();
         // Each copy's feature frames and captioned stretches.
-        let mut raw: Vec<(Vec<FeatureFrame>, Captions)> = Vec::new();
+        let mut raw: Vec<(Vec<FeatureFrame>, Vec<Stretch>)> = Vec::new();
         for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == split) {
             let poses = corpus.clip_joints(clip);
             for mirrored in [false, true] {
@@ -291,7 +336,10 @@ impl CaptionedSequences {
                 let mut captions = Vec::new();
                 for &w in &windows_of[index] {
                     let window = &corpus.windows[w];
-                    let ids = window
+                    let tags = if mirrored { window.tags.mirrored() } else { window.tags.clone() };
+                    let window_poses = &poses[window.start..window.start + window.frames];
+                    let family = Family::ALL.into_iter().find(|f| f.holds(window_poses, &tags, &clip.description));
+                    let rows = window
                         .captions
                         .iter()
                         .map(|c| {
@@ -300,7 +348,7 @@ impl CaptionedSequences {
                             *rows.entry(caption).or_insert(next)
                         })
                         .collect();
-                    captions.push((window.start + window.frames / 2, ids));
+                    captions.push(Stretch { start: window.start + window.frames / 2, rows, family });
                 }
                 if !captions.is_empty() {
                     raw.push((extracted.features, nearest_centre_stretches(captions)));
@@ -322,7 +370,7 @@ impl CaptionedSequences {
             let n = features.len();
             let flat: Vec<f32> = features.into_iter().flatten().collect();
             let features = mean_std.normalize(&Tensor::from_vec(flat, (n, FEATURE_DIM), device)?)?;
-            sequences.push(Sequence { features, captions, group: 0 });
+            sequences.push(Sequence { features, stretches: captions, group: 0 });
         }
         let mut texts: Vec<(u32, String)> = rows.into_iter().map(|(caption, row)| (row, caption)).collect();
         texts.sort_by_key(|(row, _)| *row);
@@ -340,10 +388,10 @@ impl CaptionedSequences {
         &self.mean_std
     }
 
-    /// Each sequence: its normalised features `[frames, 263]` and its captioned stretches
-    /// (first frame, the caption rows of its phrasings), by first frame, the first at frame 0.
-    pub fn sequences(&self) -> impl Iterator<Item = (&Tensor, &[(usize, Vec<u32>)])> {
-        self.sequences.iter().map(|s| (&s.features, s.captions.as_slice()))
+    /// Each sequence: its normalised features `[frames, 263]` and its captioned stretches, by
+    /// first frame, the first at frame 0.
+    pub fn sequences(&self) -> impl Iterator<Item = (&Tensor, &[Stretch])> {
+        self.sequences.iter().map(|s| (&s.features, s.stretches.as_slice()))
     }
 
     /// The training set: the captions encoded by `encoder` (`progress(done, total)` follows
@@ -433,14 +481,14 @@ pub(super) mod tests {
         // A crop's captions are those of the window centred nearest its middle frame: windows
         // [0, 120), [40, 160), [80, 200) have centres 60, 100, 140, so a crop of frames 0-119
         // (middle 60) is described by the first, one of 30-149 (middle 90) by the second.
-        let window = |i: usize| set.sequences[0].captions[i].1.as_slice();
-        assert_eq!(set.sequences[0].captions.iter().map(|(s, _)| *s).collect::<Vec<_>>(), [0, 80, 120]);
+        let window = |i: usize| set.sequences[0].stretches[i].rows.as_slice();
+        assert_eq!(set.sequences[0].stretches.iter().map(|s| s.start).collect::<Vec<_>>(), [0, 80, 120]);
         for (middle, nearest) in [(0, 0), (60, 0), (79, 0), (80, 1), (90, 1), (119, 1), (120, 2), (198, 2)] {
             assert_eq!(set.sequences[0].captions_at(middle), window(nearest), "middle frame {middle}");
         }
         // The mirrored copy's "left" caption is the original's with "right".
-        let original = &set.sequences[0].captions[0].1;
-        let mirrored = &set.sequences[1].captions[0].1;
+        let original = &set.sequences[0].stretches[0].rows;
+        let mirrored = &set.sequences[1].stretches[0].rows;
         assert_ne!(original[0], mirrored[0]);
         assert_eq!(original[1], mirrored[1]);
         let validation =
@@ -468,7 +516,7 @@ pub(super) mod tests {
         let stretches: Vec<usize> = sequences.sequences().map(|(_, s)| s.len()).collect();
         let set = sequences.encode(vocabulary(), |_, _| {}).unwrap();
         assert_eq!(table.to_vec2::<f32>().unwrap(), set.text.to_vec2::<f32>().unwrap());
-        assert_eq!(stretches, set.sequences.iter().map(|s| s.captions.len()).collect::<Vec<_>>());
+        assert_eq!(stretches, set.sequences.iter().map(|s| s.stretches.len()).collect::<Vec<_>>());
     }
 
     #[test]

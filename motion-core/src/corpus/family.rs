@@ -1,0 +1,215 @@
+//! Skill families: what a window of capture, or a generated motion, does, by measurement
+//! (issue 40, item 4). A family names a skill (walk, run, turn left, ..., crawl); [`Family::holds`]
+//! says whether a corpus window is an example of it (the report's held-out windows, the
+//! trainer's family balance) and [`Family::detect`] whether a motion passes its action detector.
+//!
+//! A window's family is chosen by what its own motion does (the corpus tagger's [`MotionTags`]
+//! and the caption rule's [`Action`]), plus the take's description for carrying and sitting,
+//! whose motion alone does not say it.
+//!
+//! **Detectors** are measurements, not judgements by eye; each says whether one motion does
+//! what its prompt asks (the thresholds are the issue's):
+//! - sideways: the body travels more sideways than forwards (the tagger's travel direction);
+//! - sneak/crouch: the mean pelvis height is at least 15 % below a standing body's;
+//! - jump, hop on one foot: at least 2 frames airborne;
+//! - one-leg balance: one foot more than 10 cm up while the other is down, for 2 s at a stretch;
+//! - sit down: the last second is seated (pelvis low, at knee height, still);
+//! - walk, run, crawl: the caption rule names the same action; walks also travel forwards;
+//! - turns: at least [`TURN_MIN_DEG`](crate::corpus::tags::TURN_MIN_DEG) the asked way.
+//!
+//! Carrying has no detector: nothing in the joints says a hand holds something.
+
+use serde::Serialize;
+
+use super::caption::Action;
+use super::skill::Skill;
+use super::tags::{standing_pelvis_height, MotionTags, TravelDirection};
+use super::{Corpus, CorpusWindow, Split};
+use crate::skeleton::{Joint, Pose, FPS};
+
+/// A skill family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Family {
+    /// Walking forwards.
+    Walk,
+    /// Running.
+    Run,
+    /// Walking and turning left.
+    TurnLeft,
+    /// Walking and turning right.
+    TurnRight,
+    /// Walking sideways.
+    Sideways,
+    /// Walking crouched.
+    Sneak,
+    /// Jumping with both feet.
+    Jump,
+    /// Hopping on one foot.
+    HopOneFoot,
+    /// Standing on one leg.
+    Balance,
+    /// Carrying something.
+    Carry,
+    /// Sitting down.
+    SitDown,
+    /// Crawling.
+    Crawl,
+}
+
+/// Fraction of a standing body's pelvis height that a crouched walk stays below, at most.
+pub const CROUCH_PELVIS_FRACTION: f64 = 0.85;
+/// Shortest one-leg stance that passes the balance detector, s.
+pub const BALANCE_MIN_S: f64 = 2.0;
+
+impl Family {
+    /// Every family, in report order.
+    pub const ALL: [Family; 12] = [
+        Family::Walk,
+        Family::Run,
+        Family::TurnLeft,
+        Family::TurnRight,
+        Family::Sideways,
+        Family::Sneak,
+        Family::Jump,
+        Family::HopOneFoot,
+        Family::Balance,
+        Family::Carry,
+        Family::SitDown,
+        Family::Crawl,
+    ];
+
+    /// Short name for tables and `--family`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Walk => "walk",
+            Family::Run => "run",
+            Family::TurnLeft => "turn left",
+            Family::TurnRight => "turn right",
+            Family::Sideways => "sideways walk",
+            Family::Sneak => "sneak/crouch walk",
+            Family::Jump => "jump",
+            Family::HopOneFoot => "hop on one foot",
+            Family::Balance => "one-leg balance",
+            Family::Carry => "carry",
+            Family::SitDown => "sit down",
+            Family::Crawl => "crawl",
+        }
+    }
+
+    /// The prompts its samples are drawn for: a caption-like one and a paraphrase in words the
+    /// captions do not use.
+    pub fn prompts(self) -> [&'static str; 2] {
+        match self {
+            Family::Walk => ["a person walks forward", "someone strolls ahead"],
+            Family::Run => ["a person runs forward", "someone jogs ahead quickly"],
+            Family::TurnLeft => ["a person walks and turns left", "someone strolls and veers to their left"],
+            Family::TurnRight => ["a person walks and turns right", "someone strolls and veers to their right"],
+            Family::Sideways => ["a person walks sideways to the left", "a man tiptoes sideways to his right"],
+            Family::Sneak => ["a person sneaks forward crouching", "someone creeps ahead bent low"],
+            Family::Jump => ["a person jumps forward", "someone leaps ahead with both feet"],
+            Family::HopOneFoot => ["a person hops on one foot", "someone bounces along on a single leg"],
+            Family::Balance => ["a person balances on one leg", "someone stands on one foot"],
+            Family::Carry => ["a person carries a heavy box", "someone walks holding a suitcase"],
+            Family::SitDown => ["a person sits down on a chair", "someone takes a seat"],
+            Family::Crawl => ["a person crawls forward on the ground", "someone moves on hands and knees"],
+        }
+    }
+
+    /// The held-out (test-split) windows of `corpus` that are examples of the family
+    /// ([`Family::holds`]), in corpus order.
+    pub fn held_out<'a>(self, corpus: &'a Corpus) -> impl Iterator<Item = &'a CorpusWindow> + 'a {
+        corpus.windows.iter().filter(move |w| {
+            let clip = &corpus.clips[w.clip];
+            clip.split == Split::Test && self.holds(corpus.window_joints(w), &w.tags, &clip.description)
+        })
+    }
+
+    /// Whether a window (its poses and tags) of a take with this description is an example of
+    /// the family.
+    pub fn holds(self, poses: &[Pose], tags: &MotionTags, description: &str) -> bool {
+        let action = Action::of(tags);
+        let straight = tags.turn_left().is_none();
+        match self {
+            Family::Walk => {
+                action == Action::Walk
+                    && straight
+                    && tags.direction == Some(TravelDirection::Forwards)
+                    && !tags.crouched
+            }
+            Family::Run => action == Action::Run,
+            Family::TurnLeft => action == Action::Walk && tags.turn_left() == Some(true),
+            Family::TurnRight => action == Action::Walk && tags.turn_left() == Some(false),
+            Family::Sideways => matches!(action, Action::Walk | Action::Sneak) && sideways(tags),
+            Family::Sneak => action == Action::Sneak,
+            Family::Jump => action == Action::Jump,
+            Family::HopOneFoot => action == Action::HopOneFoot,
+            Family::Balance => action == Action::Balance,
+            Family::Carry => Skill::Carry.named_by(description) && matches!(action, Action::Walk | Action::Stand),
+            Family::SitDown => Skill::Sit.named_by(description) && self.detect(poses) == Some(true),
+            Family::Crawl => action == Action::Crawl,
+        }
+    }
+
+    /// What the detector checks, for the report; `None` where there is none.
+    pub fn detector(self) -> Option<&'static str> {
+        Some(match self {
+            Family::Walk => "walks forwards",
+            Family::Run => "runs",
+            Family::TurnLeft => "turns ≥ 45° left",
+            Family::TurnRight => "turns ≥ 45° right",
+            Family::Sideways => "travels more sideways than forwards",
+            Family::Sneak => "pelvis ≥ 15 % below standing",
+            Family::Jump | Family::HopOneFoot => "airborne ≥ 2 frames",
+            Family::Balance => "one foot up ≥ 2 s",
+            Family::Carry => return None,
+            Family::SitDown => "seated in the last second",
+            Family::Crawl => "crawls",
+        })
+    }
+
+    /// Whether a motion (joints on the floor, 20 fps) passes the family's detector; `None`
+    /// where there is none.
+    pub fn detect(self, poses: &[Pose]) -> Option<bool> {
+        let tags = MotionTags::measure(poses);
+        let action = Action::of(&tags);
+        Some(match self {
+            Family::Walk => action == Action::Walk && tags.direction == Some(TravelDirection::Forwards),
+            Family::Run => action == Action::Run,
+            Family::TurnLeft => tags.turn_left() == Some(true),
+            Family::TurnRight => tags.turn_left() == Some(false),
+            Family::Sideways => sideways(&tags),
+            Family::Sneak => {
+                let pelvis = poses.iter().map(|p| p[Joint::Pelvis.index()].y).sum::<f64>() / poses.len().max(1) as f64;
+                pelvis <= CROUCH_PELVIS_FRACTION * standing_pelvis_height()
+            }
+            Family::Jump | Family::HopOneFoot => tags.airborne(),
+            Family::Balance => tags.one_foot_up_s >= BALANCE_MIN_S,
+            Family::Carry => return None,
+            Family::SitDown => {
+                let last = poses.len().saturating_sub(FPS as usize);
+                MotionTags::measure(&poses[last..]).sitting
+            }
+            Family::Crawl => action == Action::Crawl,
+        })
+    }
+}
+
+fn sideways(tags: &MotionTags) -> bool {
+    matches!(tags.direction, Some(TravelDirection::SidewaysLeft | TravelDirection::SidewaysRight))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_family_has_two_prompts_and_a_name() {
+        for f in Family::ALL {
+            assert!(f.prompts().iter().all(|p| !p.is_empty()) && f.prompts()[0] != f.prompts()[1], "{f:?}");
+            assert_eq!(f.detector().is_some(), f != Family::Carry);
+        }
+        let names: std::collections::BTreeSet<_> = Family::ALL.iter().map(|f| f.name()).collect();
+        assert_eq!(names.len(), Family::ALL.len());
+    }
+}
