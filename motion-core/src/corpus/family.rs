@@ -125,6 +125,12 @@ impl Family {
         })
     }
 
+    /// The family of a window (its poses and tags) of a take with this description: the first
+    /// of [`Family::ALL`] that it is an example of ([`Family::holds`]), `None` for none.
+    pub fn of(poses: &[Pose], tags: &MotionTags, description: &str) -> Option<Family> {
+        Family::ALL.into_iter().find(|f| f.holds(poses, tags, description))
+    }
+
     /// Whether a window (its poses and tags) of a take with this description is an example of
     /// the family.
     pub fn holds(self, poses: &[Pose], tags: &MotionTags, description: &str) -> bool {

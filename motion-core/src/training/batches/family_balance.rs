@@ -71,9 +71,15 @@ impl TrainingSet {
     /// (proportional to its frames to the power `alpha`).
     pub fn family_shares(&self, alpha: f64) -> Vec<(Option<Family>, f64, f64)> {
         let frames: f64 = self.families.iter().map(|f| f.frames as f64).sum();
+        let drawn = self.family_probabilities(alpha);
+        self.families.iter().zip(drawn).map(|(f, p)| (f.family, f.frames as f64 / frames, p)).collect()
+    }
+
+    /// Each family's probability of being drawn: its frames^`alpha`, normalised.
+    fn family_probabilities(&self, alpha: f64) -> Vec<f64> {
         let weights: Vec<f64> = self.families.iter().map(|f| (f.frames as f64).powf(alpha)).collect();
         let total: f64 = weights.iter().sum();
-        self.families.iter().zip(weights).map(|(f, w)| (f.family, f.frames as f64 / frames, w / total)).collect()
+        weights.into_iter().map(|w| w / total).collect()
     }
 
     /// The family draw of one batch's crops of `frames` frames: each family's weight
@@ -90,16 +96,20 @@ impl TrainingSet {
                 .collect()
         };
         let any: Vec<_> = cumulative(&mut self.families.iter().flat_map(|f| f.stretches.iter()).filter(long_enough));
-        let mut weights = Vec::with_capacity(self.families.len());
-        let mut pools = Vec::with_capacity(self.families.len());
-        for family in &self.families {
-            let pool = cumulative(&mut family.stretches.iter().filter(long_enough));
-            weights.push((family.frames as f64).powf(alpha));
-            pools.push(if pool.is_empty() { any.clone() } else { pool });
-        }
-        let total: f64 = weights.iter().sum();
-        let cumulative_weights = weights.iter().scan(0.0, |sum, w| {
-            *sum += w / total;
+        let pools = self
+            .families
+            .iter()
+            .map(|family| {
+                let pool = cumulative(&mut family.stretches.iter().filter(long_enough));
+                if pool.is_empty() {
+                    any.clone()
+                } else {
+                    pool
+                }
+            })
+            .collect();
+        let cumulative_weights = self.family_probabilities(alpha).into_iter().scan(0.0, |sum, p| {
+            *sum += p;
             Some(*sum)
         });
         FamilyDraw { cumulative_weights: cumulative_weights.collect(), pools }

@@ -242,22 +242,8 @@ impl TrainingSet {
             return Err(TrainError::Data(format!("no sequence has at least {} frames", config.min_frames)));
         }
         let frames = rng.random_range(config.min_frames..=config.max_frames).min(longest);
-        let long_enough = |i: &usize| self.sequences[*i].frames() >= frames;
-        let pools: Vec<Vec<usize>> = if self.balance {
-            self.groups.iter().map(|g| g.iter().copied().filter(long_enough).collect::<Vec<_>>()).collect()
-        } else {
-            vec![(0..self.sequences.len()).filter(long_enough).collect()]
-        };
-        let pools: Vec<&Vec<usize>> = pools.iter().filter(|p| !p.is_empty()).collect();
-        // Crops per sequence of the single pool, for drawing crops uniformly.
-        let cumulative: Vec<usize> = pools[0]
-            .iter()
-            .scan(0, |sum, &i| {
-                *sum += self.sequences[i].frames() - frames + 1;
-                Some(*sum)
-            })
-            .collect();
         let by_family = config.family_balance.map(|alpha| self.family_draw(alpha, frames));
+        let (pools, cumulative) = if by_family.is_some() { (Vec::new(), Vec::new()) } else { self.pools(frames) };
         let mut crops = Vec::with_capacity(config.batch_size);
         let mut rows = Vec::with_capacity(config.batch_size);
         for _ in 0..config.batch_size {
@@ -265,7 +251,7 @@ impl TrainingSet {
                 draw.crop(self, frames, rng)
             } else {
                 let i = if self.balance {
-                    let pool = pools[rng.random_range(0..pools.len())];
+                    let pool = &pools[rng.random_range(0..pools.len())];
                     pool[rng.random_range(0..pool.len())]
                 } else {
                     let crop = rng.random_range(0..*cumulative.last().unwrap_or(&1));
@@ -280,6 +266,29 @@ impl TrainingSet {
         }
         let ids = Tensor::from_vec(rows, config.batch_size, self.text.device())?;
         Ok(Batch { x0: Tensor::stack(&crops, 0)?, text: self.text.index_select(&ids, 0)? })
+    }
+
+    /// The sequences at least `frames` long, per balancing group (groups without one left
+    /// out) when balancing, else in one pool; and the cumulative crop counts of the first
+    /// pool's sequences, for drawing crops uniformly.
+    fn pools(&self, frames: usize) -> (Vec<Vec<usize>>, Vec<usize>) {
+        let long_enough = |i: &usize| self.sequences[*i].frames() >= frames;
+        let mut pools: Vec<Vec<usize>> = if self.balance {
+            self.groups.iter().map(|g| g.iter().copied().filter(long_enough).collect()).collect()
+        } else {
+            vec![(0..self.sequences.len()).filter(long_enough).collect()]
+        };
+        pools.retain(|p| !p.is_empty());
+        let cumulative = pools
+            .first()
+            .into_iter()
+            .flatten()
+            .scan(0, |sum, &i| {
+                *sum += self.sequences[i].frames() - frames + 1;
+                Some(*sum)
+            })
+            .collect();
+        (pools, cumulative)
     }
 }
 
@@ -338,7 +347,7 @@ impl CaptionedSequences {
                     let window = &corpus.windows[w];
                     let tags = if mirrored { window.tags.mirrored() } else { window.tags.clone() };
                     let window_poses = &poses[window.start..window.start + window.frames];
-                    let family = Family::ALL.into_iter().find(|f| f.holds(window_poses, &tags, &clip.description));
+                    let family = Family::of(window_poses, &tags, &clip.description);
                     let rows = window
                         .captions
                         .iter()
