@@ -113,8 +113,8 @@ pub fn markdown(rows: &[ResultRow]) -> String {
          \"all met\", \"max scene penetration\" and \"foot skate\" give the network's motion → the written one. \
          The same figures for held-out capture of each skill are in the prior's report (`mogen report prior`).\n\n",
     );
-    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | leg alternations/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | steps (target) / success | time (s) |\n");
-    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | leg alternations/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | floating (longest flight, s) | steps (target) / success | time (s) |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         let p = &r.report;
         let steps = p
@@ -141,7 +141,7 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             None => met,
         };
         out.push_str(&format!(
-            "| {} | {} | {:.6} | {met} | {penetration} | {:.3} | {:.2} | {:.3} | {:.4} | {:.3} | {skate} | {:.3} | {steps} | {:.1} |\n",
+            "| {} | {} | {:.6} | {met} | {penetration} | {:.3} | {:.2} | {:.3} | {:.4} | {:.3} | {skate} | {:.3} | {:.0}% ({:.2}) | {steps} | {:.1} |\n",
             r.task,
             p.config.method,
             p.constraint_error,
@@ -151,6 +151,8 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             p.motion.mean_acceleration,
             p.motion.max_acceleration,
             p.motion.stance_toe_height_m,
+            100.0 * p.motion.floating_share,
+            p.motion.longest_flight_s,
             p.seconds
         ));
     }

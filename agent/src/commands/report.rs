@@ -91,7 +91,23 @@ pub struct ReportArgs {
 }
 
 /// The motion-metric columns of both reports' tables, in [`metric_cells`]' order.
-const METRIC_COLUMNS: &str = "steps/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | bone range (m) | deepest joint under floor (m) | lower toe y (m) | airborne | turn ° (left / right) | spikes | head y (m) | travel (m)";
+/// The metric columns of every report table, in [`metric_values`]' order.
+const METRIC_COLUMNS: [&str; 14] = [
+    "steps/s",
+    "toe flicker",
+    "mean acc (m/frame²)",
+    "max acc (m/frame²)",
+    "foot skate",
+    "bone range (m)",
+    "deepest joint under floor (m)",
+    "lower toe y (m)",
+    "airborne",
+    "floating (longest flight, s)",
+    "turn ° (left / right)",
+    "spikes",
+    "head y (m)",
+    "travel (m)",
+];
 
 impl ReportArgs {
     /// The sampling settings of the flags.
@@ -124,14 +140,15 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let db = MotionDatabase::load(database)
         .with_context(|| format!("reading {} (build it with `mogen data build`)", database.display()))?;
     let config = QualityConfig { sampling: args.sampling(), labels: args.labels };
-    let metric_columns = METRIC_COLUMNS;
+    let metric_columns = METRIC_COLUMNS.join(" | ");
     let header = format!("| label | {metric_columns} | nearest train (m) | data spacing (m) | diversity (m) |");
     let decode = format!(
         "Root decode: `{}` (samples and training data alike). Each cell: generated / training data. The samples as the network made them, before the foot clean-up:",
         args.root_decode
     );
     println!("{decode}\n");
-    let mut lines = vec![decode, String::new(), header.clone(), format!("|{}", "---|".repeat(17))];
+    let mut lines =
+        vec![decode, String::new(), header.clone(), format!("|{}", "---|".repeat(4 + METRIC_COLUMNS.len()))];
     println!("{header}");
     let rows = quality_report(&prior, &db, &config, &device, |r| {
         let line = format!(
@@ -150,7 +167,7 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         "The same samples after the foot clean-up (defaults; what `mogen sample` writes), each cell: cleaned / training data:".to_owned(),
         String::new(),
         format!("| label | {metric_columns} |"),
-        format!("|{}", "---|".repeat(14)),
+        format!("|{}", "---|".repeat(1 + METRIC_COLUMNS.len())),
     ];
     lines.extend(cleaned);
     for r in &rows {
@@ -247,9 +264,8 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The metric cells of one row, "generated / training data" each, in the header's order.
 /// The per-family report against the corpus's held-out capture: report.md, report.json and one
-/// strip per family (4 cleaned samples in world coordinates) under `families/`.
+/// strip per family (2 cleaned samples of each prompt in world coordinates) under `families/`.
 fn run_families(
     args: &ReportArgs,
     prior: &motion_core::prior::Prior,
@@ -260,7 +276,7 @@ fn run_families(
     let config = FamilyConfig { sampling: args.sampling(), families: args.families.clone(), ..FamilyConfig::default() };
     let strips = args.out.join("families");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
-    let metric_columns = METRIC_COLUMNS;
+    let metric_columns = METRIC_COLUMNS.join(" | ");
     let intro = format!(
         "Prior `{}` against the held-out (test-split) windows of `{}`, root decode `{}`, {} samples per family ({} frames, {} DDIM steps, guidance {}). Each metric cell: samples / held-out capture; the detector cell: share of samples, cleaned samples and held-out windows passing it.",
         args.prior.display(),
@@ -272,21 +288,23 @@ fn run_families(
         args.guidance
     );
     let header = format!(
-        "| family | held-out windows | detector | passed (samples / cleaned / held-out) | nearest train (m; samples / held-out) | diversity (m) | {metric_columns} |"
+        "| family | held-out windows | detector | passed (samples / cleaned / held-out) | samples passed per prompt (caption-like / paraphrase) | nearest train (m; samples / held-out) | diversity (m) | {metric_columns} |"
     );
-    let mut lines = vec![intro.clone(), String::new(), header.clone(), format!("|{}", "---|".repeat(19))];
+    let mut lines =
+        vec![intro.clone(), String::new(), header.clone(), format!("|{}", "---|".repeat(7 + METRIC_COLUMNS.len()))];
     println!("{intro}\n\n{header}");
     let share = |s: Option<f64>| s.map_or("–".to_owned(), |v| format!("{:.0} %", 100.0 * v));
     let rows = family_report(prior, &corpus, &config, device, |r, cleaned| {
         let [samples, cleaned_share, held_out] = r.detected;
         let line = format!(
-            "| {} | {} | {} | {} / {} / {} | {:.3} / {} | {:.3} | {} |",
+            "| {} | {} | {} | {} / {} / {} | {} | {:.3} / {} | {:.3} | {} |",
             r.family.name(),
             r.held_out.count,
             r.family.detector().unwrap_or("none"),
             share(samples),
             share(cleaned_share),
             share(held_out),
+            r.detected_per_prompt.iter().map(|s| share(*s)).collect::<Vec<_>>().join(" / "),
             r.nearest_training_m,
             if r.held_out_nearest_training_m.is_finite() {
                 format!("{:.3}", r.held_out_nearest_training_m)
@@ -298,11 +316,10 @@ fn run_families(
         );
         println!("{line}");
         lines.push(line);
-        let shown: Vec<StripRow<'_>> = cleaned
-            .iter()
-            .take(4)
-            .enumerate()
-            .map(|(k, poses)| StripRow { label: format!("{} ({})", r.prompts[k % r.prompts.len()], k), poses })
+        // The first two samples of each prompt, labelled with the prompt they were drawn for.
+        let shown: Vec<StripRow<'_>> = (0..r.prompts.len())
+            .flat_map(|k| cleaned.iter().zip(&r.sample_prompts).enumerate().filter(move |(_, (_, &p))| p == k).take(2))
+            .map(|(i, (poses, &k))| StripRow { label: format!("{} ({i})", r.prompts[k]), poses })
             .collect();
         let file = strips.join(format!("{}.png", r.family.name().replace([' ', '/'], "_")));
         if let Err(e) =
@@ -316,7 +333,7 @@ fn run_families(
         "After the foot clean-up (what `mogen sample` writes), each cell: cleaned / held-out capture:".to_owned(),
         String::new(),
         format!("| family | {metric_columns} |"),
-        format!("|{}", "---|".repeat(14)),
+        format!("|{}", "---|".repeat(1 + METRIC_COLUMNS.len())),
     ]);
     for r in &rows {
         lines.push(format!("| {} | {} |", r.family.name(), metric_cells(&r.cleaned, &r.held_out)));
@@ -342,9 +359,9 @@ fn metric_cells(g: &MetricMeans, d: &MetricMeans) -> String {
         .join(" | ")
 }
 
-/// The 13 metric figures as the report prints them; the turn with its left/right shares when
-/// `turn_shares`.
-fn metric_values(m: &MetricMeans, turn_shares: bool) -> [String; 13] {
+/// The metric figures as the report prints them ([`METRIC_COLUMNS`]); the turn with its
+/// left/right shares when `turn_shares`.
+fn metric_values(m: &MetricMeans, turn_shares: bool) -> [String; METRIC_COLUMNS.len()] {
     let turn = if turn_shares {
         format!("{:+.0} ({:.0}% / {:.0}%)", m.turn_deg, 100.0 * m.turn_left_share, 100.0 * m.turn_right_share)
     } else {
@@ -360,6 +377,7 @@ fn metric_values(m: &MetricMeans, turn_shares: bool) -> [String; 13] {
         format!("{:.3}", m.max_under_floor_m),
         format!("{:.3}", m.stance_toe_height_m),
         format!("{:.0}%", 100.0 * m.airborne_share),
+        format!("{:.0}% ({:.2})", 100.0 * m.floating_share, m.longest_flight_s),
         turn,
         format!("{:.2}", m.spikes),
         format!("{:.2}", m.head_height_m),

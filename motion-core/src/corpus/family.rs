@@ -13,7 +13,8 @@
 //! - sneak/crouch: the mean pelvis height is at least 15 % below a standing body's;
 //! - jump, hop on one foot: at least 2 frames airborne;
 //! - one-leg balance: one foot more than 10 cm up while the other is down, for 2 s at a stretch;
-//! - sit down: the last second is seated (pelvis low, at knee height, still);
+//! - sit down: the first second stands (pelvis above the crouch line) and the last is seated
+//!   (pelvis low, at knee height, still): a body seated throughout has not sat down;
 //! - walk, run, crawl: the caption rule names the same action; walks also travel forwards;
 //! - turns: at least [`TURN_MIN_DEG`](crate::corpus::tags::TURN_MIN_DEG) the asked way.
 //!
@@ -169,7 +170,7 @@ impl Family {
             Family::Jump | Family::HopOneFoot => "airborne ≥ 2 frames",
             Family::Balance => "one foot up ≥ 2 s",
             Family::Carry => return None,
-            Family::SitDown => "seated in the last second",
+            Family::SitDown => "stands in the first second, seated in the last",
             Family::Crawl => "crawls",
         })
     }
@@ -185,20 +186,23 @@ impl Family {
             Family::TurnLeft => tags.turn_left() == Some(true),
             Family::TurnRight => tags.turn_left() == Some(false),
             Family::Sideways => sideways(&tags),
-            Family::Sneak => {
-                let pelvis = poses.iter().map(|p| p[Joint::Pelvis.index()].y).sum::<f64>() / poses.len().max(1) as f64;
-                pelvis <= CROUCH_PELVIS_FRACTION * standing_pelvis_height()
-            }
+            Family::Sneak => mean_pelvis_height(poses) <= CROUCH_PELVIS_FRACTION * standing_pelvis_height(),
             Family::Jump | Family::HopOneFoot => tags.airborne(),
             Family::Balance => tags.one_foot_up_s >= BALANCE_MIN_S,
             Family::Carry => return None,
             Family::SitDown => {
-                let last = poses.len().saturating_sub(FPS as usize);
-                MotionTags::measure(&poses[last..]).sitting
+                let second = (FPS as usize).min(poses.len());
+                let stands = mean_pelvis_height(&poses[..second]) > CROUCH_PELVIS_FRACTION * standing_pelvis_height();
+                stands && MotionTags::measure(&poses[poses.len() - second..]).sitting
             }
             Family::Crawl => action == Action::Crawl,
         })
     }
+}
+
+/// Mean pelvis height over the frames, m (0 for none).
+fn mean_pelvis_height(poses: &[Pose]) -> f64 {
+    poses.iter().map(|p| p[Joint::Pelvis.index()].y).sum::<f64>() / poses.len().max(1) as f64
 }
 
 fn sideways(tags: &MotionTags) -> bool {
@@ -208,6 +212,8 @@ fn sideways(tags: &MotionTags) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::corpus::prepare::put_on_floor;
+    use crate::skeleton::rest_pose;
 
     #[test]
     fn every_family_has_two_prompts_and_a_name() {
@@ -217,5 +223,36 @@ mod tests {
         }
         let names: std::collections::BTreeSet<_> = Family::ALL.iter().map(|f| f.name()).collect();
         assert_eq!(names.len(), Family::ALL.len());
+    }
+
+    /// A body lowered onto a seat at knee height over `lower` frames, after `stand` frames standing,
+    /// then seated for `seated` frames.
+    fn sitting_down(stand: usize, lower: usize, seated: usize) -> Vec<Pose> {
+        let rest = put_on_floor(&[rest_pose()])[0];
+        let knees = 0.5 * (rest[Joint::LeftKnee.index()].y + rest[Joint::RightKnee.index()].y);
+        let drop = rest[Joint::Pelvis.index()].y - knees;
+        let legs =
+            [Joint::LeftKnee, Joint::RightKnee, Joint::LeftAnkle, Joint::RightAnkle, Joint::LeftFoot, Joint::RightFoot];
+        (0..stand + lower + seated)
+            .map(|t| {
+                let down = drop * (t.saturating_sub(stand) as f64 / lower.max(1) as f64).min(1.0);
+                let mut p = rest;
+                for j in Joint::ALL.into_iter().filter(|j| !legs.contains(j)) {
+                    p[j.index()].y -= down;
+                }
+                p
+            })
+            .collect()
+    }
+
+    #[test]
+    fn sitting_down_stands_first_and_ends_seated() {
+        let sit = Family::SitDown;
+        assert_eq!(sit.detect(&sitting_down(40, 20, 60)), Some(true));
+        // Seated from the first frame: it never sat down.
+        assert_eq!(sit.detect(&sitting_down(0, 1, 120)), Some(false));
+        // Standing throughout, or still on the way down at the end.
+        assert_eq!(sit.detect(&sitting_down(120, 1, 0)), Some(false));
+        assert_eq!(sit.detect(&sitting_down(90, 30, 0)), Some(false));
     }
 }

@@ -148,9 +148,31 @@ pub fn stance_toe_height(poses: &[Pose]) -> f64 {
     lows[lows.len() / 2]
 }
 
+/// Whether both toes are higher than [`AIRBORNE_M`] above the floor.
+fn airborne(pose: &Pose) -> bool {
+    pose[Joint::LeftFoot.index()].y.min(pose[Joint::RightFoot.index()].y) > AIRBORNE_M
+}
+
 /// Frames at which both toes are higher than [`AIRBORNE_M`] above the floor.
 pub fn airborne_frames(poses: &[Pose]) -> usize {
-    poses.iter().filter(|p| p[Joint::LeftFoot.index()].y.min(p[Joint::RightFoot.index()].y) > AIRBORNE_M).count()
+    poses.iter().filter(|p| airborne(p)).count()
+}
+
+/// A flight longer than this floats, s: 2·√(2h/g) for a body whose centre rises h = 0.6 m, an
+/// athlete's standing jump.
+pub const FLOATING_FLIGHT_S: f64 = 0.7;
+
+/// Longest flight, s: the longest stretch of consecutive frames with both toes higher than
+/// [`AIRBORNE_M`]. Over [`FLOATING_FLIGHT_S`] the motion floats (or stands on something the
+/// capture does not show).
+pub fn longest_flight_s(poses: &[Pose]) -> f64 {
+    let mut longest = 0;
+    let mut run = 0;
+    for pose in poses {
+        run = if airborne(pose) { run + 1 } else { 0 };
+        longest = longest.max(run);
+    }
+    longest as f64 / FPS
 }
 
 /// Signed turn of the horizontal facing direction from the first to the last frame, rad,
@@ -243,7 +265,16 @@ mod tests {
 
     #[test]
     fn the_jump_leaves_the_ground_and_turns_go_their_way() {
-        assert!(airborne_frames(&clip("humanoid3d_jump.txt", None)) >= 3);
+        let jump = clip("humanoid3d_jump.txt", None);
+        assert!(airborne_frames(&jump) >= 3);
+        let flight = longest_flight_s(&jump);
+        assert!((3.0 / FPS..FLOATING_FLIGHT_S).contains(&flight), "a real jump's flight: {flight} s");
+        // The same jump held in the air for a second longer floats.
+        let top = (0..jump.len()).find(|&t| airborne(&jump[t])).expect("the jump leaves the ground");
+        let mut floating = jump.clone();
+        floating.splice(top..top, std::iter::repeat_n(jump[top], FPS as usize));
+        assert!(longest_flight_s(&floating) > 1.0, "{}", longest_flight_s(&floating));
+        assert_eq!(longest_flight_s(&clip("walker_0walk_forward.txt", Some(6.0))), 0.0);
         for (name, degrees) in [
             ("walker_turn_left0.txt", 30.0),
             ("walker_turn_left1.txt", 56.0),

@@ -6,8 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use super::{
     airborne_frames, bone_length_range, foot_skate_ratio, ground_penetration, hands_raised, head_neck_incorrect,
-    heading_change_rad, max_acceleration, mean_acceleration, mean_foot_acceleration, pace, root_travel, spike_frames,
-    stance_toe_height, toe_flicker,
+    heading_change_rad, longest_flight_s, max_acceleration, mean_acceleration, mean_foot_acceleration, pace,
+    root_travel, spike_frames, stance_toe_height, toe_flicker, FLOATING_FLIGHT_S,
 };
 use crate::skeleton::{Joint, Pose};
 
@@ -42,6 +42,10 @@ pub struct MetricMeans {
     pub stance_toe_height_m: f64,
     /// Fraction of motions airborne for at least 2 frames ([`airborne_frames`]).
     pub airborne_share: f64,
+    /// Fraction of motions with a flight longer than [`FLOATING_FLIGHT_S`] (floating).
+    pub floating_share: f64,
+    /// The longest flight of any motion, s ([`longest_flight_s`]; worst over motions).
+    pub longest_flight_s: f64,
     /// Mean signed turn, degrees (positive: left; [`heading_change_rad`]).
     pub turn_deg: f64,
     /// Fraction of motions turning more than [`TURN_DEG`] left.
@@ -91,6 +95,8 @@ impl MetricMeans {
             max_under_floor_m: worst(&ground_penetration),
             stance_toe_height_m: mean(&stance_toe_height),
             airborne_share: share(&|m: &[Pose]| airborne_frames(m) >= 2),
+            floating_share: share(&|m: &[Pose]| longest_flight_s(m) > FLOATING_FLIGHT_S),
+            longest_flight_s: worst(&longest_flight_s),
             turn_deg: mean(&turn),
             turn_left_share: share(&|m: &[Pose]| turn(m) > TURN_DEG),
             turn_right_share: share(&|m: &[Pose]| turn(m) < -TURN_DEG),
@@ -118,6 +124,7 @@ impl MetricMeans {
             ("bone length range", self.bone_length_range_m),
             ("depth under the floor", self.max_under_floor_m),
             ("stance toe height", self.stance_toe_height_m),
+            ("longest flight", self.longest_flight_s),
             ("turn", self.turn_deg),
             ("spikes", self.spikes),
             ("head height", self.head_height_m),

@@ -20,7 +20,12 @@ use crate::skeleton::Pose;
 
 /// Share of motions passing a detector (`None` without a detector or without motions).
 fn detected_share(family: Family, motions: &[Vec<Pose>]) -> Option<f64> {
-    let hits: Vec<bool> = motions.iter().filter_map(|m| family.detect(m)).collect();
+    share_passing(motions.iter().map(|m| family.detect(m)))
+}
+
+/// Share of `true` among the detector outcomes (`None`: no detector, or no motion).
+fn share_passing(outcomes: impl Iterator<Item = Option<bool>>) -> Option<f64> {
+    let hits: Vec<bool> = outcomes.flatten().collect();
     (!hits.is_empty()).then(|| hits.iter().filter(|h| **h).count() as f64 / hits.len() as f64)
 }
 
@@ -58,6 +63,12 @@ pub struct FamilyQuality {
     pub held_out: MetricMeans,
     /// Shares passing the detector: samples, cleaned samples, held-out windows.
     pub detected: [Option<f64>; 3],
+    /// Share of each prompt's samples (the network's output) passing the detector, in
+    /// `prompts` order: the caption-like prompt, then the paraphrase in words the captions do
+    /// not use.
+    pub detected_per_prompt: Vec<Option<f64>>,
+    /// The prompt (an index into `prompts`) each sample was drawn for, in sample order.
+    pub sample_prompts: Vec<usize>,
     /// Mean over samples of the RMS joint distance (root-relative, heading-free, over their
     /// first frames) to the nearest training-split window, m. Near 0 would mean copying.
     pub nearest_training_m: f64,
@@ -131,6 +142,7 @@ pub fn family_report(
     for (i, family) in families.into_iter().enumerate() {
         let prompts = family.prompts();
         let mut samples = Vec::new();
+        let mut sample_prompts = Vec::new();
         let mut sample_features = Vec::new();
         for (k, prompt) in prompts.iter().enumerate() {
             let batch = sampling.samples / prompts.len() + usize::from(k < sampling.samples % prompts.len());
@@ -148,6 +160,7 @@ pub fn family_report(
             let x = prior.sample(&request, device)?;
             let raw = prior.to_features(&x).map_err(tensor)?;
             samples.extend(tensor_to_poses(&prior.joints_of(&raw).map_err(tensor)?).map_err(tensor)?);
+            sample_prompts.extend(std::iter::repeat_n(k, batch));
             for b in 0..batch {
                 sample_features.push(raw.get(b).map_err(tensor)?);
             }
@@ -174,6 +187,7 @@ pub fn family_report(
             }
             nearest_distances(d, &training, |_, _| true).map_err(tensor)
         };
+        let sample_hits: Vec<Option<bool>> = samples.iter().map(|m| family.detect(m)).collect();
         let row = FamilyQuality {
             family,
             prompts: prompts.iter().map(|p| (*p).to_owned()).collect(),
@@ -181,10 +195,16 @@ pub fn family_report(
             cleaned: MetricMeans::of(&cleaned),
             held_out: MetricMeans::of(&held_out),
             detected: [
-                detected_share(family, &samples),
+                share_passing(sample_hits.iter().copied()),
                 detected_share(family, &cleaned),
                 detected_share(family, &held_out),
             ],
+            detected_per_prompt: (0..prompts.len())
+                .map(|k| {
+                    share_passing(sample_hits.iter().zip(&sample_prompts).filter(|(_, &p)| p == k).map(|(h, _)| *h))
+                })
+                .collect(),
+            sample_prompts,
             nearest_training_m: nearest(&sample_descriptors)?,
             held_out_nearest_training_m: nearest(&held_out_descriptors)?,
             sample_diversity_m: mean_pairwise(&sample_descriptors).map_err(tensor)?,
@@ -243,6 +263,13 @@ mod tests {
         assert_eq!((seen, rows.len()), (1, 1));
         let row = &rows[0];
         assert_eq!(row.samples.count, 3, "2 + 1 samples of the two prompts");
+        assert_eq!(row.sample_prompts, [0, 0, 1]);
+        assert_eq!(row.detected_per_prompt.len(), 2);
+        for (k, share) in row.detected_per_prompt.iter().enumerate() {
+            let n = if k == 0 { 2.0 } else { 1.0 };
+            let hits = share.expect("the walk has a detector") * n;
+            assert!((hits - hits.round()).abs() < 1e-9, "prompt {k}: {share:?} is not a share of {n} samples");
+        }
         assert_eq!(row.held_out.count, 1, "only the test split's window");
         assert_eq!(row.detected[2], Some(1.0), "the held-out walk walks forwards");
         assert!((row.held_out.travel_m - 1.2 * 118.0 / FPS).abs() < 0.05, "decoded travel {}", row.held_out.travel_m);

@@ -61,7 +61,7 @@ pub struct TrainConfig {
     /// the family of the window centred nearest the crop's middle): a family with probability
     /// proportional to its frames to this power (1: as the data has them, 0: every family
     /// alike), then a crop centred in it; default `None` (crops uniformly over the data). At 0.5
-    /// the rare skills (run, hop, sit down, crawl, one-leg balance) are drawn 4–12× as often as
+    /// the rare skills (run, hop, crawl, one-leg balance) are drawn 4–12× as often as
     /// the data holds them. The validation loss always draws uniformly.
     pub family_balance: Option<f64>,
     /// Weight of the four root features (yaw velocity, x/z velocity, height) in the x0 MSE,

@@ -1,6 +1,6 @@
 //! Family balance ([`TrainConfig::family_balance`](crate::training::TrainConfig::family_balance)):
 //! a corpus's crops drawn by skill family instead of uniformly, so that the rare skills (run,
-//! hop, sit down, crawl, one-leg balance: under 1 % of the frames each) are seen several times
+//! hop, crawl, one-leg balance: under 1 % of the frames each) are seen several times
 //! as often. A family is drawn with probability proportional to its frames to a power α, then a
 //! middle frame uniformly over its stretches; the crop is centred on that frame and so takes
 //! that stretch's captions. The PyTorch mirror (`fixtures/model/gpu/train_mdm.py
