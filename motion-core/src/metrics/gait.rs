@@ -162,14 +162,16 @@ pub fn airborne_frames(poses: &[Pose]) -> usize {
 /// athlete's standing jump.
 pub const FLOATING_FLIGHT_S: f64 = 0.7;
 
-/// Longest flight, s: the longest stretch of consecutive frames with both toes higher than
-/// [`AIRBORNE_M`]. Over [`FLOATING_FLIGHT_S`] the motion floats (or stands on something the
-/// capture does not show).
+/// Longest flight, s: the longest stretch of consecutive frames with every joint higher than
+/// [`AIRBORNE_M`] (toes, and also hands, knees and pelvis: a body diving onto its hands or
+/// crawling with its feet up is not in flight). Over [`FLOATING_FLIGHT_S`] the motion floats
+/// (or stands on something the capture does not show).
 pub fn longest_flight_s(poses: &[Pose]) -> f64 {
     let mut longest = 0;
     let mut run = 0;
     for pose in poses {
-        run = if airborne(pose) { run + 1 } else { 0 };
+        let lowest = pose.iter().map(|j| j.y).fold(f64::INFINITY, f64::min);
+        run = if lowest > AIRBORNE_M { run + 1 } else { 0 };
         longest = longest.max(run);
     }
     longest as f64 / FPS
@@ -275,6 +277,12 @@ mod tests {
         floating.splice(top..top, std::iter::repeat_n(jump[top], FPS as usize));
         assert!(longest_flight_s(&floating) > 1.0, "{}", longest_flight_s(&floating));
         assert_eq!(longest_flight_s(&clip("walker_0walk_forward.txt", Some(6.0))), 0.0);
+        // Feet up while a hand is on the floor: no flight.
+        let mut on_hands = floating.clone();
+        for p in &mut on_hands {
+            p[Joint::LeftWrist.index()].y = 0.05;
+        }
+        assert_eq!(longest_flight_s(&on_hands), 0.0);
         for (name, degrees) in [
             ("walker_turn_left0.txt", 30.0),
             ("walker_turn_left1.txt", 56.0),
