@@ -90,8 +90,7 @@ pub struct ReportArgs {
     out: PathBuf,
 }
 
-/// The motion-metric columns of both reports' tables, in [`metric_cells`]' order.
-/// The metric columns of every report table, in [`metric_values`]' order.
+/// The motion-metric columns of every report table, in [`metric_values`]' order.
 const METRIC_COLUMNS: [&str; 14] = [
     "steps/s",
     "toe flicker",

@@ -7,7 +7,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::metrics::{heading_change_rad, AIRBORNE_M};
+use crate::metrics::{heading_change_rad, longest_run, AIRBORNE_M};
 use crate::representation::facing_direction;
 use crate::skeleton::rest_pose;
 use crate::skeleton::{Joint, Pose, FPS};
@@ -106,22 +106,18 @@ impl MotionTags {
             let (a, b) = (t.saturating_sub(2), (t + 2).min(poses.len() - 1));
             horizontal(pelvis(b) - pelvis(a)).length() * FPS / (b - a).max(1) as f64
         };
-        let sit_frames: Vec<bool> = (0..poses.len())
-            .map(|t| pelvis(t).y < 0.7 * standing && (pelvis(t).y - knees(t)).abs() < 0.15 && speed_at(t) < 0.3)
-            .collect();
-        let sitting = longest_run(&sit_frames) as f64 / FPS >= 1.0;
+        let sit_frames = (0..poses.len())
+            .map(|t| pelvis(t).y < 0.7 * standing && (pelvis(t).y - knees(t)).abs() < 0.15 && speed_at(t) < 0.3);
+        let sitting = longest_run(sit_frames) as f64 / FPS >= 1.0;
         let on_floor = poses.iter().filter(|p| p[Joint::Head.index()].y < 0.6).count() * 4 >= n;
         let crouched = !sitting && !on_floor && (0..poses.len()).filter(|&t| low(t)).count() * 2 >= n;
 
         let up = |p: &Pose, toe: Joint, ankle: Joint| p[toe.index()].y > 0.10 && p[ankle.index()].y > 0.10;
         let down = |p: &Pose, toe: Joint| p[toe.index()].y < STANCE_TOE_HEIGHT_M + 0.05;
-        let one_foot: Vec<bool> = poses
-            .iter()
-            .map(|p| {
-                (up(p, Joint::LeftFoot, Joint::LeftAnkle) && down(p, Joint::RightFoot))
-                    || (up(p, Joint::RightFoot, Joint::RightAnkle) && down(p, Joint::LeftFoot))
-            })
-            .collect();
+        let one_foot = poses.iter().map(|p| {
+            (up(p, Joint::LeftFoot, Joint::LeftAnkle) && down(p, Joint::RightFoot))
+                || (up(p, Joint::RightFoot, Joint::RightAnkle) && down(p, Joint::LeftFoot))
+        });
         let count = |f: &dyn Fn(&Pose) -> bool| poses.iter().filter(|p| f(p)).count();
         let wrists = |p: &Pose| (p[Joint::LeftWrist.index()], p[Joint::RightWrist.index()]);
         Self {
@@ -133,7 +129,7 @@ impl MotionTags {
             sitting,
             on_floor,
             airborne_frames: flight_frames(poses),
-            one_foot_up_s: longest_run(&one_foot) as f64 / FPS,
+            one_foot_up_s: longest_run(one_foot) as f64 / FPS,
             hands_above_head_frames: count(&|p| {
                 let (l, r) = wrists(p);
                 l.y.max(r.y) > p[Joint::Head.index()].y + HEAD_TOP_M
@@ -222,16 +218,6 @@ fn flight_frames(poses: &[Pose]) -> usize {
     let up: Vec<bool> =
         poses.iter().map(|p| p[Joint::LeftFoot.index()].y.min(p[Joint::RightFoot.index()].y) > AIRBORNE_M).collect();
     up.split(|u| !u).map(<[bool]>::len).filter(|&n| n <= MAX_FLIGHT_FRAMES).sum()
-}
-
-/// Length of the longest run of `true`.
-fn longest_run(flags: &[bool]) -> usize {
-    let (mut best, mut run) = (0, 0);
-    for &f in flags {
-        run = if f { run + 1 } else { 0 };
-        best = best.max(run);
-    }
-    best
 }
 
 #[cfg(test)]

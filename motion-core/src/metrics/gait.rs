@@ -167,14 +167,18 @@ pub const FLOATING_FLIGHT_S: f64 = 0.7;
 /// crawling with its feet up is not in flight). Over [`FLOATING_FLIGHT_S`] the motion floats
 /// (or stands on something the capture does not show).
 pub fn longest_flight_s(poses: &[Pose]) -> f64 {
-    let mut longest = 0;
-    let mut run = 0;
-    for pose in poses {
-        let lowest = pose.iter().map(|j| j.y).fold(f64::INFINITY, f64::min);
-        run = if lowest > AIRBORNE_M { run + 1 } else { 0 };
-        longest = longest.max(run);
+    let off_the_floor = poses.iter().map(|p| p.iter().map(|j| j.y).fold(f64::INFINITY, f64::min) > AIRBORNE_M);
+    longest_run(off_the_floor) as f64 / FPS
+}
+
+/// Length of the longest run of `true`.
+pub fn longest_run(flags: impl IntoIterator<Item = bool>) -> usize {
+    let (mut best, mut run) = (0, 0);
+    for f in flags {
+        run = if f { run + 1 } else { 0 };
+        best = best.max(run);
     }
-    longest as f64 / FPS
+    best
 }
 
 /// Signed turn of the horizontal facing direction from the first to the last frame, rad,
