@@ -191,8 +191,8 @@ fn walks_stand_tall_and_differ_across_seeds() {
 }
 
 /// Issue 40's bars for walks, on what `mogen report prior` measures (its walk row in
-/// `fixtures/model/report.md`: 32 samples, half of them of the paraphrase "someone strolls
-/// ahead", against up to 64 held-out walking windows): GMD foot
+/// `fixtures/model/report.md`: 32 samples, half of them of the paraphrase "a woman ambles
+/// along at an easy pace", against up to 64 held-out walking windows): GMD foot
 /// skating at most 1.5x the held-out walks' on the network's output and 1.25x after the foot
 /// clean-up; the legs alternate at the held-out rate (±25 %); toes flicker and joints accelerate
 /// at most 1.5x as much; bones keep their lengths within 1 cm; the lower toe meets the floor

@@ -3,14 +3,16 @@
 //!
 //! - `captions CORPUS TEXT_MODELS OUT`: the caption tables of the corpus's train and validation
 //!   splits (mirrored copies' captions included, in the trainer's row order), encoded with
-//!   all-MiniLM-L6-v2: `train.text`, `validation.text` `[rows, 384]` (f32), the captions
-//!   themselves in the header metadata. Run where the sentence encoder is (11 MB out of 45).
+//!   all-MiniLM-L6-v2: `train.text`, `validation.text` `[rows, 384]` (f16, so that the file
+//!   travels to a lent GPU within its 64 MiB: about 5e-4 off per component of the unit-length
+//!   embeddings), the captions themselves in the header metadata. Run where the sentence
+//!   encoder is (17 MB out of 45).
 //! - `corpus CORPUS CAPTIONS OUT`: the normalised features of both splits with their captioned
 //!   stretches, the caption tables copied from CAPTIONS (checked against the corpus's captions,
 //!   row by row): per split `S` in `train`, `validation`, `S.x` `[rows, 263]` (the sequences one
 //!   after the other, normalised with the train split's statistics), `S.sequences` `[n, 2]`
 //!   (first row, frames), `S.stretches` `[m, 4]` (sequence, first frame, first phrasing, number
-//!   of phrasings), `S.phrasings` `[p]` (caption rows), `S.text` `[rows, 384]`,
+//!   of phrasings), `S.phrasings` `[p]` (caption rows), `S.text` `[rows, 384]` (back to f32),
 //!   `S.families` `[m]` (each stretch's skill family, `training::Stretch::family`, as its index
 //!   in `Family::ALL` or -1 for none, so a trainer can balance the skills); and `mean`, `std`
 //!   `[263]`; all f32, with the rest skeleton as JSON in the header metadata. Run where the
@@ -24,7 +26,7 @@ use std::collections::HashMap;
 use std::error::Error;
 use std::path::Path;
 
-use candle_core::{Device, Tensor};
+use candle_core::{DType, Device, Tensor};
 use motion_core::corpus::family::Family;
 use motion_core::corpus::{file as corpus_file, Corpus, Split};
 use motion_core::database::{MotionDatabase, Window};
@@ -66,7 +68,7 @@ fn captions(corpus: &str, text_models: &str, out: &str) -> Result<(), Box<dyn Er
             eprintln!("{name}: {}/{} captions", k * 256, captions.len());
             rows.push(encoder.encode(chunk, &Device::Cpu)?);
         }
-        tensors.push((format!("{name}.text"), Tensor::cat(&rows, 0)?));
+        tensors.push((format!("{name}.text"), Tensor::cat(&rows, 0)?.to_dtype(DType::F16)?));
         metadata.insert(format!("{name}.captions"), serde_json::to_string(&captions)?);
         println!("{name}: {} captions", captions.len());
     }
@@ -112,7 +114,7 @@ fn corpus_arrays(corpus: &str, captions: &str, out: &str) -> Result<(), Box<dyn 
         tensors.push((format!("{name}.families"), Tensor::from_vec(families, m, &Device::Cpu)?));
         tensors.push((format!("{name}.stretches"), Tensor::from_vec(stretches, (m, 4), &Device::Cpu)?));
         tensors.push((format!("{name}.phrasings"), Tensor::from_vec(phrasings, p, &Device::Cpu)?));
-        tensors.push((format!("{name}.text"), text.clone()));
+        tensors.push((format!("{name}.text"), text.to_dtype(DType::F32)?));
         println!("{name}: {n} sequences, {first_row} frames, {m} captioned stretches, {} captions", stored.len());
     }
     // Every tensor is stored as f32 (the indices too: exact below 2^24 rows), with the rest

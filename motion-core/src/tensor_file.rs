@@ -1,30 +1,36 @@
-//! Writing named f32 tensors and string metadata as one safetensors file.
+//! Writing named f32 (or f16) tensors and string metadata as one safetensors file.
 
 use std::collections::HashMap;
 use std::path::Path;
 
 use candle_core::{DType, Tensor};
 
-/// Writes `tensors` (converted to f32 on the CPU) with header `metadata` to `path` atomically,
-/// creating the parent folder. Errors are messages; callers add the path and their context.
+/// Writes `tensors` (f16 ones as f16, every other one converted to f32, on the CPU) with header
+/// `metadata` to `path` atomically, creating the parent folder. Errors are messages; callers
+/// add the path and their context.
 pub fn write_safetensors(
     path: &Path,
     tensors: &[(String, Tensor)],
     metadata: HashMap<String, String>,
 ) -> Result<(), String> {
-    let mut data: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::with_capacity(tensors.len());
+    let mut data: Vec<(String, safetensors::Dtype, Vec<usize>, Vec<u8>)> = Vec::with_capacity(tensors.len());
     for (name, t) in tensors {
-        let values = t
-            .to_dtype(DType::F32)
-            .and_then(|t| t.flatten_all())
-            .and_then(|t| t.to_vec1::<f32>())
-            .map_err(|e| format!("tensor `{name}`: {e}"))?;
-        data.push((name.clone(), t.dims().to_vec(), values.iter().flat_map(|x| x.to_le_bytes()).collect()));
+        let flat = t.flatten_all();
+        let stored = if t.dtype() == DType::F16 {
+            flat.and_then(|t| t.to_vec1::<half::f16>())
+                .map(|v| (safetensors::Dtype::F16, v.iter().flat_map(|x| x.to_le_bytes()).collect()))
+        } else {
+            flat.and_then(|t| t.to_dtype(DType::F32))
+                .and_then(|t| t.to_vec1::<f32>())
+                .map(|v| (safetensors::Dtype::F32, v.iter().flat_map(|x| x.to_le_bytes()).collect()))
+        };
+        let (dtype, bytes) = stored.map_err(|e| format!("tensor `{name}`: {e}"))?;
+        data.push((name.clone(), dtype, t.dims().to_vec(), bytes));
     }
     let views = data
         .iter()
-        .map(|(name, shape, bytes)| {
-            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), bytes)
+        .map(|(name, dtype, shape, bytes)| {
+            safetensors::tensor::TensorView::new(*dtype, shape.clone(), bytes)
                 .map(|v| (name.clone(), v))
                 .map_err(|e| format!("tensor `{name}`: {e}"))
         })
@@ -41,4 +47,29 @@ pub fn read_metadata(bytes: &[u8]) -> Result<HashMap<String, String>, String> {
     let (_, meta) =
         safetensors::SafeTensors::read_metadata(bytes).map_err(|e| format!("not a safetensors file: {e}"))?;
     Ok(meta.metadata().clone().unwrap_or_default())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::Device;
+
+    #[test]
+    fn f16_tensors_stay_f16_and_the_rest_become_f32() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.safetensors");
+        let values = [0.25f32, -1.5, 3.0e-4];
+        let half = Tensor::new(&values, &Device::Cpu).unwrap().to_dtype(DType::F16).unwrap();
+        let double = Tensor::new(&[1.0f64, 2.0], &Device::Cpu).unwrap();
+        let meta = HashMap::from([("k".to_owned(), "v".to_owned())]);
+        write_safetensors(&path, &[("h".into(), half), ("d".into(), double)], meta.clone()).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!(read_metadata(&bytes).unwrap(), meta);
+        let read = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu).unwrap();
+        assert_eq!(read["h"].dtype(), DType::F16);
+        assert_eq!(read["d"].dtype(), DType::F32);
+        let back = read["h"].to_dtype(DType::F32).unwrap().to_vec1::<f32>().unwrap();
+        assert!(back.iter().zip(values).all(|(b, v)| (b - v).abs() <= 1e-3 * v.abs()), "{back:?}");
+        assert_eq!(read["d"].to_vec1::<f32>().unwrap(), [1.0, 2.0]);
+    }
 }

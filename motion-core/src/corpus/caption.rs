@@ -1,8 +1,9 @@
 //! Captions that say what a window does: a sentence built from the window's measured
 //! [`MotionTags`] (the action, the direction of travel relative to facing, the turn, speed and
-//! hand states), in several phrasings so a model does not learn one template, two of them with
-//! the take's description beside it (what CMU says of the whole take: vocabulary the tags
-//! cannot give, such as "salsa" or "basketball dribble").
+//! hand states), in several phrasings so a model does not learn one template, each of them bare
+//! and two of them also with the take's description beside it (what CMU says of the whole
+//! take: vocabulary the tags cannot give, such as "salsa" or "basketball dribble"). The bare
+//! sentences are what a user's prompt looks like, so most of a window's captions are bare.
 //!
 //! Rules, in order: head under 0.6 m for a quarter of the window → crawls (moving) or is on the
 //! floor; sitting → sits; airborne with one foot up → hops on one foot; airborne and faster
@@ -114,8 +115,15 @@ const SUBJECTS: [&str; PHRASINGS] = ["a person", "someone", "the person"];
 /// description: "a person walks slowly forward and turns left by about 90 degrees".
 pub fn sentence(tags: &MotionTags, k: usize) -> String {
     let k = k % PHRASINGS;
+    mixed_sentence(tags, k, k, k)
+}
+
+/// The sentence with the verb (and the turn and hand clauses) of phrasing `k`, the subject of
+/// phrasing `subject` and the direction words of phrasing `direction` (each 0..[`PHRASINGS`]),
+/// so that across windows every verb meets every subject and direction word.
+fn mixed_sentence(tags: &MotionTags, k: usize, subject: usize, direction: usize) -> String {
     let action = Action::of(tags);
-    let mut words = vec![SUBJECTS[k].to_owned(), action.verbs()[k].to_owned()];
+    let mut words = vec![SUBJECTS[subject].to_owned(), action.verbs()[k].to_owned()];
     if action == Action::Walk {
         if tags.speed_m_per_s < 0.7 {
             words.push("slowly".into());
@@ -125,7 +133,7 @@ pub fn sentence(tags: &MotionTags, k: usize) -> String {
     }
     if action.travels() {
         if let Some(d) = tags.direction {
-            words.push(direction_words(d)[k].into());
+            words.push(direction_words(d)[direction].into());
         }
     }
     let mut s = words.join(" ");
@@ -147,18 +155,23 @@ pub fn sentence(tags: &MotionTags, k: usize) -> String {
     s
 }
 
-/// Every phrasing of a window: the bare sentence, then the take's description with the
-/// sentence in two forms (when the take has a description).
-pub fn captions(tags: &MotionTags, description: &str) -> Vec<String> {
+/// Every caption of the window numbered `window` (any number that differs between
+/// neighbouring windows, such as its index in the corpus): the [`PHRASINGS`] bare sentences,
+/// the first one phrasing 0 exactly ("a person walks forward", what displays and retrieval
+/// show), the others with their subject and direction words rotated by `window` (over nine
+/// consecutive windows each verb meets every subject and direction word); then, when the take
+/// has a description, the second and third sentence again beside it, in two forms.
+pub fn captions(tags: &MotionTags, description: &str, window: usize) -> Vec<String> {
     let description = description.trim();
-    (0..PHRASINGS)
+    let bare: Vec<String> = (0..PHRASINGS)
         .map(|k| match k {
             0 => sentence(tags, 0),
-            _ if description.is_empty() => sentence(tags, k),
-            1 => format!("{}: {}", description, sentence(tags, 1)),
-            _ => format!("{} (a take of: {})", sentence(tags, k), description),
+            _ => mixed_sentence(tags, k, (k + window) % PHRASINGS, (k + window / PHRASINGS) % PHRASINGS),
         })
-        .collect()
+        .collect();
+    let described = (!description.is_empty())
+        .then(|| [format!("{}: {}", description, bare[1]), format!("{} (a take of: {})", bare[2], description)]);
+    bare.iter().cloned().chain(described.into_iter().flatten()).collect()
 }
 
 #[cfg(test)]
@@ -195,10 +208,30 @@ mod tests {
         assert_eq!(sentence(&t, 0), "a person balances on one leg");
         let t = MotionTags { hands_above_head_frames: 30, speed_m_per_s: 0.0, direction: None, ..tags() };
         assert_eq!(sentence(&t, 0), "a person stands with the hands raised above the head");
-        let all = captions(&tags(), "walk, stop, sit down");
-        assert_eq!(all.len(), PHRASINGS);
-        assert_eq!(all[1], "walk, stop, sit down: someone steps ahead");
-        assert_eq!(all[2], "the person strolls forwards (a take of: walk, stop, sit down)");
-        assert_eq!(captions(&tags(), " ")[2], "the person strolls forwards");
+    }
+
+    #[test]
+    fn every_phrasing_is_bare_and_the_words_rotate_across_windows() {
+        let all = captions(&tags(), "walk, stop, sit down", 0);
+        assert_eq!(
+            all,
+            [
+                "a person walks forward",
+                "someone steps ahead",
+                "the person strolls forwards",
+                "walk, stop, sit down: someone steps ahead",
+                "the person strolls forwards (a take of: walk, stop, sit down)"
+            ]
+        );
+        assert_eq!(captions(&tags(), " ", 0), all[..PHRASINGS]);
+        // The next windows give the same verbs other subjects, then other direction words;
+        // the first caption stays phrasing 0.
+        assert_eq!(
+            captions(&tags(), "", 1),
+            ["a person walks forward", "the person steps ahead", "a person strolls forwards"]
+        );
+        assert_eq!(captions(&tags(), "", 3)[1..], ["someone steps forwards", "the person strolls forward"]);
+        let strolls: std::collections::BTreeSet<String> = (0..9).map(|w| captions(&tags(), "", w)[2].clone()).collect();
+        assert_eq!(strolls.len(), 9, "{strolls:?}");
     }
 }

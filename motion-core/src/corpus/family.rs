@@ -98,22 +98,25 @@ impl Family {
         }
     }
 
-    /// The prompts its samples are drawn for: a caption-like one and a paraphrase in words the
-    /// captions do not use.
+    /// The prompts its samples are drawn for: a caption-like one and a paraphrase whose verbs
+    /// and direction words the caption rules (`caption.rs`) never use ("someone strolls ahead"
+    /// and "someone stands on one foot" are captions since session 33).
     pub fn prompts(self) -> [&'static str; 2] {
         match self {
-            Family::Walk => ["a person walks forward", "someone strolls ahead"],
-            Family::Run => ["a person runs forward", "someone jogs ahead quickly"],
-            Family::TurnLeft => ["a person walks and turns left", "someone strolls and veers to their left"],
-            Family::TurnRight => ["a person walks and turns right", "someone strolls and veers to their right"],
+            Family::Walk => ["a person walks forward", "a woman ambles along at an easy pace"],
+            Family::Run => ["a person runs forward", "a man sprints off into the distance"],
+            Family::TurnLeft => ["a person walks and turns left", "someone ambles and veers off to their left"],
+            Family::TurnRight => ["a person walks and turns right", "someone ambles and veers off to their right"],
             Family::Sideways => ["a person walks sideways to the left", "a man tiptoes sideways to his right"],
-            Family::Sneak => ["a person sneaks forward crouching", "someone creeps ahead bent low"],
-            Family::Jump => ["a person jumps forward", "someone leaps ahead with both feet"],
+            Family::Sneak => ["a person sneaks forward crouching", "someone prowls along hunched over"],
+            Family::Jump => ["a person jumps forward", "someone bounds onward with both feet"],
             Family::HopOneFoot => ["a person hops on one foot", "someone bounces along on a single leg"],
-            Family::Balance => ["a person balances on one leg", "someone stands on one foot"],
+            Family::Balance => ["a person balances on one leg", "someone keeps one foot off the ground"],
             Family::Carry => ["a person carries a heavy box", "someone walks holding a suitcase"],
             Family::SitDown => ["a person sits down on a chair", "someone takes a seat"],
-            Family::Crawl => ["a person crawls forward on the ground", "someone moves on hands and knees"],
+            Family::Crawl => {
+                ["a person crawls forward on the ground", "a toddler scrambles across the floor on its knees"]
+            }
         }
     }
 

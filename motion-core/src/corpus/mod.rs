@@ -231,7 +231,7 @@ impl Corpus {
         let index = self.clips.len();
         for (start, frames) in window_starts(poses.len()) {
             let tags = MotionTags::measure(&poses[start..start + frames]);
-            let captions = caption::captions(&tags, &clip.description);
+            let captions = caption::captions(&tags, &clip.description, self.windows.len());
             self.windows.push(CorpusWindow { clip: index, start, frames, tags, captions });
         }
         self.joints.extend(poses);

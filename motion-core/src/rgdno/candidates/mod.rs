@@ -236,7 +236,7 @@ impl RetrievalDatabase {
         let mut database = Self::empty(true);
         for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == Split::Train) {
             let mirrored_description = mirror_label(&clip.description);
-            let windows = corpus.windows.iter().filter(|w| w.clip == index).map(|w| {
+            let windows = corpus.windows.iter().enumerate().filter(|(_, w)| w.clip == index).map(|(number, w)| {
                 let text = |captions: Vec<String>| WindowText {
                     measured: captions.first().cloned().unwrap_or_default(),
                     said: captions.join(" | "),
@@ -244,7 +244,10 @@ impl RetrievalDatabase {
                 StoredWindow {
                     start: w.start,
                     frames: w.frames,
-                    texts: [text(w.captions.clone()), text(captions(&w.tags.mirrored(), &mirrored_description))],
+                    texts: [
+                        text(w.captions.clone()),
+                        text(captions(&w.tags.mirrored(), &mirrored_description, number)),
+                    ],
                 }
             });
             database.push(

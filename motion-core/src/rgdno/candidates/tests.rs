@@ -14,7 +14,7 @@ pub(in crate::rgdno) fn tiny_corpus(clips: Vec<(&str, Split, Vec<Pose>)>) -> Cor
     for (name, split, poses) in clips {
         for (start, frames) in window_starts(poses.len()) {
             let tags = MotionTags::measure(&poses[start..start + frames]);
-            let captions = captions(&tags, "walk");
+            let captions = captions(&tags, "walk", corpus.windows.len());
             corpus.windows.push(CorpusWindow { clip: corpus.clips.len(), start, frames, tags, captions });
         }
         corpus.clips.push(CorpusClip {
