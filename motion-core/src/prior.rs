@@ -7,7 +7,11 @@
 //! [`VocabularyEncoder`](crate::text::vocabulary::VocabularyEncoder), or
 //! `sentence_encoder`, the name of a sentence encoder such as [`MINILM_NAME`], whose weights live
 //! in the text models folder, not in the prior) and `rest_skeleton` (JSON of [`RestSkeleton`], the
-//! training data's bone lengths; absent in files written before it existed).
+//! training data's bone lengths; absent in files written before it existed). A prior conditioned
+//! on a sentence encoder may carry its [`CaptionBank`]: the distinct training captions' vectors
+//! as `conditioning.captions` (`[captions, text_dim]`, f16) and the captions themselves as
+//! `caption_bank` (a JSON list); prompts are then conditioned on their nearest training caption
+//! ([`Prior::encode_text`]).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -23,6 +27,7 @@ use crate::representation::{
     recover_from_ric, rigid_bones, root_velocity_from_planted_feet, MeanStd, NormalizationError, RestSkeleton,
 };
 use crate::tensor_file::{read_metadata, write_safetensors};
+use crate::text::caption_bank::{CaptionBank, NearestCaption};
 use crate::text::{ConditionEncoder, TextEncoder, MINILM_NAME};
 
 const MEAN_KEY: &str = "normalization.mean";
@@ -30,6 +35,8 @@ const STD_KEY: &str = "normalization.std";
 const REST_KEY: &str = "rest_skeleton";
 const VOCABULARY_KEY: &str = "vocabulary";
 const SENTENCE_KEY: &str = "sentence_encoder";
+const BANK_KEY: &str = "conditioning.captions";
+const BANK_TEXT_KEY: &str = "caption_bank";
 
 /// Errors loading or saving a prior.
 #[derive(Debug, thiserror::Error)]
@@ -135,6 +142,9 @@ pub struct Prior {
     /// Bone lengths of the training data: generated joints are re-derived on them, so bones are
     /// rigid by construction ([`rigid_bones`]); `None` for files without it (joints as decoded).
     pub rest: Option<RestSkeleton>,
+    /// The captions it was trained on, when the file carries them: prompts are conditioned on
+    /// the nearest of them ([`Self::encode_text`]).
+    pub captions: Option<CaptionBank>,
 }
 
 impl Prior {
@@ -165,7 +175,7 @@ impl Prior {
                 cfg.text_dim
             )));
         }
-        let tensors = candle_core::safetensors::load_buffer(&bytes, device).map_err(|e| format(e.to_string()))?;
+        let mut tensors = candle_core::safetensors::load_buffer(&bytes, device).map_err(|e| format(e.to_string()))?;
         for (name, tensor) in &tensors {
             let values = tensor
                 .to_dtype(DType::F32)
@@ -194,9 +204,21 @@ impl Prior {
             .get(REST_KEY)
             .map(|json| serde_json::from_str(json).map_err(|e| format(format!("bad {REST_KEY}: {e}"))))
             .transpose()?;
+        let captions = match (tensors.remove(BANK_KEY), meta.get(BANK_TEXT_KEY)) {
+            (None, None) => None,
+            (Some(vectors), Some(json)) if matches!(encoder, ConditionEncoder::MiniLm(_)) => {
+                let captions = serde_json::from_str(json).map_err(|e| format(format!("bad {BANK_TEXT_KEY}: {e}")))?;
+                if vectors.dims().get(1) != Some(&cfg.text_dim) {
+                    return Err(format(format!("`{BANK_KEY}` is {:?}, not [_, {}]", vectors.dims(), cfg.text_dim)));
+                }
+                Some(CaptionBank::new(captions, vectors).map_err(|e| format(format!("`{BANK_KEY}`: {e}")))?)
+            }
+            (Some(_), Some(_)) => return Err(format(format!("`{BANK_KEY}` needs a sentence encoder"))),
+            _ => return Err(format(format!("`{BANK_KEY}` and `{BANK_TEXT_KEY}` come together; one is missing"))),
+        };
         let mdm =
             Mdm::new(cfg, VarBuilder::from_tensors(tensors, DType::F32, device)).map_err(|e| format(e.to_string()))?;
-        Ok(Self { mdm, encoder, mean_std, root_decode: RootDecode::default(), rest })
+        Ok(Self { mdm, encoder, mean_std, root_decode: RootDecode::default(), rest, captions })
     }
 
     /// Writes the prior as one safetensors file.
@@ -208,6 +230,7 @@ impl Prior {
             &self.encoder,
             &self.mean_std,
             self.rest.as_ref(),
+            self.captions.as_ref(),
         )
     }
 
@@ -219,6 +242,7 @@ impl Prior {
         encoder: &ConditionEncoder,
         mean_std: &MeanStd,
         rest: Option<&RestSkeleton>,
+        captions: Option<&CaptionBank>,
     ) -> Result<(), PriorError> {
         let format = |message: String| PriorError::from(FileError::format(path, message));
         let mut tensors: Vec<(String, Tensor)> = params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
@@ -237,12 +261,35 @@ impl Prior {
         if let Some(rest) = rest {
             metadata.insert(REST_KEY.to_owned(), serde_json::to_string(rest).map_err(|e| format(e.to_string()))?);
         }
+        if let Some(bank) = captions {
+            let vectors = bank.vectors().to_dtype(DType::F16).map_err(|e| format(e.to_string()))?;
+            tensors.push((BANK_KEY.into(), vectors));
+            let json = serde_json::to_string(bank.captions()).map_err(|e| format(e.to_string()))?;
+            metadata.insert(BANK_TEXT_KEY.to_owned(), json);
+        }
         write_safetensors(path, &tensors, metadata).map_err(format)
     }
 
-    /// Condition vectors of prompts, `[prompts.len(), text_dim]`.
+    /// Condition vectors of prompts, `[prompts.len(), text_dim]`: the text encoder's, or, for
+    /// a prior with a [`CaptionBank`], those of the training captions nearest the prompts.
     pub fn encode_text(&self, prompts: &[&str], device: &Device) -> candle_core::Result<Tensor> {
-        self.encoder.encode(prompts, device)
+        let own = self.encoder.encode(prompts, device)?;
+        match &self.captions {
+            Some(bank) => bank.snap(&own, prompts, device),
+            None => Ok(own),
+        }
+    }
+
+    /// The training caption a non-blank prompt is conditioned on (`None` without a
+    /// [`CaptionBank`] or for a blank prompt).
+    pub fn nearest_caption(&self, prompt: &str) -> candle_core::Result<Option<NearestCaption>> {
+        match &self.captions {
+            Some(bank) if !prompt.trim().is_empty() => {
+                let own = self.encoder.encode(&[prompt], bank.vectors().device())?;
+                Ok(bank.nearest(&own)?.pop())
+            }
+            _ => Ok(None),
+        }
     }
 
     /// Unconstrained samples: `batch` motions of `frames` frames for `prompt`, from seeded start
@@ -320,6 +367,7 @@ impl Prior {
             mean_std: MeanStd::from_vecs(vec![0.0; 263], vec![0.1; 263], &Device::Cpu).unwrap(),
             root_decode: RootDecode::Velocity,
             rest: None,
+            captions: None,
         }
     }
 }
@@ -363,7 +411,7 @@ mod tests {
         let broken = Tensor::from_vec(values, weight.shape(), &Device::Cpu).unwrap();
         named.push((name.clone(), broken));
         let damaged = dir.path().join("damaged.safetensors");
-        Prior::write(&damaged, &named, prior.mdm.config(), &prior.encoder, &prior.mean_std, prior.rest.as_ref())
+        Prior::write(&damaged, &named, prior.mdm.config(), &prior.encoder, &prior.mean_std, prior.rest.as_ref(), None)
             .unwrap();
         let err = Prior::load(&damaged, &no_text, &Device::Cpu).unwrap_err().to_string();
         assert!(err.contains(&format!("tensor `{name}` has 1 of")) && err.contains("damaged"), "{err}");
@@ -383,7 +431,7 @@ mod tests {
             MdmConfig { latent_dim: 16, ff_size: 32, num_layers: 1, num_heads: 2, text_dim: 384, ..MdmConfig::small() };
         let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
         let mean_std = MeanStd::from_vecs(vec![0.0; 263], vec![1.0; 263], &Device::Cpu).unwrap();
-        let prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::Velocity, rest: None };
+        let mut prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::Velocity, rest: None, captions: None };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("prior.safetensors");
         prior.save(&path).unwrap();
@@ -397,5 +445,21 @@ mod tests {
         assert_eq!(crate::testing::max_abs_diff(&a, &b).unwrap(), 0.0);
         let err = Prior::load(&path, dir.path(), &Device::Cpu).unwrap_err().to_string();
         assert!(err.contains(MINILM_NAME) && err.contains(&dir.path().display().to_string()), "{err}");
+
+        // With its training captions, a prompt is conditioned on the nearest one, written as
+        // f16 and read back.
+        let captions = ["a person walks forward", "a person sits down"].map(String::from).to_vec();
+        let vectors = prior.encoder.encode(&["a person walks forward", "a person sits down"], &Device::Cpu).unwrap();
+        prior.captions = Some(CaptionBank::new(captions, vectors.clone()).unwrap());
+        prior.save(&path).unwrap();
+        let back = Prior::load(&path, &text_models, &Device::Cpu).unwrap();
+        let nearest = back.nearest_caption("someone takes a seat").unwrap().unwrap();
+        assert_eq!(nearest.caption, "a person sits down");
+        let snapped = back.encode_text(&["someone takes a seat", ""], &Device::Cpu).unwrap();
+        assert!(crate::testing::max_abs_diff(&snapped.get(0).unwrap(), &vectors.get(1).unwrap()).unwrap() < 1e-3);
+        let blank = prior.encoder.encode(&[""], &Device::Cpu).unwrap();
+        // The blank prompt keeps its own vector (batched with another prompt: 2e-7 off).
+        assert!(crate::testing::max_abs_diff(&snapped.get(1).unwrap(), &blank.get(0).unwrap()).unwrap() < 1e-5);
+        assert_eq!(back.nearest_caption(" ").unwrap(), None);
     }
 }

@@ -18,6 +18,7 @@ use motion_core::quality::text_motion::{
 };
 use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, QualityConfig, ReportSampling};
 use motion_core::render::{motion_strip, StripRow};
+use motion_core::text::caption_bank::KEEP_OWN_SIMILARITY;
 
 use crate::paths;
 
@@ -336,6 +337,29 @@ fn run_families(
     ]);
     for r in &rows {
         lines.push(format!("| {} | {} |", r.family.name(), metric_cells(&r.cleaned, &r.held_out)));
+    }
+    if prior.captions.is_some() {
+        lines.extend([
+            String::new(),
+            format!(
+                "The training caption nearest each prompt (cosine similarity of the sentence vectors); a prompt under {KEEP_OWN_SIMILARITY} is conditioned on the caption's vector, the others on their own:"
+            ),
+            String::new(),
+            "| family | prompt | conditioned on | cosine |".to_owned(),
+            "|---|---|---|---|".to_owned(),
+        ]);
+        for r in &rows {
+            for prompt in &r.prompts {
+                if let Some(n) = prior.nearest_caption(prompt)? {
+                    let caption = if n.replaces_prompt() {
+                        n.caption
+                    } else {
+                        format!("(its own vector; nearest: {})", n.caption)
+                    };
+                    lines.push(format!("| {} | {prompt} | {caption} | {:.2} |", r.family.name(), n.similarity));
+                }
+            }
+        }
     }
     let text_motion = text_motion_section(args, prior, &corpus, device, &mut lines)?;
     std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;

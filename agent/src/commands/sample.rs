@@ -68,6 +68,14 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         Some(heard) => eprintln!("the prior hears: {}", heard.join(" ")),
         None => {}
     }
+    match prior.nearest_caption(&args.prompt)? {
+        Some(n) if n.replaces_prompt() => eprintln!(
+            "no training caption is near the prompt; conditioned on the nearest: {:?} (cosine similarity {:.2})",
+            n.caption, n.similarity
+        ),
+        Some(n) => eprintln!("the nearest training caption: {:?} (cosine similarity {:.2})", n.caption, n.similarity),
+        None => {}
+    }
     let request = Sampling {
         prompt: &args.prompt,
         frames: args.frames,

@@ -3,6 +3,7 @@
 //! `fixtures/text/`); priors trained on the 23 labelled clips on the deterministic
 //! [`vocabulary::VocabularyEncoder`]; official MDM checkpoints on [`clip`].
 
+pub mod caption_bank;
 pub mod clip;
 pub mod minilm;
 pub mod vocabulary;

@@ -385,7 +385,8 @@ impl Trainer {
     /// Writes the EMA weights as a shippable prior.
     pub fn save_prior(&self, path: &Path) -> Result<(), TrainError> {
         let data = &self.data;
-        Prior::write(path, &self.ema_parameters(), &self.model_config, data.encoder(), data.mean_std(), data.rest())?;
+        let (params, config) = (self.ema_parameters(), &self.model_config);
+        Prior::write(path, &params, config, data.encoder(), data.mean_std(), data.rest(), data.caption_bank())?;
         Ok(())
     }
 

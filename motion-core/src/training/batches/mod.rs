@@ -33,6 +33,7 @@ use crate::database::{mirror_label, MotionDatabase};
 use crate::motion::mirror;
 use crate::representation::{extract_features, FeatureFrame, MeanStd, RestSkeleton, FEATURE_DIM};
 use crate::skeleton::rest_bone_lengths;
+use crate::text::caption_bank::CaptionBank;
 use crate::text::vocabulary::VocabularyEncoder;
 use crate::text::{ConditionEncoder, TextEncoder};
 
@@ -106,6 +107,9 @@ pub struct TrainingSet {
     balance: bool,
     /// Seconds of motion, mirrored copies included.
     seconds: f64,
+    /// The captions with their rows of `text`, for a sentence encoder's set (what a prior
+    /// trained on it conditions prompts on).
+    bank: Option<CaptionBank>,
 }
 
 impl TrainingSet {
@@ -175,7 +179,7 @@ impl TrainingSet {
         }
         groups.retain(|g| !g.is_empty());
         let families = FamilyStretches::of(&sequences);
-        Ok(Self { sequences, text, encoder, mean_std, rest, groups, families, balance, seconds })
+        Ok(Self { sequences, text, encoder, mean_std, rest, groups, families, balance, seconds, bank: None })
     }
 
     /// The text encoder whose vectors the condition table holds.
@@ -206,6 +210,12 @@ impl TrainingSet {
     /// Distinct captions (rows of the condition table).
     pub fn captions(&self) -> usize {
         self.text.dims()[0]
+    }
+
+    /// The captions and their condition vectors, for a corpus set encoded by a sentence
+    /// encoder (`None` for a vocabulary encoder's set, whose words a prompt is matched by).
+    pub fn caption_bank(&self) -> Option<&CaptionBank> {
+        self.bank.as_ref()
     }
 
     /// Seconds of motion, mirrored copies included.
@@ -419,7 +429,12 @@ impl CaptionedSequences {
         progress(self.captions.len(), self.captions.len());
         let text = Tensor::cat(&encoded, 0)?;
         let rest = Some(RestSkeleton { bone_lengths_m: rest_bone_lengths() });
-        TrainingSet::assemble(self.sequences, text, encoder, self.mean_std, rest, false, self.seconds)
+        let sentence = matches!(encoder, ConditionEncoder::MiniLm(_));
+        let mut set = TrainingSet::assemble(self.sequences, text, encoder, self.mean_std, rest, false, self.seconds)?;
+        if sentence {
+            set.bank = Some(CaptionBank::new(self.captions, set.text.clone()).map_err(TrainError::Data)?);
+        }
+        Ok(set)
     }
 }
 
