@@ -98,6 +98,25 @@ fn progress_goes_to_a_log_and_errors_carry_no_backtrace() {
     assert!(!stderr.to_lowercase().contains("backtrace") && stderr.lines().count() == 1, "{stderr}");
 }
 
+/// `mogen sample` says which training caption a prompt is conditioned on: a paraphrase far
+/// from every caption takes the nearest one (a crawl), a caption keeps its own vector.
+#[test]
+fn sample_names_the_training_caption_a_prompt_is_conditioned_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let sample = |prompt: &str, out: &str| {
+        let out = dir.path().join(out).display().to_string();
+        let output = mogen(&["sample", prompt, "-n", "1", "--frames", "40", "--steps", "2", "-o", &out]);
+        let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+        assert!(output.status.success(), "{stderr}");
+        stderr
+    };
+    let far = sample("a toddler scrambles across the floor on its knees", "far");
+    let line = far.lines().find(|l| l.contains("conditioned on the nearest")).unwrap_or_else(|| panic!("{far}"));
+    assert!(line.contains("crawls"), "{line}");
+    let near = sample("a person walks forward", "near");
+    assert!(near.contains("the nearest training caption: \"a person walks forward\" (cosine similarity 1.00)"), "{near}");
+}
+
 /// A prior file whose header disagrees with its tensors (here `latent_dim` 64 over 128-wide
 /// weights) is a user error: one line naming the file and the tensor, no backtrace, even with
 /// `RUST_BACKTRACE` set (candle captures one into the error's message otherwise), and nothing

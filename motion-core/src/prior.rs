@@ -10,8 +10,8 @@
 //! training data's bone lengths; absent in files written before it existed). A prior conditioned
 //! on a sentence encoder may carry its [`CaptionBank`]: the distinct training captions' vectors
 //! as `conditioning.captions` (`[captions, text_dim]`, f16) and the captions themselves as
-//! `caption_bank` (a JSON list); prompts are then conditioned on their nearest training caption
-//! ([`Prior::encode_text`]).
+//! `caption_bank` (a JSON list); a prompt far from every training caption is then conditioned
+//! on the nearest one ([`Prior::encode_text`]).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -142,8 +142,8 @@ pub struct Prior {
     /// Bone lengths of the training data: generated joints are re-derived on them, so bones are
     /// rigid by construction ([`rigid_bones`]); `None` for files without it (joints as decoded).
     pub rest: Option<RestSkeleton>,
-    /// The captions it was trained on, when the file carries them: prompts are conditioned on
-    /// the nearest of them ([`Self::encode_text`]).
+    /// The captions it was trained on, when the file carries them: a prompt far from all of
+    /// them is conditioned on the nearest ([`Self::encode_text`]).
     pub captions: Option<CaptionBank>,
 }
 
