@@ -114,7 +114,10 @@ fn sample_names_the_training_caption_a_prompt_is_conditioned_on() {
     let line = far.lines().find(|l| l.contains("conditioned on the nearest")).unwrap_or_else(|| panic!("{far}"));
     assert!(line.contains("crawls"), "{line}");
     let near = sample("a person walks forward", "near");
-    assert!(near.contains("the nearest training caption: \"a person walks forward\" (cosine similarity 1.00)"), "{near}");
+    assert!(
+        near.contains("the nearest training caption: \"a person walks forward\" (cosine similarity 1.00)"),
+        "{near}"
+    );
 }
 
 /// A prior file whose header disagrees with its tensors (here `latent_dim` 64 over 128-wide
