@@ -10,8 +10,8 @@
 //! training data's bone lengths; absent in files written before it existed). A prior conditioned
 //! on a sentence encoder may carry its [`CaptionBank`]: the distinct training captions' vectors
 //! as `conditioning.captions` (`[captions, text_dim]`, f16) and the captions themselves as
-//! `caption_bank` (a JSON list); a prompt far from every training caption is then conditioned
-//! on the nearest one ([`Prior::encode_text`]).
+//! `caption_bank` (a JSON list); a free prompt far from every training caption is then
+//! conditioned on the nearest one ([`Prior::caption_conditions`]).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -142,8 +142,8 @@ pub struct Prior {
     /// Bone lengths of the training data: generated joints are re-derived on them, so bones are
     /// rigid by construction ([`rigid_bones`]); `None` for files without it (joints as decoded).
     pub rest: Option<RestSkeleton>,
-    /// The captions it was trained on, when the file carries them: a prompt far from all of
-    /// them is conditioned on the nearest ([`Self::encode_text`]).
+    /// The captions it was trained on, when the file carries them: a free prompt far from all
+    /// of them is conditioned on the nearest ([`Self::caption_conditions`]).
     pub captions: Option<CaptionBank>,
 }
 
@@ -270,10 +270,22 @@ impl Prior {
         write_safetensors(path, &tensors, metadata).map_err(format)
     }
 
-    /// Condition vectors of prompts, `[prompts.len(), text_dim]`: the text encoder's, or, for
-    /// a prior with a [`CaptionBank`], those of the training captions nearest the prompts.
+    /// Condition vectors of prompts, `[prompts.len(), text_dim]`, as the text encoder gives
+    /// them. What constrained generation (DNO, RG-DNO) conditions on: the program's constraints
+    /// say what the body does, and a program's text heard as its nearest training caption gains
+    /// words it did not ask for (Task 3's "a man walks forwards and raises up hands at the same
+    /// time" became "... raising both hands, holding the hands together", and three of four
+    /// RG-DNO samples started bent double; on its own vector all four met every constraint,
+    /// session 33, `fixtures/results/`).
     pub fn encode_text(&self, prompts: &[&str], device: &Device) -> candle_core::Result<Tensor> {
-        let own = self.encoder.encode(prompts, device)?;
+        self.encoder.encode(prompts, device)
+    }
+
+    /// Condition vectors of free prompts (sampling without constraints), `[prompts.len(),
+    /// text_dim]`: [`Self::encode_text`]'s, except that for a prior with a [`CaptionBank`] a
+    /// prompt far from every training caption takes the nearest one's ([`CaptionBank::snap`]).
+    pub fn caption_conditions(&self, prompts: &[&str], device: &Device) -> candle_core::Result<Tensor> {
+        let own = self.encode_text(prompts, device)?;
         match &self.captions {
             Some(bank) => bank.snap(&own, prompts, device),
             None => Ok(own),
@@ -298,13 +310,13 @@ impl Prior {
     pub fn sample(&self, request: &Sampling<'_>, device: &Device) -> Result<Tensor, PriorError> {
         let Sampling { prompt, frames, batch, seed, steps, guidance } = *request;
         let text = self
-            .encode_text(&vec![prompt; batch], device)
+            .caption_conditions(&vec![prompt; batch], device)
             .map_err(|e| PriorError::Compute { what: "sampling", message: e.to_string() })?;
         self.sample_conditioned(&text, frames, seed, steps, guidance)
     }
 
     /// One motion per row of condition vectors `text` `[batch, text_dim]` (prompts through
-    /// [`Self::encode_text`]), as [`Self::sample`] draws them: `[batch, frames, 263]`, normalised.
+    /// [`Self::caption_conditions`]), as [`Self::sample`] draws them: `[batch, frames, 263]`, normalised.
     pub fn sample_conditioned(
         &self,
         text: &Tensor,
@@ -455,7 +467,13 @@ mod tests {
         let back = Prior::load(&path, &text_models, &Device::Cpu).unwrap();
         let nearest = back.nearest_caption("someone takes a seat").unwrap().unwrap();
         assert_eq!(nearest.caption, "a person sits down");
-        let snapped = back.encode_text(&["someone takes a seat", ""], &Device::Cpu).unwrap();
+        let snapped = back.caption_conditions(&["someone takes a seat", ""], &Device::Cpu).unwrap();
+        let own = back.encode_text(&["someone takes a seat"], &Device::Cpu).unwrap();
+        assert_eq!(
+            crate::testing::max_abs_diff(&own, &prior.encoder.encode(&["someone takes a seat"], &Device::Cpu).unwrap())
+                .unwrap(),
+            0.0
+        );
         assert!(crate::testing::max_abs_diff(&snapped.get(0).unwrap(), &vectors.get(1).unwrap()).unwrap() < 1e-3);
         let blank = prior.encoder.encode(&[""], &Device::Cpu).unwrap();
         // The blank prompt keeps its own vector (batched with another prompt: 2e-7 off).

@@ -141,7 +141,7 @@ pub fn text_motion_report(
     let mut samples = Vec::with_capacity(config.pairs);
     for (k, chunk) in captions.chunks(CHUNK).enumerate() {
         progress(samples.len(), config.pairs);
-        let text = prior.encode_text(chunk, device).map_err(tensor)?;
+        let text = prior.caption_conditions(chunk, device).map_err(tensor)?;
         let guidance = Guidance { scale: config.guidance };
         let x =
             prior.sample_conditioned(&text, WINDOW_FRAMES - 1, config.seed + k as u64, config.ddim_steps, guidance)?;
