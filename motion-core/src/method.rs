@@ -12,6 +12,7 @@ use crate::constraints::{CompiledProgram, ConstraintError};
 use crate::diffusion::Guidance;
 use crate::dno::DnoConfig;
 use crate::limits;
+use crate::objective::Guards;
 use crate::program::TaskProgram;
 use crate::refine::{RefineConfig, RefineReport};
 
@@ -72,13 +73,11 @@ pub struct GenerationConfig {
     pub dno: DnoConfig,
     /// The IK baselines' optimiser.
     pub direct: DirectConfig,
-    /// Weight λ of the jitter guard added to DNO's criterion: `λ·Σ_{t,j} relu(‖a_tj‖ − A)²`
-    /// with `a` the joints' second differences (m/frame²) and `A` = [`crate::objective::JITTER_LIMIT`]. Ours, not
-    /// DNO's or ProgMoGen's: without it, DNO through our small prior satisfies keyframe
-    /// constraints with one-frame glitches (max acceleration 5–12× the unconstrained samples'
-    /// on HSI-2/3). 0 switches it off. Default 1.
-    #[serde(default = "default_jitter_weight")]
-    pub jitter_weight: f64,
+    /// The guards added to the criterion of DNO and RG-DNO's stages ([`Guards`]: no one-frame
+    /// glitches, no flight longer than 0.7 s, free fall in flight). Ours, not DNO's or
+    /// ProgMoGen's. Default: all three at weight 1.
+    #[serde(default)]
+    pub guards: Guards,
     /// The contact-aware clean-up of every method's output (foot locking with leg IK; on by
     /// default). Its `plant_on_floor` is switched off for programs whose scene holds a raised
     /// support (a balance beam, a ground away from y = 0), and its `keep_above_floor` for those
@@ -100,7 +99,7 @@ impl GenerationConfig {
 
     /// Settings a run of `frames` frames can use: at least one sample, within
     /// [`limits::BATCH_SAMPLES`] and [`limits::BATCH_ATTENTION`] (checked before any tensor is
-    /// made), a finite guidance ≥ 0 and a finite jitter weight ≥ 0.
+    /// made), a finite guidance ≥ 0 and finite guard weights ≥ 0.
     pub fn check(&self, frames: usize) -> Result<(), GenerationError> {
         if self.samples == 0 {
             return Err(GenerationError::Setting("samples must be at least 1".into()));
@@ -111,18 +110,9 @@ impl GenerationConfig {
         if !(self.guidance.is_finite() && self.guidance >= 0.0) {
             return Err(GenerationError::Setting(format!("guidance must be finite and ≥ 0, got {}", self.guidance)));
         }
-        if !(self.jitter_weight.is_finite() && self.jitter_weight >= 0.0) {
-            return Err(GenerationError::Setting(format!(
-                "the jitter weight must be finite and ≥ 0, got {}",
-                self.jitter_weight
-            )));
-        }
+        self.guards.check().map_err(GenerationError::Setting)?;
         self.refine.validate().map_err(GenerationError::Setting)
     }
-}
-
-fn default_jitter_weight() -> f64 {
-    1.0
 }
 
 /// Settings of the direct (IK) optimisation.
@@ -154,7 +144,7 @@ impl GenerationConfig {
             guidance: Guidance::MDM_SCALE,
             dno: DnoConfig::default(),
             direct: DirectConfig::default(),
-            jitter_weight: default_jitter_weight(),
+            guards: Guards::DEFAULT,
             foot_lock: FootLockConfig::default(),
             refine: RefineConfig::default(),
         }
@@ -303,8 +293,10 @@ mod tests {
         config.samples = 65;
         assert!(config.check(40).unwrap_err().to_string().contains("samples per run"));
         config.samples = 1;
-        config.jitter_weight = f64::INFINITY;
-        assert!(config.check(40).unwrap_err().to_string().contains("jitter weight"));
+        config.guards.jitter = f64::INFINITY;
+        assert!(config.check(40).unwrap_err().to_string().contains("jitter guard's weight"));
+        config.guards = Guards { flight: -1.0, ..Guards::DEFAULT };
+        assert!(config.check(40).unwrap_err().to_string().contains("flight guard's weight"));
     }
 
     #[test]

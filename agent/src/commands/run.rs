@@ -6,7 +6,7 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use motion_core::evaluation::TaskReport;
 use motion_core::export::OutputFolder;
-use motion_core::generation::{Event, GenerationConfig, Method};
+use motion_core::generation::{Event, GenerationConfig, Guards, Method};
 use motion_core::pipeline::{run_task, write_task, TaskSettings};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
@@ -87,6 +87,14 @@ pub struct GenerationArgs {
     /// Weight of DNO's jitter guard on joint accelerations above 0.15 m/frame² (0: off).
     #[arg(long, default_value_t = 1.0, value_parser = flags::weight)]
     pub jitter_weight: f64,
+    /// Weight of DNO's flight guard: in every 0.75 s some joint comes within 0.10 m of the floor,
+    /// so no leap hangs in the air longer than an athlete's jump (0.7 s) (0: off).
+    #[arg(long, default_value_t = 1.0, value_parser = flags::weight)]
+    pub flight_weight: f64,
+    /// Weight of DNO's ballistic guard: in flight the centre of mass falls at g, so a leap's
+    /// height fits its time in the air (0: off).
+    #[arg(long, default_value_t = 1.0, value_parser = flags::weight)]
+    pub ballistic_weight: f64,
     /// Switch off the contact-aware clean-up (foot locking with leg IK) of the output; the report
     /// gives every figure before and after it when it runs.
     #[arg(long)]
@@ -152,7 +160,8 @@ impl GenerationArgs {
         config.seed = self.seed;
         config.guidance = self.guidance;
         config.dno.restarts = self.restarts;
-        config.jitter_weight = self.jitter_weight;
+        config.guards =
+            Guards { jitter: self.jitter_weight, flight: self.flight_weight, ballistic: self.ballistic_weight };
         config.foot_lock.enabled = !self.no_foot_lock;
         config.refine.enabled = !self.no_refine;
         if let Some(lr) = self.lr {

@@ -90,6 +90,12 @@ pub struct TrainArgs {
     /// sampling); high-noise steps teach the denoiser to tie frames together.
     #[arg(long, default_value_t = TrainConfig::default().high_noise_fraction, value_parser = super::flags::fraction)]
     high_noise_fraction: f64,
+    /// Noise on the text conditions: per row, σ uniform in [0, TEXT_NOISE] times the row's
+    /// length, then scaled back to that length (0.05 moves a 384-d sentence vector to cosine
+    /// about 0.71 of its caption), so the denoiser learns the space between its captions where
+    /// paraphrases lie (0 = off).
+    #[arg(long, default_value_t = TrainConfig::default().text_noise, value_parser = super::flags::weight)]
+    text_noise: f64,
     /// Fraction of frames whose noisy input is replaced by pure noise, target unchanged, so the
     /// denoiser learns to restore frames from their neighbours (0 = off).
     #[arg(long, default_value_t = TrainConfig::default().frame_corruption, value_parser = super::flags::fraction)]
@@ -180,6 +186,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         snr_gamma: args.snr_gamma,
         high_noise_fraction: args.high_noise_fraction,
         frame_corruption: args.frame_corruption,
+        text_noise: args.text_noise,
         velocity_weight: args.velocity_weight,
         foot_contact_weight: args.foot_contact_weight,
         seed: args.seed,

@@ -31,7 +31,9 @@ use candle_core::{Device, Tensor};
 pub use crate::method::{
     ensure_finite, pick_rows, DirectConfig, Generated, GenerationConfig, GenerationError, Method, Task,
 };
-pub use crate::objective::{jitter_penalty, joints_objective, program_objective, JITTER_LIMIT};
+pub use crate::objective::{
+    flight_penalty, jitter_penalty, joints_objective, program_objective, Guards, FLIGHT_LIMIT_FRAMES, JITTER_LIMIT,
+};
 
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
@@ -192,14 +194,14 @@ fn from_sample(
     let (features, loss_history): (Tensor, Vec<Vec<f64>>) = match method {
         FromSample::Unconstrained => (x0, vec![Vec::new(); config.samples]),
         FromSample::Direct { smoothness } => {
-            let plain = program_objective(prior, compiled, &initial_joints, 0.0);
+            let plain = program_objective(prior, compiled, &initial_joints, Guards::NONE);
             direct::optimize_motion(&x0, &plain, &config.direct, smoothness, |step, loss| {
                 progress(0, step, config.direct.steps, loss)
             })?
         }
         FromSample::Dno => {
             let dno = DnoConfig { seed: config.seed, ..config.dno.clone() };
-            let guarded = program_objective(prior, compiled, &initial_joints, config.jitter_weight);
+            let guarded = program_objective(prior, compiled, &initial_joints, config.guards);
             let run = optimize_with_restarts(&solver as &dyn Solver, guarded, shape, device, &dno, |round, s| {
                 let loss = s.loss.iter().sum::<f64>() / s.loss.len().max(1) as f64;
                 progress(round, s.step, s.steps, loss)

@@ -42,8 +42,8 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             ..config.dno.clone()
         };
         let (c1, c2) = (compiled.subset(&groups.random_noise), compiled.subset(&groups.retrieved_noise));
-        let f1 = program_objective(prior, &c1, initial_joints, config.jitter_weight);
-        let f2 = program_objective(prior, &c2, initial_joints, config.jitter_weight);
+        let f1 = program_objective(prior, &c1, initial_joints, config.guards);
+        let f2 = program_objective(prior, &c2, initial_joints, config.guards);
         let branches = |x: &Tensor| Tensor::cat(&[f1(&x.narrow(0, 0, batch)?)?, f2(&x.narrow(0, batch, batch)?)?], 0);
         let starts = Tensor::cat(&[z0, z_r], 0)?;
         let fitted = dno::optimize(both, branches, &starts, &first, |s| {

@@ -20,7 +20,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<DnoResult, RgDnoError> {
         let Stages { prior, compiled, config, rg, solver, .. } = *self;
-        let full = program_objective(prior, compiled, initial_joints, config.jitter_weight);
+        let full = program_objective(prior, compiled, initial_joints, config.guards);
         let last = DnoConfig {
             steps: rg.final_steps,
             lr: rg.final_lr,

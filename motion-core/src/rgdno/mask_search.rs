@@ -14,7 +14,7 @@ use crate::constraints::CompiledProgram;
 use crate::diffusion::Denoiser;
 use crate::dno::UnrolledDdim;
 use crate::method::GenerationError;
-use crate::objective::joints_objective;
+use crate::objective::{joints_objective, Guards};
 use crate::prior::Prior;
 use crate::representation::FEATURE_DIM;
 
@@ -30,12 +30,12 @@ pub(super) struct MaskStages<'a, M: Denoiser + ?Sized> {
 }
 
 /// The program objective's parts ([`crate::objective::program_objective`]): the compiled
-/// program, the initial joints `[B or 1, T, 22, 3]` and the jitter guard's weight.
+/// program, the initial joints `[B or 1, T, 22, 3]` and the guards.
 #[derive(Clone, Copy)]
 pub(super) struct Objective<'a> {
     pub(super) compiled: &'a CompiledProgram,
     pub(super) initial: &'a Tensor,
-    pub(super) jitter_weight: f64,
+    pub(super) guards: Guards,
 }
 
 impl Objective<'_> {
@@ -45,7 +45,7 @@ impl Objective<'_> {
             (1, _) | (_, 1) => self.initial.clone(),
             _ => self.initial.repeat((copies, 1, 1, 1))?,
         };
-        let objective = joints_objective(self.compiled, &initial, self.jitter_weight);
+        let objective = joints_objective(self.compiled, &initial, self.guards);
         objective(joints)
     }
 }

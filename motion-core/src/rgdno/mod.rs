@@ -283,7 +283,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
                     prior,
                     rg,
                     solver,
-                    objective: Objective { compiled, initial: &initial_joints, jitter_weight: config.jitter_weight },
+                    objective: Objective { compiled, initial: &initial_joints, guards: config.guards },
                     weights: &reward_weights,
                     round,
                 };

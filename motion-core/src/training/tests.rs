@@ -243,3 +243,24 @@ fn a_corpus_run_validates_on_held_out_clips_and_writes_its_encoder() {
     assert!(matches!(prior.encoder, crate::text::ConditionEncoder::Vocabulary(_)));
     assert_eq!(prior.rest.map(|r| r.bone_lengths_m), Some(crate::skeleton::rest_bone_lengths()));
 }
+
+#[test]
+fn text_noise_keeps_each_condition_s_length_and_blank_rows() {
+    let dim = 384;
+    let mut unit = vec![0f32; dim];
+    unit[0] = 0.6;
+    unit[1] = 0.8;
+    let long: Vec<f32> = unit.iter().map(|v| 3.0 * v).collect();
+    let rows = [unit.clone(), vec![0.0; dim], long].concat();
+    let text = Tensor::from_vec(rows, (3, dim), &Device::Cpu).unwrap();
+    let moved = perturb_conditions(&text, 0.05, &mut StdRng::seed_from_u64(7)).unwrap();
+    let norms = moved.sqr().unwrap().sum(1).unwrap().sqrt().unwrap().to_vec1::<f32>().unwrap();
+    assert!((norms[0] - 1.0).abs() < 1e-5 && norms[1] == 0.0 && (norms[2] - 3.0).abs() < 1e-4, "{norms:?}");
+    // Moved, but at σ ≤ 0.05 no further than cosine 1/√(1 + 384·0.05²) ≈ 0.71 on average.
+    let cosine = (&moved * &text).unwrap().sum(1).unwrap().to_vec1::<f32>().unwrap();
+    assert!(cosine[0] < 1.0 - 1e-4 && cosine[0] > 0.4, "{cosine:?}");
+    assert!((cosine[2] / 9.0 - 1.0).abs() > 1e-4 && cosine[2] / 9.0 > 0.4, "{cosine:?}");
+    // The same stream moves them the same way (a resumed run draws what an uninterrupted one does).
+    let again = perturb_conditions(&text, 0.05, &mut StdRng::seed_from_u64(7)).unwrap();
+    assert_eq!(again.to_vec2::<f32>().unwrap(), moved.to_vec2::<f32>().unwrap());
+}
