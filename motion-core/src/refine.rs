@@ -33,14 +33,18 @@
 //! **Honesty.** The layer is bounded and smooth, so it cannot turn a walk into a crawl: a
 //! constraint that needs a different motion (a 0.5 m barrier) stays violated and the report says
 //! so. A sample keeps its refined motion only when the whole program's error (counts included)
-//! did not rise and no constraint it met (in natural units, [`CompiledProgram::satisfaction`])
-//! fails after; [`RefineReport`] gives the error and the largest joint offset, and the run's
+//! did not rise, no constraint it met (in natural units, [`CompiledProgram::satisfaction`])
+//! fails after, and no flight grows past [`FLOATING_FLIGHT_S`] (lifting a touch-down between
+//! two hops to meet a height makes one leap that hangs in the air: seen on
+//! `mogen_jump_over_box`, 0.7 → 1.55 s); [`RefineReport`] gives the error and the largest joint offset, and the run's
 //! report gives every figure before and after the clean-up stages.
 
 use candle_core::{DType, Result, Tensor, Var, D};
 use serde::{Deserialize, Serialize};
 
 use crate::constraints::{CompiledProgram, ConstraintError};
+use crate::metrics::{longest_flight_s, FLOATING_FLIGHT_S};
+use crate::motion::tensor_to_poses;
 use crate::optim::AdamW;
 use crate::representation::{rigid_bones, RestSkeleton};
 use crate::skeleton::{Joint, CONTACT_JOINTS};
@@ -179,10 +183,14 @@ pub fn refine(
     let mean_offset = per_sample(&offsets.mean(D::Minus1)?)?;
     let verdicts_before = compiled.satisfaction(joints, initial)?;
     let verdicts_after = compiled.satisfaction(&refined, initial)?;
+    let flights =
+        |j: &Tensor| -> Result<Vec<f64>> { Ok(tensor_to_poses(j)?.iter().map(|m| longest_flight_s(m)).collect()) };
+    let (flight_before, flight_after) = (flights(joints)?, flights(&refined)?);
     let keep: Vec<bool> = (0..batch)
         .map(|i| {
             let no_new_failure = verdicts_before.iter().zip(&verdicts_after).all(|(b, a)| !b.pass[i] || a.pass[i]);
-            after[i].is_finite() && after[i] <= before[i] && no_new_failure
+            let no_new_float = flight_after[i] <= flight_before[i].max(FLOATING_FLIGHT_S);
+            after[i].is_finite() && after[i] <= before[i] && no_new_failure && no_new_float
         })
         .collect();
     let reports = (0..batch)
@@ -374,6 +382,24 @@ mod tests {
                 assert!(acc(&refined) <= acc(&motion) + 0.005, "frame {t}, joint {j}: {}", acc(&refined));
             }
         }
+    }
+
+    #[test]
+    fn a_refinement_that_would_join_two_hops_into_one_long_flight_is_not_kept() {
+        // Two 9-frame hops (every joint 0.2 m up) with a 2-frame touch-down between them (toes
+        // at 7 cm: on the ground for the flight metric, not planted for the layer).
+        let lift = |t: usize| match t {
+            5..=12 | 15..=22 => 0.2,
+            13 | 14 => 0.05,
+            _ => 0.0,
+        };
+        let motion: Motion = (0..30).map(|t| STANDING.map(|[x, y, z]| [x, y + lift(t), z])).collect();
+        let pelvis_high = r#"{"op": "greater_than", "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "y"}, "min": 1.2, "frames": {"range": {"from": {"frame": 5}, "to": {"frame": 22}}}}"#;
+        let compiled = compile(30, &[pelvis_high]);
+        let (out, reports) = refine(&tensor(&motion), &compiled, None, &RefineConfig::default()).unwrap();
+        // Lifting the touch-down would lower the error but leave the body 0.9 s in the air.
+        assert!(!reports[0].applied, "{:?}", reports[0]);
+        assert_eq!(poses(&out), motion);
     }
 
     #[test]
