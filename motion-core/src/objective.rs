@@ -47,13 +47,18 @@ pub fn flight_penalty(joints: &Tensor, limit: usize) -> candle_core::Result<Tens
     if frames < window {
         return Tensor::zeros(batch, joints.dtype(), joints.device());
     }
-    let lowest = joints.narrow(D::Minus1, 1, 1)?.squeeze(D::Minus1)?.min(D::Minus1)?; // [B, T]
+    let lowest = joint_heights(joints)?.min(D::Minus1)?; // [B, T]
     let count = frames - window + 1;
     let mut window_lowest = lowest.narrow(1, 0, count)?;
     for k in 1..window {
         window_lowest = window_lowest.minimum(&lowest.narrow(1, k, count)?)?;
     }
     (window_lowest - AIRBORNE_M)?.relu()?.sum(D::Minus1)
+}
+
+/// The joints' heights `[B, T, 22]` (m, y) of joints `[B, T, 22, 3]`.
+fn joint_heights(joints: &Tensor) -> candle_core::Result<Tensor> {
+    joints.narrow(D::Minus1, 1, 1)?.squeeze(D::Minus1)
 }
 
 /// Gravity, m/s².
@@ -71,7 +76,7 @@ pub fn ballistic_penalty(joints: &Tensor) -> candle_core::Result<Tensor> {
     if frames < 3 {
         return Tensor::zeros(batch, joints.dtype(), joints.device());
     }
-    let heights = joints.narrow(D::Minus1, 1, 1)?.squeeze(D::Minus1)?; // [B, T, 22]
+    let heights = joint_heights(joints)?;
     let weights = Tensor::new(&centre_of_mass_weights(false), joints.device())?.to_dtype(joints.dtype())?.reshape((
         1,
         1,

@@ -36,8 +36,8 @@
 //! did not rise, no constraint it met (in natural units, [`CompiledProgram::satisfaction`])
 //! fails after, and no flight grows past [`FLOATING_FLIGHT_S`] (lifting a touch-down between
 //! two hops to meet a height makes one leap that hangs in the air: seen on
-//! `mogen_jump_over_box`, 0.7 → 1.55 s); [`RefineReport`] gives the error and the largest joint offset, and the run's
-//! report gives every figure before and after the clean-up stages.
+//! `mogen_jump_over_box`, 0.7 → 1.55 s); [`RefineReport`] gives the error and the largest joint
+//! offset, and the run's report gives every figure before and after the clean-up stages.
 
 use candle_core::{DType, Result, Tensor, Var, D};
 use serde::{Deserialize, Serialize};

@@ -104,8 +104,8 @@ pub fn markdown(rows: &[ResultRow]) -> String {
     if let Some(first) = rows.first() {
         let c = &first.report.config;
         out.push_str(&format!(
-            "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s), jitter guard weight {}, flight guard weight {}), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
-            c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.guards.jitter, c.guards.flight, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
+            "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s), jitter guard weight {}, flight guard weight {}, ballistic guard weight {}), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
+            c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.guards.jitter, c.guards.flight, c.guards.ballistic, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
         ));
     }
     out.push_str(
