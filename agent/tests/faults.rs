@@ -110,6 +110,7 @@ fn non_finite_results_and_flags_are_errors_not_files() {
         ("--jitter-weight=-1e30", "outside [0, 1000000]"),
         ("--flight-weight=nan", "NaN is not a finite number"),
         ("--ballistic-weight=-1", "outside [0, 1000000]"),
+        ("--floor-weight=inf", "inf is not a finite number"),
         ("--guidance=1e38", "outside [0, 100]"),
         ("--lr=0", "above 0"),
         ("--samples=100000", "outside 1..=64"),

@@ -74,8 +74,8 @@ pub struct GenerationConfig {
     /// The IK baselines' optimiser.
     pub direct: DirectConfig,
     /// The guards added to the criterion of DNO and RG-DNO's stages ([`Guards`]: no one-frame
-    /// glitches, no flight longer than 0.7 s, free fall in flight). Ours, not DNO's or
-    /// ProgMoGen's. Default: all three at weight 1.
+    /// glitches, no flight longer than 0.7 s, free fall in flight, no joint under the floor).
+    /// Ours, not DNO's or ProgMoGen's. Default: [`Guards::DEFAULT`].
     #[serde(default)]
     pub guards: Guards,
     /// The contact-aware clean-up of every method's output (foot locking with leg IK; on by

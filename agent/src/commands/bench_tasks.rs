@@ -32,7 +32,9 @@ pub struct BenchTasksArgs {
     #[command(flatten)]
     generation: GenerationArgs,
     /// Output folder: results.json, results.md and one folder of motions per task and method.
-    /// Rows already in results.json are kept and not run again (delete it to start over).
+    /// A row already in results.json is kept and not run again when its settings are this
+    /// run's, exactly as written there; a row of the same task and method made with other
+    /// settings (or by a build whose settings lacked one of today's) is run again and replaced.
     #[arg(long, short, default_value = "out/bench-tasks")]
     out: PathBuf,
 }
@@ -44,6 +46,37 @@ pub struct ResultRow {
     pub task: String,
     /// The run's report.
     pub report: TaskReport,
+}
+
+/// A row of `results.json` with the JSON it was read from, which is written back unchanged: read
+/// into a [`ResultRow`], a row made before a setting existed takes a default for it (today's,
+/// for most settings), and written back from there it would pass for a run with those settings.
+struct StoredRow {
+    row: ResultRow,
+    json: serde_json::Value,
+}
+
+impl StoredRow {
+    fn new(row: ResultRow) -> serde_json::Result<Self> {
+        let json = serde_json::to_value(&row)?;
+        Ok(Self { row, json })
+    }
+
+    /// The rows of a `results.json`.
+    fn read(text: &str) -> serde_json::Result<Vec<Self>> {
+        let rows: Vec<serde_json::Value> = serde_json::from_str(text)?;
+        rows.into_iter().map(|json| Ok(Self { row: serde_json::from_value(json.clone())?, json })).collect()
+    }
+
+    /// `results.json` holding `rows`.
+    fn json(rows: &[Self]) -> serde_json::Result<String> {
+        serde_json::to_string_pretty(&rows.iter().map(|r| &r.json).collect::<Vec<_>>())
+    }
+
+    /// Whether the row was made with exactly `settings`, as its JSON says.
+    fn made_with(&self, settings: &GenerationConfig) -> serde_json::Result<bool> {
+        Ok(self.json.pointer("/report/config") == Some(&serde_json::to_value(settings)?))
+    }
 }
 
 pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
@@ -59,8 +92,8 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
     anyhow::ensure!(!files.is_empty(), "no task files in {}", args.tasks.display());
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let json_path = args.out.join("results.json");
-    let mut rows: Vec<ResultRow> = match std::fs::read_to_string(&json_path) {
-        Ok(text) => serde_json::from_str(&text).with_context(|| format!("reading {}", json_path.display()))?,
+    let mut rows = match std::fs::read_to_string(&json_path) {
+        Ok(text) => StoredRow::read(&text).with_context(|| format!("reading {}", json_path.display()))?,
         Err(_) => Vec::new(),
     };
     for file in &files {
@@ -68,25 +101,35 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
         let program = load_program(file)?;
         for &method in &args.methods {
             let method = Method::from(method);
-            if rows.iter().any(|r| r.task == task && r.report.config.method == method) {
-                continue;
+            let settings = args.generation.settings(method);
+            match rows.iter().position(|r| r.row.task == task && r.row.report.config.method == method) {
+                Some(k) if rows[k].made_with(&settings.generation)? => continue,
+                Some(k) => {
+                    eprintln!(
+                        "{task} / {method}: {} holds a run with other settings; running it again",
+                        json_path.display()
+                    );
+                    rows.remove(k);
+                }
+                None => {}
             }
             eprintln!("{task} / {method}");
             let report = run_program(
                 &prior,
                 &program,
-                &args.generation.settings(method),
+                &settings,
                 OutputFolder::create(&args.out.join(&task).join(method.name()))?,
                 args.generation.formats,
             )?;
-            rows.push(ResultRow { task: task.clone(), report });
-            write_atomically(&json_path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-            write_atomically(&args.out.join("results.md"), markdown(&rows).as_bytes())?;
+            rows.push(StoredRow::new(ResultRow { task: task.clone(), report })?);
+            write_atomically(&json_path, StoredRow::json(&rows)?.as_bytes())?;
+            let table: Vec<ResultRow> = rows.iter().map(|r| r.row.clone()).collect();
+            write_atomically(&args.out.join("results.md"), markdown(&table).as_bytes())?;
         }
     }
-    rows.sort_by(|a, b| (&a.task, a.report.config.method).cmp(&(&b.task, b.report.config.method)));
-    std::fs::write(&json_path, serde_json::to_string_pretty(&rows)?)
-        .with_context(|| format!("writing {}", json_path.display()))?;
+    rows.sort_by(|a, b| (&a.row.task, a.row.report.config.method).cmp(&(&b.row.task, b.row.report.config.method)));
+    std::fs::write(&json_path, StoredRow::json(&rows)?).with_context(|| format!("writing {}", json_path.display()))?;
+    let rows: Vec<ResultRow> = rows.into_iter().map(|r| r.row).collect();
     std::fs::write(args.out.join("results.md"), markdown(&rows))?;
     println!("{}", markdown(&rows));
     println!("wrote {} and {}", json_path.display(), args.out.join("results.md").display());
@@ -104,8 +147,8 @@ pub fn markdown(rows: &[ResultRow]) -> String {
     if let Some(first) = rows.first() {
         let c = &first.report.config;
         out.push_str(&format!(
-            "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s), jitter guard weight {}, flight guard weight {}, ballistic guard weight {}), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
-            c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.guards.jitter, c.guards.flight, c.guards.ballistic, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
+            "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s), jitter guard weight {}, flight guard weight {}, ballistic guard weight {}, floor guard weight {}), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
+            c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.guards.jitter, c.guards.flight, c.guards.ballistic, c.guards.floor, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
         ));
     }
     out.push_str(
@@ -263,4 +306,37 @@ pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
         println!("| {batch} | {total:.1} | {:.4} | {first:.5} → {last:.5} |", total / args.steps as f64);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use motion_core::generation::Guards;
+
+    use super::*;
+
+    #[test]
+    fn a_stored_row_is_reused_only_with_the_settings_it_was_written_with() {
+        // Table 6 of session 34, made before the floor guard existed (read as weight 0): not a
+        // run with today's settings, nor with the same settings and the guard at 0, since its
+        // JSON lacks the setting.
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures/results/session34-table6-n4/results.json");
+        let rows = StoredRow::read(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let old = &rows[0];
+        assert_eq!(old.row.report.config.guards.floor, 0.0);
+        assert!(!old.made_with(&old.row.report.config).unwrap());
+        let mut today = old.row.report.config.clone();
+        today.guards = Guards::DEFAULT;
+        assert!(!old.made_with(&today).unwrap());
+        // Written back unchanged: still without the floor guard.
+        let again = StoredRow::read(&StoredRow::json(&rows).unwrap()).unwrap();
+        assert_eq!(again.len(), rows.len());
+        assert!(again[0].json.pointer("/report/config/guards/floor").is_none());
+        // The same run made with today's build is reused, and only with its own settings.
+        let mut row = old.row.clone();
+        row.report.config = today.clone();
+        let fresh = StoredRow::new(row).unwrap();
+        assert!(fresh.made_with(&today).unwrap());
+        today.seed += 1;
+        assert!(!fresh.made_with(&today).unwrap());
+    }
 }

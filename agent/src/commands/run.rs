@@ -95,6 +95,10 @@ pub struct GenerationArgs {
     /// height fits its time in the air (0: off).
     #[arg(long, default_value_t = 1.0, value_parser = flags::weight)]
     pub ballistic_weight: f64,
+    /// Weight of DNO's floor guard: no joint under the floor (the summed depth, m), so a
+    /// constraint such as "feet on the ground" is not met by a foot sunk into it (0: off).
+    #[arg(long, default_value_t = motion_core::generation::Guards::DEFAULT.floor, value_parser = flags::weight)]
+    pub floor_weight: f64,
     /// Switch off the contact-aware clean-up (foot locking with leg IK) of the output; the report
     /// gives every figure before and after it when it runs.
     #[arg(long)]
@@ -160,8 +164,12 @@ impl GenerationArgs {
         config.seed = self.seed;
         config.guidance = self.guidance;
         config.dno.restarts = self.restarts;
-        config.guards =
-            Guards { jitter: self.jitter_weight, flight: self.flight_weight, ballistic: self.ballistic_weight };
+        config.guards = Guards {
+            jitter: self.jitter_weight,
+            flight: self.flight_weight,
+            ballistic: self.ballistic_weight,
+            floor: self.floor_weight,
+        };
         config.foot_lock.enabled = !self.no_foot_lock;
         config.refine.enabled = !self.no_refine;
         if let Some(lr) = self.lr {

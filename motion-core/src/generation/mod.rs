@@ -32,7 +32,7 @@ pub use crate::method::{
     ensure_finite, pick_rows, DirectConfig, Generated, GenerationConfig, GenerationError, Method, Task,
 };
 pub use crate::objective::{
-    ballistic_penalty, flight_penalty, jitter_penalty, joints_objective, program_objective, Guards,
+    ballistic_penalty, flight_penalty, floor_penalty, jitter_penalty, joints_objective, program_objective, Guards,
     FLIGHT_LIMIT_FRAMES, JITTER_LIMIT,
 };
 
