@@ -29,9 +29,9 @@ pub fn jitter_penalty(joints: &Tensor, limit: f64) -> candle_core::Result<Tensor
 }
 
 /// The longest flight the flight guard allows, frames: [`FLOATING_FLIGHT_S`] (0.7 s, an
-/// athlete's standing jump) at 20 fps, 14 frames. A longer flight is what the metrics call
-/// floating.
-pub const FLIGHT_LIMIT_FRAMES: usize = (FLOATING_FLIGHT_S * FPS) as usize;
+/// athlete's standing jump) at 20 fps, 14 frames, rounded to the nearest frame (a truncated
+/// product a hair under 14 would give 13). A longer flight is what the metrics call floating.
+pub const FLIGHT_LIMIT_FRAMES: usize = (FLOATING_FLIGHT_S * FPS + 0.5) as usize;
 
 /// The flight guard `Σ_W relu(min_{t∈W} y_t − AIRBORNE_M)` per sample `[B]` of joints
 /// `[B, T, 22, 3]` (m, y up, floor at 0), over every window W of `limit + 1` consecutive
