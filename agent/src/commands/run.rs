@@ -85,19 +85,19 @@ pub struct GenerationArgs {
     #[arg(long, default_value_t = motion_core::diffusion::Guidance::MDM_SCALE, value_parser = flags::guidance)]
     pub guidance: f64,
     /// Weight of DNO's jitter guard on joint accelerations above 0.15 m/frame² (0: off).
-    #[arg(long, default_value_t = 1.0, value_parser = flags::weight)]
+    #[arg(long, default_value_t = Guards::DEFAULT.jitter, value_parser = flags::weight)]
     pub jitter_weight: f64,
     /// Weight of DNO's flight guard: in every 0.75 s some joint comes within 0.10 m of the floor,
     /// so no leap hangs in the air longer than an athlete's jump (0.7 s) (0: off).
-    #[arg(long, default_value_t = 1.0, value_parser = flags::weight)]
+    #[arg(long, default_value_t = Guards::DEFAULT.flight, value_parser = flags::weight)]
     pub flight_weight: f64,
     /// Weight of DNO's ballistic guard: in flight the centre of mass falls at g, so a leap's
     /// height fits its time in the air (0: off).
-    #[arg(long, default_value_t = 1.0, value_parser = flags::weight)]
+    #[arg(long, default_value_t = Guards::DEFAULT.ballistic, value_parser = flags::weight)]
     pub ballistic_weight: f64,
     /// Weight of DNO's floor guard: no joint under the floor (the summed depth, m), so a
     /// constraint such as "feet on the ground" is not met by a foot sunk into it (0: off).
-    #[arg(long, default_value_t = motion_core::generation::Guards::DEFAULT.floor, value_parser = flags::weight)]
+    #[arg(long, default_value_t = Guards::DEFAULT.floor, value_parser = flags::weight)]
     pub floor_weight: f64,
     /// Switch off the contact-aware clean-up (foot locking with leg IK) of the output; the report
     /// gives every figure before and after it when it runs.

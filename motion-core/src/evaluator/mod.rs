@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 use crate::model::init::SeededInit;
 use crate::model::layer::{Dropout, EncoderLayer, ParamLoader};
 use crate::model::{sinusoidal_table, MdmConfig, MAX_LEN};
-use crate::nn::Linear;
+use crate::nn::{unit_rows, Linear};
 use crate::representation::{MeanStd, FEATURE_DIM};
 use crate::tensor_file::{read_metadata, write_safetensors};
 
@@ -234,12 +234,6 @@ impl Evaluator {
         };
         (nll(&logits)? + nll(&logits.t()?)?)? * 0.5
     }
-}
-
-/// Each row of `[n, k]` over its length (at least 1e-12).
-fn unit_rows(x: &Tensor) -> Result<Tensor> {
-    let norms = x.sqr()?.sum_keepdim(1)?.sqrt()?.clamp(1e-12, f64::MAX)?;
-    x.broadcast_div(&norms)
 }
 
 #[cfg(test)]

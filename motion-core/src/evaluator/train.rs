@@ -5,6 +5,7 @@ use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 
 use super::{Evaluator, EvaluatorConfig, EvaluatorError};
+use crate::nn::unit_rows;
 use crate::optim::AdamW;
 use crate::representation::MeanStd;
 
@@ -49,7 +50,7 @@ impl EvaluatorTrainer {
     /// One optimiser step at learning rate `lr` on normalised crops `x0` `[batch, frames, 263]`
     /// and their captions' sentence embeddings `text` `[batch, text_dim]`.
     pub fn train_step(&mut self, x0: &Tensor, text: &Tensor, lr: f64) -> Result<EvaluatorStep, EvaluatorError> {
-        let unit_text = text.broadcast_div(&text.sqr()?.sum_keepdim(1)?.sqrt()?.clamp(1e-12, f64::MAX)?)?;
+        let unit_text = unit_rows(text)?;
         let dots: Vec<Vec<f32>> = unit_text.matmul(&unit_text.t()?)?.to_vec2()?;
         let same: Vec<Vec<bool>> = dots.iter().map(|row| row.iter().map(|d| *d > SAME_CAPTION_DOT).collect()).collect();
         let motion = self.model.embed_motion(x0)?;

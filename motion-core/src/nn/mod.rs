@@ -21,6 +21,13 @@ pub use dropout::dropout;
 pub use layer_norm::{LayerNorm, LAYER_NORM_EPS};
 pub use linear::Linear;
 
+/// `torch.nn.functional.normalize(x, p=2, dim=1)`: each row of `[n, k]` over
+/// `max(‖row‖, 1e-12)`, so a zero row stays zero; differentiable.
+pub fn unit_rows(x: &candle_core::Tensor) -> candle_core::Result<candle_core::Tensor> {
+    let norms = x.sqr()?.sum_keepdim(1)?.sqrt()?.clamp(1e-12, f64::MAX)?;
+    x.broadcast_div(&norms)
+}
+
 #[cfg(test)]
 pub(crate) mod testing {
     use candle_core::{Device, Result, Tensor};

@@ -24,6 +24,8 @@ pub use candle_transformers::models::bert::Config as BertConfig;
 use candle_transformers::models::bert::{BertModel, HiddenAct, PositionEmbeddingType};
 use tokenizers::{Tokenizer, TruncationParams};
 
+use crate::nn::unit_rows;
+
 use super::weights::{no_extra_layer, take_tensor, EncoderError, TensorProblem};
 use super::TextEncoder;
 
@@ -181,7 +183,7 @@ impl MiniLm {
         let mask = Tensor::from_vec(mask, (n, len), &self.device)?;
         let token_types = ids.zeros_like()?;
         let hidden = self.bert.forward(&ids, &token_types, Some(&mask))?;
-        Ok(l2_normalise(&mean_pool(&hidden, &mask)?)?)
+        Ok(unit_rows(&mean_pool(&hidden, &mask)?)?)
     }
 }
 
@@ -202,12 +204,6 @@ fn mean_pool(hidden: &Tensor, mask: &Tensor) -> candle_core::Result<Tensor> {
     let summed = hidden.broadcast_mul(&mask.unsqueeze(2)?)?.sum(1)?;
     let counts = mask.sum_keepdim(1)?.clamp(1e-9, f64::MAX)?;
     summed.broadcast_div(&counts)
-}
-
-/// `torch.nn.functional.normalize(x, p=2, dim=1)`: each row of `[N, H]` over `max(‖row‖, 1e-12)`.
-fn l2_normalise(x: &Tensor) -> candle_core::Result<Tensor> {
-    let norms = x.sqr()?.sum_keepdim(1)?.sqrt()?.clamp(1e-12, f64::MAX)?;
-    x.broadcast_div(&norms)
 }
 
 /// Loads `tokenizer.json` with sentence-transformers' truncation (`max_seq_length` ids, special

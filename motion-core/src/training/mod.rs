@@ -24,6 +24,7 @@ use serde::{Deserialize, Serialize};
 use crate::diffusion::noise::gaussian_from_rng;
 use crate::diffusion::NoiseSchedule;
 use crate::model::{Mdm, MdmConfig, Prediction};
+use crate::nn::unit_rows;
 use crate::optim::AdamW;
 use crate::prior::{Prior, PriorError};
 use crate::representation::{FEATURE_DIM, RIC, ROOT_Y};
@@ -527,8 +528,7 @@ fn perturb_conditions(text: &Tensor, max_sigma: f64, rng: &mut StdRng) -> candle
     let norm = text.sqr()?.sum_keepdim(1)?.sqrt()?;
     let noise = gaussian_from_rng(text.shape(), rng, text.device())?.to_dtype(text.dtype())?;
     let moved = (text + noise.broadcast_mul(&sigma.broadcast_mul(&norm)?)?)?;
-    let moved_norm = (moved.sqr()?.sum_keepdim(1)?.sqrt()? + 1e-12)?;
-    moved.broadcast_mul(&norm.broadcast_div(&moved_norm)?)
+    unit_rows(&moved)?.broadcast_mul(&norm)
 }
 
 #[cfg(test)]

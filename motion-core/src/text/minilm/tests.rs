@@ -126,7 +126,7 @@ fn mean_pool_averages_unmasked_tokens_then_normalise_scales_to_unit_length() {
     let mask = Tensor::new(&[[1u32, 1, 0], [1, 0, 0]], &dev).unwrap();
     let pooled = mean_pool(&hidden, &mask).unwrap();
     assert_eq!(rows(&pooled), [[2., 3.], [3., 4.]]);
-    assert_eq!(rows(&l2_normalise(&pooled.narrow(0, 1, 1).unwrap()).unwrap()), [[0.6, 0.8]]);
+    assert_eq!(rows(&unit_rows(&pooled.narrow(0, 1, 1).unwrap()).unwrap()), [[0.6, 0.8]]);
 }
 
 // ---- loading errors, on a tiny BERT (hidden 8, 2 heads, 1 layer) with the real tokenizer ----
