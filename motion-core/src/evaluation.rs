@@ -88,6 +88,10 @@ pub struct TaskReport {
     pub frames: usize,
     /// The run's settings (method, samples, seed, optimiser settings).
     pub config: GenerationConfig,
+    /// The prior that made the motions (its file and SHA-256); absent in reports written
+    /// before it was recorded, and for a prior built in memory.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<crate::prior::PriorIdentity>,
     /// Wall-clock seconds of the method.
     pub seconds: f64,
     /// Constraint error: mean over samples of `Σ wᵢ·Eᵢ` (ProgMoGen's mean `f_eval`).
@@ -258,6 +262,7 @@ pub fn report(
         text: program.text.clone(),
         frames: compiled.frames(),
         config: config.clone(),
+        prior: None,
         seconds: generated.seconds,
         constraint_error: mean(&judged.per_sample),
         max_scene_penetration_m: worst(&judged.penetration),

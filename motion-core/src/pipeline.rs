@@ -142,6 +142,7 @@ pub fn run_task(
         };
         report = evaluation::report(program, &compiled, &generated, &config)?;
     }
+    report.prior = prior.identity.clone();
     report.rg_dno = rg_report;
     report.fallback = fallback;
     report.attempt = (settings.retry_unmet > 0).then_some(kept);

@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarBuilder;
+use serde::{Deserialize, Serialize};
 
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{DdimSampler, Guidance, NoiseSchedule};
@@ -145,6 +146,29 @@ pub struct Prior {
     /// The captions it was trained on, when the file carries them: a free prompt far from all
     /// of them is conditioned on the nearest ([`Self::caption_conditions`]).
     pub captions: Option<CaptionBank>,
+    /// The file it was loaded from ([`Prior::load`]); `None` for a prior built in memory.
+    pub identity: Option<PriorIdentity>,
+}
+
+/// Which file a prior was loaded from: its name and the SHA-256 of its bytes. Every run's report
+/// carries it ([`crate::evaluation::TaskReport::prior`]), so that a figure names the model that
+/// made it and a stored result is not taken for another model's.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PriorIdentity {
+    /// The file's name, without its folder.
+    pub file: String,
+    /// SHA-256 of the file's bytes, 64 lower-case hex digits.
+    pub sha256: String,
+}
+
+impl PriorIdentity {
+    /// The identity of the file at `path` holding `bytes`.
+    pub fn of(path: &Path, bytes: &[u8]) -> Self {
+        use sha2::{Digest, Sha256};
+        let file = path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let sha256 = Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect();
+        Self { file, sha256 }
+    }
 }
 
 impl Prior {
@@ -218,7 +242,8 @@ impl Prior {
         };
         let mdm =
             Mdm::new(cfg, VarBuilder::from_tensors(tensors, DType::F32, device)).map_err(|e| format(e.to_string()))?;
-        Ok(Self { mdm, encoder, mean_std, root_decode: RootDecode::default(), rest, captions })
+        let identity = Some(PriorIdentity::of(path, &bytes));
+        Ok(Self { mdm, encoder, mean_std, root_decode: RootDecode::default(), rest, captions, identity })
     }
 
     /// Writes the prior as one safetensors file.
@@ -380,6 +405,7 @@ impl Prior {
             root_decode: RootDecode::Velocity,
             rest: None,
             captions: None,
+            identity: None,
         }
     }
 }
@@ -394,6 +420,31 @@ mod tests {
             assert_eq!(d.to_string().parse::<RootDecode>(), Ok(d));
         }
         assert!("feet".parse::<RootDecode>().unwrap_err().contains("\"feet\""));
+    }
+
+    /// A loaded prior names its file and the SHA-256 of its bytes; one built in memory names
+    /// none.
+    #[test]
+    fn a_loaded_prior_names_its_file_and_its_sha256() {
+        let prior = Prior::tiny(&["a person walks"]);
+        assert!(prior.identity.is_none());
+        let dir = tempfile::tempdir().unwrap();
+        let (path, no_text) = (dir.path().join("tiny.safetensors"), dir.path().join("no_text_models"));
+        prior.save(&path).unwrap();
+        let identity = Prior::load(&path, &no_text, &Device::Cpu).unwrap().identity.unwrap();
+        assert_eq!(
+            identity,
+            PriorIdentity::of(Path::new("elsewhere/tiny.safetensors"), &std::fs::read(&path).unwrap())
+        );
+        assert_eq!(identity.file, "tiny.safetensors");
+        // The digest of FIPS 180-2's example "abc".
+        let abc = PriorIdentity::of(Path::new("abc"), b"abc").sha256;
+        assert_eq!(abc, "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+        // Another prior in the same file: another digest.
+        Prior::tiny(&["a person runs"]).save(&path).unwrap();
+        let other = Prior::load(&path, &no_text, &Device::Cpu).unwrap().identity.unwrap();
+        assert_eq!(other.file, identity.file);
+        assert_ne!(other.sha256, identity.sha256);
     }
 
     #[test]
@@ -443,7 +494,15 @@ mod tests {
             MdmConfig { latent_dim: 16, ff_size: 32, num_layers: 1, num_heads: 2, text_dim: 384, ..MdmConfig::small() };
         let mdm = Mdm::random(cfg, DType::F32, &Device::Cpu, 3).unwrap();
         let mean_std = MeanStd::from_vecs(vec![0.0; 263], vec![1.0; 263], &Device::Cpu).unwrap();
-        let mut prior = Prior { mdm, encoder, mean_std, root_decode: RootDecode::Velocity, rest: None, captions: None };
+        let mut prior = Prior {
+            mdm,
+            encoder,
+            mean_std,
+            root_decode: RootDecode::Velocity,
+            rest: None,
+            captions: None,
+            identity: None,
+        };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("prior.safetensors");
         prior.save(&path).unwrap();

@@ -10,6 +10,8 @@ use clap::Args;
 use motion_core::constraints::CompiledProgram;
 use motion_core::evaluation::TaskReport;
 use motion_core::generation::{generate, GenerationConfig, Method, Task};
+use motion_core::pipeline::TaskSettings;
+use motion_core::prior::PriorIdentity;
 use serde::{Deserialize, Serialize};
 
 use motion_core::export::{write_atomically, OutputFolder};
@@ -32,9 +34,10 @@ pub struct BenchTasksArgs {
     #[command(flatten)]
     generation: GenerationArgs,
     /// Output folder: results.json, results.md and one folder of motions per task and method.
-    /// A row already in results.json is kept and not run again when its settings are this
-    /// run's, exactly as written there; a row of the same task and method made with other
-    /// settings (or by a build whose settings lacked one of today's) is run again and replaced.
+    /// A row already in results.json is kept and not run again when it was made by this prior
+    /// file (same SHA-256) with this run's settings (RG-DNO's stage settings included), exactly
+    /// as written there; a row of the same task and method made otherwise (or by a build whose
+    /// report lacked one of today's settings or the prior) is run again and replaced.
     #[arg(long, short, default_value = "out/bench-tasks")]
     out: PathBuf,
 }
@@ -73,9 +76,19 @@ impl StoredRow {
         serde_json::to_string_pretty(&rows.iter().map(|r| &r.json).collect::<Vec<_>>())
     }
 
-    /// Whether the row was made with exactly `settings`, as its JSON says.
-    fn made_with(&self, settings: &GenerationConfig) -> serde_json::Result<bool> {
-        Ok(self.json.pointer("/report/config") == Some(&serde_json::to_value(settings)?))
+    /// Whether the row was made by `prior` with exactly `settings`, as its JSON says: the same
+    /// prior file (name and SHA-256), the same generation settings and, for a row that ran
+    /// RG-DNO's stages, the same stage settings. A row written before the prior was recorded
+    /// names none, so it is not taken for any prior's.
+    fn made_with(&self, settings: &TaskSettings, prior: Option<&PriorIdentity>) -> serde_json::Result<bool> {
+        let written = |pointer: &str, value: serde_json::Value| self.json.pointer(pointer) == Some(&value);
+        let rg_dno_same = self.json.pointer("/report/rg_dno").is_none()
+            || written("/report/rg_dno/config", serde_json::to_value(&settings.rg_dno)?);
+        let prior_same = match prior {
+            Some(prior) => written("/report/prior", serde_json::to_value(prior)?),
+            None => self.json.pointer("/report/prior").is_none(),
+        };
+        Ok(prior_same && rg_dno_same && written("/report/config", serde_json::to_value(&settings.generation)?))
     }
 }
 
@@ -103,10 +116,10 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
             let method = Method::from(method);
             let settings = args.generation.settings(method);
             match rows.iter().position(|r| r.row.task == task && r.row.report.config.method == method) {
-                Some(k) if rows[k].made_with(&settings.generation)? => continue,
+                Some(k) if rows[k].made_with(&settings, prior.identity.as_ref())? => continue,
                 Some(k) => {
                     eprintln!(
-                        "{task} / {method}: {} holds a run with other settings; running it again",
+                        "{task} / {method}: {} holds a run with other settings or another prior; running it again",
                         json_path.display()
                     );
                     rows.remove(k);
@@ -311,32 +324,67 @@ pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use motion_core::generation::Guards;
+    use motion_core::rgdno::candidates::RetrievalSource;
+    use motion_core::rgdno::RgDnoConfig;
 
     use super::*;
 
+    /// Today's settings for `config`, RG-DNO's stages at their defaults.
+    fn settings(config: &GenerationConfig) -> TaskSettings {
+        TaskSettings {
+            generation: config.clone(),
+            rg_dno: RgDnoConfig::default(),
+            database: RetrievalSource::from_path("corpus.safetensors.gz"),
+            retry_unmet: 0,
+        }
+    }
+
+    fn prior(name: &str) -> PriorIdentity {
+        PriorIdentity::of(std::path::Path::new(name), name.as_bytes())
+    }
+
     #[test]
-    fn a_stored_row_is_reused_only_with_the_settings_it_was_written_with() {
-        // Table 6 of session 34, made before the floor guard existed (read as weight 0): not a
-        // run with today's settings, nor with the same settings and the guard at 0, since its
-        // JSON lacks the setting.
+    fn a_stored_row_is_reused_only_with_the_prior_and_settings_it_was_written_with() {
+        // Table 6 of session 34, made before the floor guard existed (read as weight 0) and
+        // before reports named their prior: not a run with today's settings, nor with the same
+        // settings and the guard at 0, since its JSON lacks the setting, nor any prior's.
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures/results/session34-table6-n4/results.json");
         let rows = StoredRow::read(&std::fs::read_to_string(path).unwrap()).unwrap();
         let old = &rows[0];
         assert_eq!(old.row.report.config.guards.floor, 0.0);
-        assert!(!old.made_with(&old.row.report.config).unwrap());
+        assert!(old.row.report.prior.is_none());
+        assert!(!old.made_with(&settings(&old.row.report.config), None).unwrap());
         let mut today = old.row.report.config.clone();
         today.guards = Guards::DEFAULT;
-        assert!(!old.made_with(&today).unwrap());
+        assert!(!old.made_with(&settings(&today), None).unwrap());
         // Written back unchanged: still without the floor guard.
         let again = StoredRow::read(&StoredRow::json(&rows).unwrap()).unwrap();
         assert_eq!(again.len(), rows.len());
         assert!(again[0].json.pointer("/report/config/guards/floor").is_none());
-        // The same run made with today's build is reused, and only with its own settings.
+        // The same run made by today's build with prior `a` is reused, and only with its own
+        // settings and prior.
         let mut row = old.row.clone();
         row.report.config = today.clone();
+        row.report.prior = Some(prior("a"));
         let fresh = StoredRow::new(row).unwrap();
-        assert!(fresh.made_with(&today).unwrap());
+        assert!(fresh.made_with(&settings(&today), Some(&prior("a"))).unwrap());
+        assert!(!fresh.made_with(&settings(&today), Some(&prior("b"))).unwrap());
+        assert!(!fresh.made_with(&settings(&today), None).unwrap());
         today.seed += 1;
-        assert!(!fresh.made_with(&today).unwrap());
+        assert!(!fresh.made_with(&settings(&today), Some(&prior("a"))).unwrap());
+
+        // An RG-DNO row also needs RG-DNO's stage settings to be this run's.
+        let old = rows.iter().find(|r| r.row.report.rg_dno.is_some()).unwrap();
+        let mut row = old.row.clone();
+        row.report.config.guards = Guards::DEFAULT;
+        row.report.prior = Some(prior("a"));
+        if let Some(rg) = row.report.rg_dno.as_mut() {
+            rg.config = RgDnoConfig::default();
+        }
+        let fresh = StoredRow::new(row.clone()).unwrap();
+        let same = settings(&row.report.config);
+        assert!(fresh.made_with(&same, Some(&prior("a"))).unwrap());
+        let fewer_steps = TaskSettings { rg_dno: RgDnoConfig::default().scaled_to(250), ..same };
+        assert!(!fresh.made_with(&fewer_steps, Some(&prior("a"))).unwrap());
     }
 }

@@ -278,8 +278,9 @@ fn run_families(
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
     let metric_columns = METRIC_COLUMNS.join(" | ");
     let intro = format!(
-        "Prior `{}` against the held-out (test-split) windows of `{}`, root decode `{}`, {} samples per family ({} frames, {} DDIM steps, guidance {}). Each metric cell: samples / held-out capture; the detector cell: share of samples, cleaned samples and held-out windows passing it.",
+        "Prior `{}`{} against the held-out (test-split) windows of `{}`, root decode `{}`, {} samples per family ({} frames, {} DDIM steps, guidance {}). Each metric cell: samples / held-out capture; the detector cell: share of samples, cleaned samples and held-out windows passing it.",
         args.prior.display(),
+        prior.identity.as_ref().map_or(String::new(), |id| format!(" (SHA-256 {})", id.sha256)),
         args.corpus.display(),
         args.root_decode,
         args.samples,
@@ -363,7 +364,7 @@ fn run_families(
     }
     let text_motion = text_motion_section(args, prior, &corpus, device, &mut lines)?;
     std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
-    let json = serde_json::json!({ "families": rows, "text_motion": text_motion });
+    let json = serde_json::json!({ "prior": prior.identity, "families": rows, "text_motion": text_motion });
     std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&json)?)?;
     println!("wrote {}/{{report.md,report.json,families/*.png}}", args.out.display());
     Ok(())
