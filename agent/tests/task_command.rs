@@ -106,6 +106,9 @@ fn without_dry_run_the_task_becomes_motions_with_rg_dno() {
         serde_json::from_str(&std::fs::read_to_string(out.path().join("report.json")).unwrap()).unwrap();
     assert_eq!(report["config"]["method"], "rg-dno");
     assert_eq!(report["steps"]["target"], 6, "the step count is measured against the program's count");
+    // Footfalls beside the leg alternations, one per sample.
+    let (counts, footfalls) = (&report["steps"]["counts"], &report["steps"]["footfalls"]);
+    assert_eq!(footfalls.as_array().map(Vec::len), counts.as_array().map(Vec::len), "{}", report["steps"]);
     // The report names the retrieved clip, its caption and the chosen mask; the database is the
     // shipped corpus's train split.
     let rg = &report["rg_dno"];

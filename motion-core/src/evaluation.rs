@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::cleanup::FootLockReport;
 use crate::constraints::{Check, CompiledProgram};
 use crate::generation::{Generated, GenerationConfig};
-use crate::metrics::{step_count, MetricMeans};
+use crate::metrics::{footfalls, step_count, MetricMeans};
 use crate::motion::tensor_to_poses;
 use crate::program::TaskProgram;
 use crate::refine::RefineReport;
@@ -38,8 +38,24 @@ pub struct StepReport {
     pub target: u32,
     /// Steps counted per sample ([`crate::metrics::step_count`]).
     pub counts: Vec<usize>,
+    /// Footfalls per sample ([`crate::metrics::footfalls`]: every swing of either foot, as a
+    /// person or the RG-DNO paper counts steps; usually one more than `counts`). Absent in
+    /// reports written before it was measured.
+    #[serde(default)]
+    pub footfalls: Vec<usize>,
     /// Fraction of samples with exactly `target` steps.
     pub success_rate: f64,
+}
+
+impl StepReport {
+    /// The counts, with the footfalls beside them where measured: `[6, 5] (footfalls [7, 6])`.
+    pub fn counts_text(&self) -> String {
+        if self.footfalls.is_empty() {
+            format!("{:?}", self.counts)
+        } else {
+            format!("{:?} (footfalls {:?})", self.counts, self.footfalls)
+        }
+    }
 }
 
 /// The figures of the network's motion before the contact-aware clean-up, to set beside the
@@ -172,7 +188,8 @@ fn judge(
     let steps = compiled.count_targets().into_iter().find(|(id, _)| is_step_count(program, id)).map(|(_, target)| {
         let counts: Vec<usize> = motions.iter().map(|m| step_count(m)).collect();
         let hits = counts.iter().filter(|&&c| c == target as usize).count();
-        StepReport { target, success_rate: hits as f64 / counts.len().max(1) as f64, counts }
+        let footfalls = motions.iter().map(|m| footfalls(m)).collect();
+        StepReport { target, success_rate: hits as f64 / counts.len().max(1) as f64, counts, footfalls }
     });
     let success_rate = successes as f64 / samples.max(1) as f64;
     Ok(Judged { per_sample, constraints, success_rate, penetration, steps, motions })

@@ -169,14 +169,14 @@ pub fn markdown(rows: &[ResultRow]) -> String {
          \"all met\", \"max scene penetration\" and \"foot skate\" give the network's motion → the written one. \
          The same figures for held-out capture of each skill are in the prior's report (`mogen report prior`).\n\n",
     );
-    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | leg alternations/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | floating (longest flight, s) | steps (target) / success | time (s) |\n");
+    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | leg alternations/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | floating (longest flight, s) | steps as leg alternations (target) / success | time (s) |\n");
     out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         let p = &r.report;
         let steps = p
             .steps
             .as_ref()
-            .map_or("–".to_owned(), |s| format!("{:?} ({}) / {:.2}", s.counts, s.target, s.success_rate));
+            .map_or("–".to_owned(), |s| format!("{} ({}) / {:.2}", s.counts_text(), s.target, s.success_rate));
         let before = &p.cleanup.before;
         let (skate, met, penetration) = if p.cleanup.enabled || p.cleanup.refine_enabled {
             (
@@ -242,7 +242,7 @@ pub fn markdown(rows: &[ResultRow]) -> String {
         );
         out.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
         for (task, d, r) in pairs {
-            let steps = |p: &TaskReport| p.steps.as_ref().map_or("–".to_owned(), |s| format!("{:?}", s.counts));
+            let steps = |p: &TaskReport| p.steps.as_ref().map_or("–".to_owned(), |s| s.counts_text());
             let retrieved = r
                 .rg_dno
                 .as_ref()

@@ -350,7 +350,12 @@ pub fn print_summary(report: &TaskReport) {
         report.motion.foot_skate_ratio, report.motion.max_acceleration, report.motion.head_neck_incorrect_ratio
     );
     if let Some(steps) = &report.steps {
-        println!("  steps {:?} (target {}), success {:.2}", steps.counts, steps.target, steps.success_rate);
+        println!(
+            "  steps (leg alternations) {} (target {}), success {:.2}",
+            steps.counts_text(),
+            steps.target,
+            steps.success_rate
+        );
     }
     let cleanup = &report.cleanup;
     if cleanup.refine_enabled {

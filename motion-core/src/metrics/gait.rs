@@ -61,9 +61,52 @@ pub fn alternation_frames(poses: &[Pose]) -> Vec<usize> {
 }
 
 /// Steps taken: leg alternations ([`alternation_frames`]). The one definition of a step used by
-/// the reports and checked against the counting constraint.
+/// the reports and checked against the counting constraint. From feet side by side it counts
+/// one fewer than [`footfalls`]: the first swing only takes the lead.
 pub fn step_count(poses: &[Pose]) -> usize {
     alternation_frames(poses).len()
+}
+
+/// A foot's swing starts when its toe's horizontal speed rises above this, m/s (stance toes of
+/// the written motions move at about 0.1 m/s, swinging ones at 1–4 m/s) ...
+pub const SWING_ENTER_M_PER_S: f64 = 1.0;
+/// ... and ends when the speed falls below this, m/s.
+pub const SWING_LEAVE_M_PER_S: f64 = 0.5;
+/// A swing is a footfall when its toe moves at least this far horizontally, m: a shuffle or a
+/// short slide is not a step.
+pub const FOOTFALL_MIN_M: f64 = 0.15;
+
+/// Footfalls: every swing of either foot, counted as a person watching counts steps and as the
+/// RG-DNO paper counts walking steps (the edges of a foot's speed crossing a threshold; the
+/// paper's supplement does not give its threshold): a swing runs while the toe's horizontal
+/// speed stays above [`SWING_LEAVE_M_PER_S`] after rising above [`SWING_ENTER_M_PER_S`], and
+/// counts when the toe travels at least [`FOOTFALL_MIN_M`] in it. Reported beside
+/// [`step_count`], which a first swing from feet side by side, or from behind the foot that
+/// already leads by under 5 cm, does not raise: "6 steps" by leg alternations are usually 7
+/// footfalls. A foot sliding fast over the floor counts as a swing too.
+pub fn footfalls(poses: &[Pose]) -> usize {
+    [Joint::LeftFoot, Joint::RightFoot]
+        .iter()
+        .map(|toe| {
+            let j = toe.index();
+            let horizontal = |p: &Pose| DVec3::new(p[j].x, 0.0, p[j].z);
+            let (mut count, mut start) = (0, None);
+            for w in poses.windows(2) {
+                let speed = (horizontal(&w[1]) - horizontal(&w[0])).length() * FPS;
+                match start {
+                    None if speed > SWING_ENTER_M_PER_S => start = Some(horizontal(&w[0])),
+                    Some(from) if speed < SWING_LEAVE_M_PER_S => {
+                        count += usize::from((horizontal(&w[0]) - from).length() >= FOOTFALL_MIN_M);
+                        start = None;
+                    }
+                    _ => {}
+                }
+            }
+            let last = poses.last().map(horizontal);
+            count
+                + usize::from(matches!((start, last), (Some(from), Some(to)) if (to - from).length() >= FOOTFALL_MIN_M))
+        })
+        .sum()
 }
 
 /// Pace: steps per second over the clip and the coefficient of variation (std / mean) of the
@@ -235,7 +278,65 @@ mod tests {
             let real = 2.0 * 10.0 / cycle_s(name);
             let counted = step_count(&poses) as f64;
             assert!((counted - real).abs() <= 1.0, "{name}: counted {counted}, real {real:.1}");
+            // Every swing is a footfall: one more than the alternations (the first swing takes
+            // the lead), or as many where the clip's first swing is already a change of lead.
+            let footfalls = footfalls(&poses) as f64;
+            assert!((footfalls - real).abs() <= 1.0, "{name}: {footfalls} footfalls, real {real:.1}");
+            assert!((0.0..=1.0).contains(&(footfalls - counted)), "{name}: {footfalls} footfalls, {counted} steps");
         }
+    }
+
+    /// From feet side by side, six swings are six footfalls and five leg alternations; a toe
+    /// that zig-zags up and down, a shuffle of 10 cm and a still body add none.
+    #[test]
+    fn footfalls_count_every_swing_and_nothing_else() {
+        let stand = crate::corpus::prepare::put_on_floor(&[crate::skeleton::rest_pose()])[0];
+        let stride = 0.6;
+        // Six swings, alternating feet from the right, each over 4 frames (the first 0.3 m,
+        // the others 0.6 m: 1.5 and 3 m/s), with 8 frames of stance after each; the body
+        // follows the feet's mean.
+        let mut feet = [0.0f64; 2];
+        let mut poses = vec![stand; 4];
+        for k in 0..6 {
+            let foot = if k % 2 == 0 { 1 } else { 0 };
+            let from = feet[foot];
+            let to = if k == 0 { stride / 2.0 } else { feet[1 - foot] + stride / 2.0 };
+            for f in 1..=12 {
+                feet[foot] = from + (to - from) * (f.min(4) as f64 / 4.0);
+                let mut p = stand;
+                let mid = 0.5 * (feet[0] + feet[1]);
+                for (i, joint) in p.iter_mut().enumerate() {
+                    let side = [Joint::LeftKnee, Joint::LeftAnkle, Joint::LeftFoot]
+                        .iter()
+                        .any(|j| j.index() == i)
+                        .then_some(0)
+                        .or_else(|| {
+                            [Joint::RightKnee, Joint::RightAnkle, Joint::RightFoot]
+                                .iter()
+                                .any(|j| j.index() == i)
+                                .then_some(1)
+                        });
+                    joint.z += side.map_or(mid, |s| feet[s]);
+                }
+                poses.push(p);
+            }
+        }
+        assert_eq!(footfalls(&poses), 6);
+        assert_eq!(step_count(&poses), 5);
+        let mut zigzag = poses.clone();
+        for (t, p) in zigzag.iter_mut().enumerate() {
+            p[Joint::LeftFoot.index()].y += if t % 2 == 0 { 0.02 } else { -0.02 };
+        }
+        assert_eq!(footfalls(&zigzag), 6);
+        assert_eq!(footfalls(&vec![stand; 40]), 0);
+        let shuffle: Vec<Pose> = (0..20)
+            .map(|t| {
+                let mut p = stand;
+                p[Joint::LeftFoot.index()].z += 0.1 * (t as f64 / 4.0).min(1.0);
+                p
+            })
+            .collect();
+        assert_eq!(footfalls(&shuffle), 0);
     }
 
     #[test]
