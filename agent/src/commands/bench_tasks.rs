@@ -1,7 +1,7 @@
 //! `mogen bench tasks`: every shipped task × every method, written as a results table
 //! (markdown + JSON); `mogen bench dno`: the time of a full DNO run.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -163,6 +163,23 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s), jitter guard weight {}, flight guard weight {}, ballistic guard weight {}, floor guard weight {}), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
             c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.guards.jitter, c.guards.flight, c.guards.ballistic, c.guards.floor, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
         ));
+        if rows.iter().any(|r| GenerationConfig { method: c.method, ..r.report.config.clone() } != *c) {
+            out.push_str("**The rows were made with different settings** (rows kept from earlier runs); each row's are in results.json.\n\n");
+        }
+        let priors: BTreeSet<String> = rows
+            .iter()
+            .map(|r| {
+                r.report.prior.as_ref().map_or_else(
+                    || "not recorded".to_owned(),
+                    |p| format!("`{}` (SHA-256 {})", p.file, p.sha256.get(..12).unwrap_or(&p.sha256)),
+                )
+            })
+            .collect();
+        let priors: Vec<String> = priors.into_iter().collect();
+        match priors.as_slice() {
+            [one] => out.push_str(&format!("Prior: {one}.\n\n")),
+            many => out.push_str(&format!("**The rows were made by different priors**: {}.\n\n", many.join(", "))),
+        }
     }
     out.push_str(
         "Every figure is measured on the written joints, after the kinematic refinement and the foot clean-up; \
@@ -386,5 +403,28 @@ mod tests {
         assert!(fresh.made_with(&same, Some(&prior("a"))).unwrap());
         let fewer_steps = TaskSettings { rg_dno: RgDnoConfig::default().scaled_to(250), ..same };
         assert!(!fresh.made_with(&fewer_steps, Some(&prior("a"))).unwrap());
+    }
+
+    /// The table names the prior of its rows and says when its rows were made with other
+    /// settings or by other priors than the first row's.
+    #[test]
+    fn the_table_says_which_prior_and_whether_its_rows_mix_settings() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures/results/session34-table6-n4/results.json");
+        let mut rows: Vec<ResultRow> =
+            StoredRow::read(&std::fs::read_to_string(path).unwrap()).unwrap().into_iter().map(|r| r.row).collect();
+        let table = markdown(&rows);
+        assert!(table.contains("Prior: not recorded.") && !table.contains("different"), "{table}");
+        for row in &mut rows {
+            row.report.prior = Some(prior("a"));
+        }
+        let table = markdown(&rows);
+        assert!(table.contains(&format!("Prior: `a` (SHA-256 {})", &prior("a").sha256[..12])), "{table}");
+        rows[1].report.prior = Some(prior("b"));
+        rows[2].report.config.seed += 1;
+        let table = markdown(&rows);
+        assert!(
+            table.contains("made by different priors") && table.contains("made with different settings"),
+            "{table}"
+        );
     }
 }
