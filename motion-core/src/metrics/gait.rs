@@ -67,8 +67,8 @@ pub fn step_count(poses: &[Pose]) -> usize {
     alternation_frames(poses).len()
 }
 
-/// A foot's swing starts when its toe's horizontal speed rises above this, m/s (stance toes of
-/// the written motions move at about 0.1 m/s, swinging ones at 1–4 m/s) ...
+/// A foot's swing starts when its toe's horizontal speed rises above this, m/s (on the shipped
+/// walking clips stance joints move at about 0.1 m/s, swinging feet at 1–4 m/s) ...
 pub const SWING_ENTER_M_PER_S: f64 = 1.0;
 /// ... and ends when the speed falls below this, m/s.
 pub const SWING_LEAVE_M_PER_S: f64 = 0.5;
@@ -81,9 +81,10 @@ pub const FOOTFALL_MIN_M: f64 = 0.15;
 /// paper's supplement does not give its threshold): a swing runs while the toe's horizontal
 /// speed stays above [`SWING_LEAVE_M_PER_S`] after rising above [`SWING_ENTER_M_PER_S`], and
 /// counts when the toe travels at least [`FOOTFALL_MIN_M`] in it. Reported beside
-/// [`step_count`], which a first swing from feet side by side, or from behind the foot that
-/// already leads by under 5 cm, does not raise: "6 steps" by leg alternations are usually 7
-/// footfalls. A foot sliding fast over the floor counts as a swing too.
+/// [`step_count`], which the first swing does not raise when the feet start side by side
+/// (within its 5 cm hysteresis) or when the leading foot swings first: "6 steps" by leg
+/// alternations are usually 7 footfalls. A foot sliding fast over the floor counts as a swing
+/// too.
 pub fn footfalls(poses: &[Pose]) -> usize {
     [Joint::LeftFoot, Joint::RightFoot]
         .iter()
