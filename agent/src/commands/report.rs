@@ -12,7 +12,8 @@ use motion_core::database::MotionDatabase;
 use motion_core::inversion::InversionConfig;
 use motion_core::metrics::MetricMeans;
 use motion_core::prior::{RootDecode, Sampling};
-use motion_core::quality::families::{family_report, FamilyConfig};
+use motion_core::quality::families::{family_report, FamilyConfig, FamilyQuality};
+use motion_core::quality::held_out_ratio::{ratios, Ratio, RATIO_FIGURES};
 use motion_core::quality::text_motion::{
     text_motion_report, TextMotionConfig, TextMotionReport, CLEANED, HELD_OUT, SAMPLES, TRAIN,
 };
@@ -264,6 +265,43 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Issue 40's ratio bars ([`held_out_ratio`]) as a table in `lines`: each family's figures over
+/// its held-out capture's, on the network's output and after the clean-up; returned for the
+/// JSON.
+fn ratio_section(rows: &[FamilyQuality], lines: &mut Vec<String>) -> Vec<serde_json::Value> {
+    let names: Vec<&str> = RATIO_FIGURES.iter().map(|f| f.name).collect();
+    lines.extend([
+        String::new(),
+        "Issue 40's bar on the figures: each over the held-out capture's figure, on the network's output / after the clean-up; within 1/1.5 to 1.5 times (leg alternations within ±25 %, foot skate at most 1.5 times), **bold** outside, – where capture's figure is about 0 or there is no held-out capture:".to_owned(),
+        String::new(),
+        format!("| family | {} | outside (network / cleaned) |", names.join(" | ")),
+        format!("|{}", "---|".repeat(2 + names.len())),
+    ]);
+    let held_out = |r: &FamilyQuality| (r.held_out.count > 0).then_some(r.held_out);
+    let mut json = Vec::new();
+    for r in rows {
+        let (network, cleaned) = (ratios(&r.samples, held_out(r).as_ref()), ratios(&r.cleaned, held_out(r).as_ref()));
+        let cell = |x: &Ratio| match (x.ratio, x.within) {
+            (Some(v), Some(false)) => format!("**{v:.2}**"),
+            (Some(v), _) => format!("{v:.2}"),
+            _ => "–".to_owned(),
+        };
+        let cells: Vec<String> =
+            network.iter().zip(&cleaned).map(|(n, c)| format!("{} / {}", cell(n), cell(c))).collect();
+        let outside = |all: &[Ratio]| all.iter().filter(|x| x.within == Some(false)).count();
+        let judged = network.iter().filter(|x| x.within.is_some()).count();
+        lines.push(format!(
+            "| {} | {} | {} / {} of {judged} |",
+            r.family.name(),
+            cells.join(" | "),
+            outside(&network),
+            outside(&cleaned)
+        ));
+        json.push(serde_json::json!({ "family": r.family.name(), "network": network, "cleaned": cleaned }));
+    }
+    json
+}
+
 /// The per-family report against the corpus's held-out capture: report.md, report.json and one
 /// strip per family (2 cleaned samples of each prompt in world coordinates) under `families/`.
 fn run_families(
@@ -339,6 +377,7 @@ fn run_families(
     for r in &rows {
         lines.push(format!("| {} | {} |", r.family.name(), metric_cells(&r.cleaned, &r.held_out)));
     }
+    let ratios = ratio_section(&rows, &mut lines);
     if prior.captions.is_some() {
         lines.extend([
             String::new(),
@@ -364,7 +403,8 @@ fn run_families(
     }
     let text_motion = text_motion_section(args, prior, &corpus, device, &mut lines)?;
     std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
-    let json = serde_json::json!({ "prior": prior.identity, "families": rows, "text_motion": text_motion });
+    let json =
+        serde_json::json!({ "prior": prior.identity, "families": rows, "ratios": ratios, "text_motion": text_motion });
     std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&json)?)?;
     println!("wrote {}/{{report.md,report.json,families/*.png}}", args.out.display());
     Ok(())
