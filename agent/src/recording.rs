@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
-use sha2::{Digest, Sha256};
 
 use crate::llm::api_key::{scrub, ApiKey};
 use crate::llm::wire::{ChatRequest, ChatResponse, Message};
@@ -39,7 +38,7 @@ pub fn key(model: &str, messages: &[Message], schema: &Value) -> String {
     let document = json!({ "model": model, "messages": messages, "schema": schema });
     let mut canonical = String::new();
     write_canonical(&document, &mut canonical);
-    Sha256::digest(canonical.as_bytes()).iter().map(|byte| format!("{byte:02x}")).collect()
+    motion_core::files::sha256_hex(canonical.as_bytes())
 }
 
 fn write_canonical(value: &Value, out: &mut String) {

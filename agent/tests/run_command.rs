@@ -47,9 +47,8 @@ fn run_writes_motion_report_and_picture() {
     assert!(report["constraint_error"].as_f64().is_some_and(f64::is_finite));
     assert!(String::from_utf8_lossy(&output.stdout).contains("constraint error"));
     // The report names the prior that made the motion: the shipped one, by its bytes.
-    use sha2::{Digest, Sha256};
     let shipped = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures/model/prior.safetensors")).unwrap();
-    let digest: String = Sha256::digest(&shipped).iter().map(|b| format!("{b:02x}")).collect();
+    let digest = motion_core::files::sha256_hex(&shipped);
     assert_eq!(report["prior"]["file"], "prior.safetensors");
     assert_eq!(report["prior"]["sha256"], digest.as_str());
 }

@@ -9,6 +9,13 @@ use std::path::{Path, PathBuf};
 
 use crate::limits::{Limit, LimitExceeded};
 
+/// SHA-256 of `bytes` as 64 lower-case hex digits: the name of a file's contents (a prior in
+/// every report, a recorded LLM reply's request).
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// A file that could not be read, or whose contents are not what its format says; each names
 /// the file.
 #[derive(Debug, thiserror::Error)]

@@ -164,10 +164,8 @@ pub struct PriorIdentity {
 impl PriorIdentity {
     /// The identity of the file at `path` holding `bytes`.
     pub fn of(path: &Path, bytes: &[u8]) -> Self {
-        use sha2::{Digest, Sha256};
         let file = path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
-        let sha256 = Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect();
-        Self { file, sha256 }
+        Self { file, sha256: crate::files::sha256_hex(bytes) }
     }
 }
 

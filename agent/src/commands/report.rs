@@ -277,10 +277,10 @@ fn ratio_section(rows: &[FamilyQuality], lines: &mut Vec<String>) -> Vec<serde_j
         format!("| family | {} | outside (network / cleaned) |", names.join(" | ")),
         format!("|{}", "---|".repeat(2 + names.len())),
     ]);
-    let held_out = |r: &FamilyQuality| (r.held_out.count > 0).then_some(r.held_out);
     let mut json = Vec::new();
     for r in rows {
-        let (network, cleaned) = (ratios(&r.samples, held_out(r).as_ref()), ratios(&r.cleaned, held_out(r).as_ref()));
+        let held_out = (r.held_out.count > 0).then_some(&r.held_out);
+        let (network, cleaned) = (ratios(&r.samples, held_out), ratios(&r.cleaned, held_out));
         let cell = |x: &Ratio| match (x.ratio, x.within) {
             (Some(v), Some(false)) => format!("**{v:.2}**"),
             (Some(v), _) => format!("{v:.2}"),

@@ -91,21 +91,21 @@ pub fn footfalls(poses: &[Pose]) -> usize {
         .map(|toe| {
             let j = toe.index();
             let horizontal = |p: &Pose| DVec3::new(p[j].x, 0.0, p[j].z);
+            let is_step = |from: DVec3, to: &Pose| usize::from((horizontal(to) - from).length() >= FOOTFALL_MIN_M);
             let (mut count, mut start) = (0, None);
             for w in poses.windows(2) {
                 let speed = (horizontal(&w[1]) - horizontal(&w[0])).length() * FPS;
                 match start {
                     None if speed > SWING_ENTER_M_PER_S => start = Some(horizontal(&w[0])),
                     Some(from) if speed < SWING_LEAVE_M_PER_S => {
-                        count += usize::from((horizontal(&w[0]) - from).length() >= FOOTFALL_MIN_M);
+                        count += is_step(from, &w[0]);
                         start = None;
                     }
                     _ => {}
                 }
             }
-            let last = poses.last().map(horizontal);
-            count
-                + usize::from(matches!((start, last), (Some(from), Some(to)) if (to - from).length() >= FOOTFALL_MIN_M))
+            // A swing still going on the last frame.
+            count + start.zip(poses.last()).map_or(0, |(from, last)| is_step(from, last))
         })
         .sum()
 }
