@@ -12,7 +12,7 @@ use motion_core::corpus::{file as corpus_file, Split};
 use motion_core::database::MotionDatabase;
 use motion_core::model::{MdmConfig, Prediction};
 use motion_core::text::{ConditionEncoder, MINILM_NAME};
-use motion_core::training::{TrainConfig, Trainer, TrainingSet};
+use motion_core::training::{saved_model_config, TrainConfig, Trainer, TrainingSet};
 
 use crate::paths;
 
@@ -47,9 +47,10 @@ pub struct TrainArgs {
     #[arg(long, default_value = "out/train_checkpoint.safetensors")]
     checkpoint: PathBuf,
     /// Fine-tune this prior (a file written by `mogen train`, e.g. the shipped one) instead of
-    /// starting from random weights: its weights start the model and its EMA at step 0. It must
-    /// be of the size given here and trained on the same data (its normalisation is checked).
-    /// Only for a new run: with an existing --checkpoint, resume without it.
+    /// starting from random weights: its weights start the model and its EMA at step 0, at the
+    /// sizes written in it (the model flags below may be left out). It must have been trained on
+    /// the same data (its normalisation is checked). Only for a new run: with an existing
+    /// --checkpoint, resume without it.
     #[arg(long)]
     init: Option<PathBuf>,
     /// Optimiser steps.
@@ -120,21 +121,23 @@ pub struct TrainArgs {
     /// on this number, not on the cores. Set RAYON_NUM_THREADS to the cores to use.
     #[arg(long, default_value_t = TrainConfig::default().shards)]
     shards: usize,
-    /// Model width d (tokens), feed-forward width and layers; defaults: the shipped small size.
+    /// Model width d (tokens), feed-forward width and layers. Defaults: those of the --checkpoint
+    /// being resumed, else of the --init prior, else the small size (d = 128, 256, 4 layers).
     #[arg(long)]
     latent_dim: Option<usize>,
     #[arg(long)]
     ff_size: Option<usize>,
     #[arg(long)]
     layers: Option<usize>,
-    /// Dropout inside the denoiser while training, in [0, 1) (MDM's 0.1; the shipped prior was
-    /// trained with 0, which let it learn the turning labels: see the model card).
-    #[arg(long, default_value_t = MdmConfig::small().dropout, value_parser = super::flags::fraction)]
-    dropout: f64,
+    /// Dropout inside the denoiser while training, in [0, 1). Default: the checkpoint's or the
+    /// --init prior's, else MDM's 0.1.
+    #[arg(long, value_parser = super::flags::fraction)]
+    dropout: Option<f64>,
     /// What the network's output head predicts: `x0` (MDM) or `velocity` (v = √ᾱ·ε − √(1−ᾱ)·x0;
-    /// x̂0 stays close to a lightly noised input).
-    #[arg(long, default_value_t = MdmConfig::small().prediction)]
-    prediction: Prediction,
+    /// x̂0 stays close to a lightly noised input). Default: the checkpoint's or the --init
+    /// prior's, else `x0`.
+    #[arg(long)]
+    prediction: Option<Prediction>,
     /// Write the losses of every step as CSV
     /// (step,loss,velocity,foot_contact,lr,frames,seconds,validation; validation on its steps only).
     #[arg(long)]
@@ -164,14 +167,22 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         let held_out = held_out.context("the evaluator is trained on the corpus")?;
         return train_evaluator(&args, out, &data, &held_out, &device);
     }
-    let small = MdmConfig::small();
+    // The model the run continues (a checkpoint) or starts from (--init) is written in that file;
+    // flags given beside it must agree with it (resume and init_from_prior check).
+    let base = match (&args.init, args.checkpoint.exists()) {
+        (_, true) => saved_model_config(&args.checkpoint).context("reading the checkpoint's model sizes")?,
+        (Some(init), false) => {
+            saved_model_config(init).with_context(|| format!("reading the model sizes of {}", init.display()))?
+        }
+        (None, false) => MdmConfig::small(),
+    };
     let model = MdmConfig {
-        latent_dim: args.latent_dim.unwrap_or(small.latent_dim),
-        ff_size: args.ff_size.unwrap_or(small.ff_size),
-        num_layers: args.layers.unwrap_or(small.num_layers),
-        prediction: args.prediction,
-        dropout: args.dropout,
-        ..small
+        latent_dim: args.latent_dim.unwrap_or(base.latent_dim),
+        ff_size: args.ff_size.unwrap_or(base.ff_size),
+        num_layers: args.layers.unwrap_or(base.num_layers),
+        prediction: args.prediction.unwrap_or(base.prediction),
+        dropout: args.dropout.unwrap_or(base.dropout),
+        ..base
     };
     let config = TrainConfig {
         steps: args.steps,

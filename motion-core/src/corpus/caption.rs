@@ -155,6 +155,88 @@ fn mixed_sentence(tags: &MotionTags, k: usize, subject: usize, direction: usize)
     s
 }
 
+/// Misspellings and side words that name no side in CMU's file-name descriptions, mended before
+/// they are split into words (`UpRightSequence` is upright and `RightAngleTurns` are 90-degree
+/// turns, neither a right to mirror).
+const WORDING: [(&str, &str); 7] = [
+    ("UpRight", "Upright"),
+    ("RightAngleTurns", "NinetyDegreeTurns"),
+    ("Sraight", "Straight"),
+    ("Tigher", "Tighter"),
+    ("Bannana", "Banana"),
+    ("Sequnce", "Sequence"),
+    ("Painfulleftknee", "PainfulLeftKnee"),
+];
+
+/// A take's description as words that a sentence encoder reads and that mirroring can mirror
+/// (`database::mirror_label` swaps whole words "left" and "right"). About 250 CMU takes are
+/// described by a file name instead: `Reach_Left002`, `RunningWideLeft CleanedGRS`. Those are
+/// split into lower-case words at underscores, capitals and digits, their take numbering
+/// (`001`, `_01`) and the cleaning note (`CleanedGRS`, `Cleaned GRS`) dropped: `reach left`,
+/// `running wide left`. A description that is only a file name (`106_15.amc`) or a number
+/// (`180`) says nothing and becomes empty. Descriptions in words (`walk, stop, sit down`,
+/// `Walk Left`) come back as they are.
+pub fn readable_description(raw: &str) -> String {
+    let raw = raw.trim();
+    let lower = raw.to_ascii_lowercase();
+    if lower.ends_with(".amc") || raw.chars().all(|c| c.is_ascii_digit() || c.is_whitespace() || c == '_') {
+        return String::new();
+    }
+    let mended = WORDING.iter().fold(raw.to_owned(), |s, (wrong, right)| s.replace(wrong, right));
+    let tokens: Vec<&str> = mended.split_whitespace().collect();
+    let file_name = |t: &str| {
+        let chars: Vec<char> = t.chars().collect();
+        t.contains('_')
+            || chars.windows(2).any(|p| {
+                (p[0].is_ascii_lowercase() && p[1].is_ascii_uppercase())
+                    || (p[0].is_ascii_alphabetic() && p[1].is_ascii_digit())
+            })
+    };
+    if !tokens.iter().any(|t| file_name(t)) {
+        return raw.to_owned();
+    }
+    let mut words = Vec::new();
+    let mut k = 0;
+    while k < tokens.len() {
+        let token = tokens[k];
+        k += 1;
+        if token.eq_ignore_ascii_case("cleanedgrs") {
+            continue;
+        }
+        if token.eq_ignore_ascii_case("cleaned") && tokens.get(k).is_some_and(|t| t.eq_ignore_ascii_case("grs")) {
+            k += 1;
+            continue;
+        }
+        for piece in token.split('_') {
+            let numbered = piece.trim_end_matches(|c: char| c.is_ascii_digit());
+            let digits = &piece[numbered.len()..];
+            let piece = if digits.starts_with('0') { numbered } else { piece };
+            words.extend(split_camel_case(piece).into_iter().map(|w| w.to_ascii_lowercase()));
+        }
+    }
+    words.join(" ")
+}
+
+/// Splits a word at a capital after a lower-case letter, a digit after a letter and a capital
+/// after a digit: `RunningWideLeft` → `Running Wide Left`, `90TwistsFall` → `90 Twists Fall`.
+fn split_camel_case(word: &str) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    let mut previous: Option<char> = None;
+    for c in word.chars() {
+        let boundary = previous.is_some_and(|p| {
+            (p.is_ascii_lowercase() && c.is_ascii_uppercase())
+                || (p.is_ascii_alphabetic() && c.is_ascii_digit())
+                || (p.is_ascii_digit() && c.is_ascii_uppercase())
+        });
+        match out.last_mut() {
+            Some(last) if !boundary => last.push(c),
+            _ => out.push(c.to_string()),
+        }
+        previous = Some(c);
+    }
+    out
+}
+
 /// Every caption of the window numbered `window` (any number that differs between
 /// neighbouring windows, such as its index in the corpus): the [`PHRASINGS`] bare sentences,
 /// the first one phrasing 0 exactly ("a person walks forward", what displays and retrieval
@@ -208,6 +290,32 @@ mod tests {
         assert_eq!(sentence(&t, 0), "a person balances on one leg");
         let t = MotionTags { hands_above_head_frames: 30, speed_m_per_s: 0.0, direction: None, ..tags() };
         assert_eq!(sentence(&t, 0), "a person stands with the hands raised above the head");
+    }
+
+    #[test]
+    fn file_name_descriptions_become_words_and_word_descriptions_stay() {
+        for (raw, readable) in [
+            ("Reach_Left002", "reach left"),
+            ("RunningWideLeft CleanedGRS", "running wide left"),
+            ("LeftDrive (right then left) Cleaned GRS", "left drive (right then left)"),
+            ("SraightDriveFromStop", "straight drive from stop"),
+            ("UpRightSequence", "upright sequence"),
+            ("SlowWalkRightAngleTurns", "slow walk ninety degree turns"),
+            ("Painfulleftknee", "painful left knee"),
+            ("charleston_01", "charleston"),
+            ("Figure8s001", "figure 8s"),
+            ("90TwistsFall", "90 twists fall"),
+            ("360 smallStumble", "360 small stumble"),
+            ("Sun Salutation001", "sun salutation"),
+            ("106_15.amc", ""),
+            (" 180 ", ""),
+            ("walk, stop, sit down", "walk, stop, sit down"),
+            ("Walk Left", "Walk Left"),
+            ("hop turn left 180 degrees in air", "hop turn left 180 degrees in air"),
+        ] {
+            assert_eq!(readable_description(raw), readable, "{raw}");
+            assert_eq!(readable_description(readable), readable, "{raw}: not idempotent");
+        }
     }
 
     #[test]

@@ -77,7 +77,7 @@ pub struct CorpusClip {
     /// The subject (`07`, `bd`); whole subjects go to one split.
     pub subject: String,
     /// What the source says of the whole take (CMU's description, HDM05's class, the shipped
-    /// label).
+    /// label), in words ([`caption::readable_description`]: `Reach_Left002` → `reach left`).
     pub description: String,
     /// The split.
     pub split: Split,
@@ -211,7 +211,7 @@ impl Corpus {
                         source: take.source,
                         take: take.take.clone(),
                         subject: take.subject.clone(),
-                        description: take.description.clone(),
+                        description: caption::readable_description(&take.description),
                         split,
                         take_frame: range.start,
                         offset: 0,
@@ -323,7 +323,8 @@ fn prepare_stretches(poses: &[Pose], verdicts: &mut FrameVerdicts, config: &Scre
 
 /// Splits per (source, subject): the shipped clips train; CMU and HDM05 subjects are assigned
 /// by [`split::assign_subjects`] within their source, with the skill families their takes'
-/// descriptions name.
+/// descriptions name as published (not [`caption::readable_description`]'s words, so that
+/// tidying a description never moves a subject to another split).
 fn assign_splits(takes: &[&RawTake]) -> BTreeMap<(Source, String), Split> {
     let mut out = BTreeMap::new();
     for source in [Source::Cmu, Source::Hdm05] {

@@ -543,5 +543,8 @@ mod tests {
         assert_eq!(mirror_label("a person walks and turns left"), "a person walks and turns right");
         assert_eq!(mirror_label("to the left, sideways (Right leg)"), "to the right, sideways (Left leg)");
         assert_eq!(mirror_label("leftover rights"), "leftover rights");
+        // A file-name description mirrors once it is in words.
+        let readable = crate::corpus::caption::readable_description("RunningWideLeft CleanedGRS");
+        assert_eq!(mirror_label(&readable), "running wide right");
     }
 }

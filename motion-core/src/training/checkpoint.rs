@@ -12,6 +12,23 @@ use crate::tensor_file::{read_metadata, write_safetensors};
 
 use super::{TrainError, Trainer};
 
+/// The model a checkpoint or a written prior was made with (its `mdm_config`), so that a
+/// resumed run or a fine-tune can take its sizes from the file instead of from the caller.
+pub fn saved_model_config(path: &Path) -> Result<MdmConfig, TrainError> {
+    let err = |message: String| TrainError::Checkpoint { path: path.into(), message };
+    let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
+    let meta = read_metadata(&bytes).map_err(err)?;
+    model_config(&meta).map(|(config, _)| config).map_err(err)
+}
+
+/// The `mdm_config` of a file's metadata, parsed (not compared as text, so fields added later
+/// with defaults still match), beside its text for messages.
+fn model_config(meta: &HashMap<String, String>) -> Result<(MdmConfig, &str), String> {
+    let saved = meta.get("mdm_config").ok_or("no mdm_config in metadata")?;
+    let config = serde_json::from_str(saved).map_err(|e| format!("mdm_config: {e}"))?;
+    Ok((config, saved))
+}
+
 /// Summary of a checkpoint, for display.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TrainState {
@@ -48,9 +65,7 @@ impl Trainer {
         let meta = read_metadata(&bytes).map_err(err)?;
         let step: usize =
             meta.get("step").and_then(|s| s.parse().ok()).ok_or_else(|| err("no step in metadata".into()))?;
-        let saved_cfg = meta.get("mdm_config").ok_or_else(|| err("no mdm_config in metadata".into()))?;
-        // Parsed, not compared as text, so fields added later with defaults still match.
-        let saved: MdmConfig = serde_json::from_str(saved_cfg).map_err(|e| err(format!("mdm_config: {e}")))?;
+        let (saved, saved_cfg) = model_config(&meta).map_err(err)?;
         if saved != self.model_config {
             return Err(err(format!("the model differs: checkpoint {saved_cfg}")));
         }
@@ -78,8 +93,7 @@ impl Trainer {
         let err = |message: String| TrainError::Checkpoint { path: path.into(), message };
         let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
         let meta = read_metadata(&bytes).map_err(err)?;
-        let saved_cfg = meta.get("mdm_config").ok_or_else(|| err("no mdm_config in metadata".into()))?;
-        let saved: MdmConfig = serde_json::from_str(saved_cfg).map_err(|e| err(format!("mdm_config: {e}")))?;
+        let (saved, saved_cfg) = model_config(&meta).map_err(err)?;
         if saved != self.model_config {
             return Err(err(format!("the model differs: the prior is {saved_cfg}")));
         }

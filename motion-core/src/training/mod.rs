@@ -8,7 +8,7 @@ mod checkpoint;
 mod geometric;
 
 pub use batches::{Batch, CaptionedSequences, Stretch, TrainingSet};
-pub use checkpoint::TrainState;
+pub use checkpoint::{saved_model_config, TrainState};
 pub use geometric::{GeometricLoss, GeometricTerms, CONTACT_SPEED_M_PER_S};
 
 use std::path::{Path, PathBuf};

@@ -84,6 +84,13 @@ fn a_fine_tune_starts_from_a_written_prior() {
             assert!(d == 0.0, "{name}: differs from the prior's EMA by {d}");
         }
     }
+    // The sizes come back from the file, so a caller need not repeat them.
+    assert_eq!(&saved_model_config(&prior).unwrap(), trained.model_config());
+    let ckpt = dir.path().join("ckpt.safetensors");
+    trained.save_checkpoint(&ckpt).unwrap();
+    assert_eq!(&saved_model_config(&ckpt).unwrap(), trained.model_config());
+    let err = saved_model_config(&dir.path().join("none.safetensors")).unwrap_err().to_string();
+    assert!(err.contains("none.safetensors"), "{err}");
     let wider = MdmConfig { latent_dim: 32, ..model };
     let mut other = Trainer::new(data, wider, fresh, &dev).unwrap();
     let err = other.init_from_prior(&prior).unwrap_err().to_string();
