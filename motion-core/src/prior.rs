@@ -321,7 +321,7 @@ impl Prior {
         match &self.captions {
             Some(bank) if !prompt.trim().is_empty() => {
                 let own = self.encoder.encode(&[prompt], bank.vectors().device())?;
-                Ok(bank.nearest(&own)?.pop())
+                Ok(bank.nearest(&own, &[prompt])?.pop())
             }
             _ => Ok(None),
         }
