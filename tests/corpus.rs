@@ -1,10 +1,11 @@
 //! The shipped corpus (`fixtures/corpus/corpus.safetensors.gz`) loads and holds what its data
 //! card says: at least 7.5 hours after the drops, every split with whole subjects, a test split
-//! of at least 10 % of the takes, windows with captions, and sound joints.
+//! of at least 10 % of the takes, windows with captions, descriptions in words, and sound joints.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
+use motion_core::corpus::caption::readable_description;
 use motion_core::corpus::stats::CorpusStats;
 use motion_core::corpus::{file, Source, Split};
 
@@ -40,6 +41,11 @@ fn the_shipped_corpus_holds_its_hours_splits_and_captions() {
         .windows
         .iter()
         .all(|w| (3..=5).contains(&w.captions.len()) && w.captions.iter().all(|c| !c.is_empty())));
+    // Every description is in words (a corpus built before `readable_description` holds file
+    // names such as `Reach_Left002`, which mirroring cannot mirror).
+    for c in &corpus.clips {
+        assert_eq!(readable_description(&c.description), c.description, "clip {}", c.name);
+    }
     let s = &stats.soundness;
     assert!(s.bone_spread_max_m < 0.005 && s.deepest_under_floor_m <= 0.0305, "{s:?}");
     assert!((s.stance_toe_median_m - 0.015).abs() < 0.01, "{s:?}");
