@@ -17,7 +17,9 @@ use motion_core::quality::held_out_ratio::{ratios, Ratio, RATIO_FIGURES};
 use motion_core::quality::text_motion::{
     text_motion_report, TextMotionConfig, TextMotionReport, CLEANED, HELD_OUT, SAMPLES, TRAIN,
 };
-use motion_core::quality::{denoising_fidelity, inversion_round_trip, quality_report, QualityConfig, ReportSampling};
+use motion_core::quality::{
+    denoising_fidelity, inversion_round_trip, quality_report, Denoising, QualityConfig, ReportSampling,
+};
 use motion_core::render::{motion_strip, StripRow};
 use motion_core::text::caption_bank::KEEP_OWN_SIMILARITY;
 
@@ -48,10 +50,10 @@ pub struct ReportArgs {
     #[arg(long, default_value_t = ReportSampling::default().frames)]
     frames: usize,
     /// DDIM steps.
-    #[arg(long, default_value_t = ReportSampling::default().ddim_steps)]
+    #[arg(long, default_value_t = Denoising::default().ddim_steps)]
     steps: usize,
     /// Classifier-free guidance scale (1 = conditional model alone).
-    #[arg(long, default_value_t = ReportSampling::default().guidance, value_parser = super::flags::guidance)]
+    #[arg(long, default_value_t = Denoising::default().guidance, value_parser = super::flags::guidance)]
     guidance: f64,
     /// Only this label (repeatable; all labels when absent), e.g. "a person walks forward".
     #[arg(long = "label")]
@@ -113,13 +115,11 @@ const METRIC_COLUMNS: [&str; 14] = [
 impl ReportArgs {
     /// The sampling settings of the flags.
     fn sampling(&self) -> ReportSampling {
-        ReportSampling {
-            samples: self.samples,
-            frames: self.frames,
-            ddim_steps: self.steps,
-            guidance: self.guidance,
-            seed: self.seed,
-        }
+        ReportSampling { samples: self.samples, frames: self.frames, denoising: self.denoising() }
+    }
+
+    fn denoising(&self) -> Denoising {
+        Denoising { ddim_steps: self.steps, guidance: self.guidance, seed: self.seed }
     }
 }
 
@@ -529,13 +529,7 @@ fn text_motion_section(
         .with_context(|| format!("loading the evaluator {}", args.evaluator.display()))?;
     let sentences = ConditionEncoder::sentence(MINILM_NAME, &paths::text_models(), device)
         .with_context(|| format!("loading {MINILM_NAME} from {}", paths::text_models().display()))?;
-    let config = TextMotionConfig {
-        pairs: args.pairs,
-        ddim_steps: args.steps,
-        guidance: args.guidance,
-        seed: args.seed,
-        ..TextMotionConfig::default()
-    };
+    let config = TextMotionConfig { pairs: args.pairs, denoising: args.denoising(), ..TextMotionConfig::default() };
     let started = std::time::Instant::now();
     let report = text_motion_report(prior, &evaluator, &sentences, corpus, &config, device, |done, total| {
         eprintln!("text–motion metrics: {done}/{total} samples ({:.0} s)", started.elapsed().as_secs_f64());

@@ -153,9 +153,9 @@ pub fn family_report(
                 prompt,
                 frames: sampling.frames,
                 batch,
-                seed: sampling.seed + 100 * i as u64 + k as u64,
-                steps: sampling.ddim_steps,
-                guidance: Guidance { scale: sampling.guidance },
+                seed: sampling.denoising.seed + 100 * i as u64 + k as u64,
+                steps: sampling.denoising.ddim_steps,
+                guidance: Guidance { scale: sampling.denoising.guidance },
             };
             let x = prior.sample(&request, device)?;
             let raw = prior.to_features(&x).map_err(tensor)?;
@@ -220,6 +220,7 @@ mod tests {
     use super::*;
     use crate::corpus::tags::MotionTags;
     use crate::quality::test_fixtures::{corpus_of, moving};
+    use crate::quality::Denoising;
     use crate::skeleton::FPS;
     use glam::DVec3;
 
@@ -250,7 +251,11 @@ mod tests {
         let corpus = corpus_of(vec![(Split::Train, walk.clone(), "walk"), (Split::Test, walk, "walk")]);
         let prior = Prior::tiny(&["a person walks forward"]);
         let config = FamilyConfig {
-            sampling: ReportSampling { samples: 3, frames: 40, ddim_steps: 2, ..ReportSampling::default() },
+            sampling: ReportSampling {
+                samples: 3,
+                frames: 40,
+                denoising: Denoising { ddim_steps: 2, ..Denoising::default() },
+            },
             families: vec![Family::Walk],
             ..FamilyConfig::default()
         };

@@ -47,24 +47,38 @@ pub struct LabelQuality {
     pub sample_diversity_m: f64,
 }
 
-/// How the prior's reports draw their unconstrained samples.
+/// How every report draws a sample from the prior: DDIM with classifier-free guidance, from
+/// seeded start noise.
+#[derive(Debug, Clone, Copy)]
+pub struct Denoising {
+    /// DDIM steps (default 50).
+    pub ddim_steps: usize,
+    /// Guidance scale (default 2.5, MDM's).
+    pub guidance: f64,
+    /// The first seed; each report says how it derives the others.
+    pub seed: u64,
+}
+
+impl Default for Denoising {
+    fn default() -> Self {
+        Self { ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0 }
+    }
+}
+
+/// How the prior's per-label and per-family reports draw their unconstrained samples.
 #[derive(Debug, Clone, Copy)]
 pub struct ReportSampling {
     /// Samples per label or per family (default 32).
     pub samples: usize,
     /// Frames per sample (default 120, 6 s: a corpus window).
     pub frames: usize,
-    /// DDIM steps (default 50).
-    pub ddim_steps: usize,
-    /// Guidance scale (default 2.5).
-    pub guidance: f64,
-    /// Seed of the first label's or family's noise.
-    pub seed: u64,
+    /// Steps, guidance and the seed of the first label's or family's noise.
+    pub denoising: Denoising,
 }
 
 impl Default for ReportSampling {
     fn default() -> Self {
-        Self { samples: 32, frames: 120, ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0 }
+        Self { samples: 32, frames: 120, denoising: Denoising::default() }
     }
 }
 
@@ -117,9 +131,9 @@ pub fn quality_report(
             prompt: label,
             frames: t,
             batch: config.sampling.samples,
-            seed: config.sampling.seed + i as u64,
-            steps: config.sampling.ddim_steps,
-            guidance: Guidance { scale: config.sampling.guidance },
+            seed: config.sampling.denoising.seed + i as u64,
+            steps: config.sampling.denoising.ddim_steps,
+            guidance: Guidance { scale: config.sampling.denoising.guidance },
         };
         let x = prior.sample(&request, device)?;
         let raw = prior.to_features(&x).map_err(fail)?;

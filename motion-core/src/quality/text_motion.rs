@@ -20,6 +20,7 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
+use super::Denoising;
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::corpus::{Corpus, Split, WINDOW_FRAMES};
 use crate::diffusion::Guidance;
@@ -40,17 +41,13 @@ pub struct TextMotionConfig {
     pub pairs: usize,
     /// Captions per R-precision pool (default 32, the field's).
     pub pool: usize,
-    /// DDIM steps of the samples (default 50).
-    pub ddim_steps: usize,
-    /// Guidance scale of the samples (default 2.5).
-    pub guidance: f64,
-    /// Seed of the window choice, the captions, the noise and the pools.
-    pub seed: u64,
+    /// How the samples are drawn; its seed also chooses the windows, captions and pools.
+    pub denoising: Denoising,
 }
 
 impl Default for TextMotionConfig {
     fn default() -> Self {
-        Self { pairs: 256, pool: 32, ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0 }
+        Self { pairs: 256, pool: 32, denoising: Denoising::default() }
     }
 }
 
@@ -111,7 +108,8 @@ pub fn text_motion_report(
     if config.pairs < config.pool || config.pool == 0 {
         return Err(fail(format!("{} pairs cannot fill pools of {}", config.pairs, config.pool)));
     }
-    let mut rng = StdRng::seed_from_u64(config.seed);
+    let Denoising { ddim_steps, guidance, seed } = config.denoising;
+    let mut rng = StdRng::seed_from_u64(seed);
     let held_out = windows(corpus, Split::Test, config.pairs, &mut rng);
     let train = windows(corpus, Split::Train, config.pairs, &mut rng);
     if held_out.len() < config.pairs || train.len() < config.pairs {
@@ -142,9 +140,8 @@ pub fn text_motion_report(
     for (k, chunk) in captions.chunks(CHUNK).enumerate() {
         progress(samples.len(), config.pairs);
         let text = prior.caption_conditions(chunk, device).map_err(tensor)?;
-        let guidance = Guidance { scale: config.guidance };
-        let x =
-            prior.sample_conditioned(&text, WINDOW_FRAMES - 1, config.seed + k as u64, config.ddim_steps, guidance)?;
+        let guidance = Guidance { scale: guidance };
+        let x = prior.sample_conditioned(&text, WINDOW_FRAMES - 1, seed + k as u64, ddim_steps, guidance)?;
         samples.extend(tensor_to_poses(&prior.to_joints(&x).map_err(tensor)?).map_err(tensor)?);
     }
     progress(samples.len(), config.pairs);
@@ -166,7 +163,7 @@ pub fn text_motion_report(
         (CLEANED, &cleaned, &held_out_text),
     ] {
         let embedded = if name == HELD_OUT { reference.clone() } else { embed_motions(evaluator, motions, device)? };
-        let r = r_precision(&embedded, text, config.pool, &[1, 2, 3], config.seed).map_err(tensor)?;
+        let r = r_precision(&embedded, text, config.pool, &[1, 2, 3], seed).map_err(tensor)?;
         let fid = (name != HELD_OUT).then(|| frechet_distance(&embedded, &reference)).transpose().map_err(tensor)?;
         rows.push(TextMotionRow { motions: name, r_precision: [r[0], r[1], r[2]], fid });
     }
@@ -255,7 +252,8 @@ mod tests {
             Evaluator::init_seeded(EvaluatorConfig::default(), mean_std, &VarMap::new(), &device, 3).unwrap();
         let text_models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/text");
         let sentences = ConditionEncoder::sentence(MINILM_NAME, &text_models, &device).unwrap();
-        let config = TextMotionConfig { pairs: 4, pool: 4, ddim_steps: 2, ..TextMotionConfig::default() };
+        let config =
+            TextMotionConfig { pairs: 4, pool: 4, denoising: Denoising { ddim_steps: 2, ..Denoising::default() } };
         let mut calls = 0;
         let report =
             text_motion_report(&prior, &evaluator, &sentences, &corpus, &config, &device, |_, _| calls += 1).unwrap();
