@@ -266,55 +266,59 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     };
     let start = Instant::now();
     let mut smoothed: Option<f64> = None;
-    trainer.run(args.stop_after, Some(&args.checkpoint), |r, trainer| {
-        let s = smoothed.map_or(r.loss, |s| 0.98 * s + 0.02 * r.loss);
-        smoothed = Some(s);
-        bar.set_position(r.step as u64);
-        bar.set_message(format!("loss {s:.4} lr {:.1e} T={}", r.lr, r.frames));
-        // Not a terminal: a plain line every 100 steps instead of the bar.
-        if bar.is_hidden() && r.step % 100 == 0 {
-            eprintln!(
-                "step {}/{} loss {s:.4} velocity {:.4} foot contact {:.4} lr {:.1e} ({:.0} s)",
-                r.step,
-                r.steps,
-                r.velocity,
-                r.foot_contact,
-                r.lr,
-                start.elapsed().as_secs_f64()
-            );
-        }
-        let validation = match &held_out {
-            Some(set)
-                if r.step % args.validate_every.max(1) == 0 || r.step == r.steps || Some(r.step) == args.stop_after =>
-            {
-                let loss = trainer.validation_loss(set, args.validation_batches, VALIDATION_SEED)?;
-                let line = format!("step {}: validation loss {loss:.4}", r.step);
-                if bar.is_hidden() {
-                    eprintln!("{line}");
-                } else {
-                    bar.println(line);
-                }
-                Some(loss)
+    trainer
+        .run(args.stop_after, Some(&args.checkpoint), |r, trainer| {
+            let s = smoothed.map_or(r.loss, |s| 0.98 * s + 0.02 * r.loss);
+            smoothed = Some(s);
+            bar.set_position(r.step as u64);
+            bar.set_message(format!("loss {s:.4} lr {:.1e} T={}", r.lr, r.frames));
+            // Not a terminal: a plain line every 100 steps instead of the bar.
+            if bar.is_hidden() && r.step % 100 == 0 {
+                eprintln!(
+                    "step {}/{} loss {s:.4} velocity {:.4} foot contact {:.4} lr {:.1e} ({:.0} s)",
+                    r.step,
+                    r.steps,
+                    r.velocity,
+                    r.foot_contact,
+                    r.lr,
+                    start.elapsed().as_secs_f64()
+                );
             }
-            _ => None,
-        };
-        if let Some(f) = csv.as_mut() {
-            use std::io::Write;
-            let _ = writeln!(
-                f,
-                "{},{},{},{},{},{},{:.2},{}",
-                r.step,
-                r.loss,
-                r.velocity,
-                r.foot_contact,
-                r.lr,
-                r.frames,
-                start.elapsed().as_secs_f64(),
-                validation.map(|v| v.to_string()).unwrap_or_default()
-            );
-        }
-        Ok(())
-    })?;
+            let validation = match &held_out {
+                Some(set)
+                    if r.step % args.validate_every.max(1) == 0
+                        || r.step == r.steps
+                        || Some(r.step) == args.stop_after =>
+                {
+                    let loss = trainer.validation_loss(set, args.validation_batches, VALIDATION_SEED)?;
+                    let line = format!("step {}: validation loss {loss:.4}", r.step);
+                    if bar.is_hidden() {
+                        eprintln!("{line}");
+                    } else {
+                        bar.println(line);
+                    }
+                    Some(loss)
+                }
+                _ => None,
+            };
+            if let Some(f) = csv.as_mut() {
+                use std::io::Write;
+                let _ = writeln!(
+                    f,
+                    "{},{},{},{},{},{},{:.2},{}",
+                    r.step,
+                    r.loss,
+                    r.velocity,
+                    r.foot_contact,
+                    r.lr,
+                    r.frames,
+                    start.elapsed().as_secs_f64(),
+                    validation.map(|v| v.to_string()).unwrap_or_default()
+                );
+            }
+            Ok(())
+        })
+        .with_context(|| format!("training (checkpoints to {})", args.checkpoint.display()))?;
     bar.finish();
     trainer.save_prior(&args.out).context("writing the prior")?;
     println!("wrote {} after {:.0} s", args.out.display(), start.elapsed().as_secs_f64());

@@ -189,8 +189,8 @@ pub enum TrainError {
         /// Loss value.
         loss: f64,
     },
-    /// Checkpoint I/O.
-    #[error("checkpoint {path}: {message}")]
+    /// Reading or writing a checkpoint, or reading a prior to start from (the caller says which).
+    #[error("{path}: {message}")]
     Checkpoint {
         /// File.
         path: PathBuf,
