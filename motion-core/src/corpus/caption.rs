@@ -178,21 +178,14 @@ const WORDING: [(&str, &str); 7] = [
 /// `Walk Left`) come back as they are.
 pub fn readable_description(raw: &str) -> String {
     let raw = raw.trim();
-    let lower = raw.to_ascii_lowercase();
-    if lower.ends_with(".amc") || raw.chars().all(|c| c.is_ascii_digit() || c.is_whitespace() || c == '_') {
+    if raw.to_ascii_lowercase().ends_with(".amc")
+        || raw.chars().all(|c| c.is_ascii_digit() || c.is_whitespace() || c == '_')
+    {
         return String::new();
     }
     let mended = WORDING.iter().fold(raw.to_owned(), |s, (wrong, right)| s.replace(wrong, right));
     let tokens: Vec<&str> = mended.split_whitespace().collect();
-    let file_name = |t: &str| {
-        let chars: Vec<char> = t.chars().collect();
-        t.contains('_')
-            || chars.windows(2).any(|p| {
-                (p[0].is_ascii_lowercase() && p[1].is_ascii_uppercase())
-                    || (p[0].is_ascii_alphabetic() && p[1].is_ascii_digit())
-            })
-    };
-    if !tokens.iter().any(|t| file_name(t)) {
+    if !tokens.iter().any(|t| t.contains('_') || split_camel_case(t).len() > 1) {
         return raw.to_owned();
     }
     let mut words = Vec::new();
