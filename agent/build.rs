@@ -7,12 +7,13 @@ use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-/// What the installed binary needs: the prior and the sentence encoder it is conditioned on
-/// (with its licence and provenance), the recorded LLM replies, the task programs, the mocap
+/// What the installed binary needs: the prior, the sentence encoder it is conditioned on and
+/// the WordNet verbs its prompts are restated with (each with its licence and provenance), the recorded LLM replies, the task programs, the mocap
 /// catalog with its clips, and the motion corpus.
-const EMBEDDED: [&str; 6] = [
+const EMBEDDED: [&str; 7] = [
     "model/prior.safetensors",
     "text/all-MiniLM-L6-v2",
+    "text/wordnet",
     "llm/recorded",
     "tasks",
     "mocap",

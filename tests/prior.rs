@@ -240,3 +240,17 @@ fn walks_skate_and_move_like_held_out_walks() {
     );
     assert!(s.bone_length_range_m <= 0.01, "bones vary by {} m", s.bone_length_range_m);
 }
+
+/// A free prompt's verbs that no training caption uses are restated through WordNet before the
+/// caption bank hears it: "ambles and veers" is a walk and a turn, where the sentence encoder
+/// alone heard "a person stays where they are (a take of: Reach_Left002)" (session 36).
+#[test]
+fn unknown_verbs_are_restated_in_the_captions_verbs_before_the_bank_hears_them() {
+    let prior = prior();
+    let restated = prior.restate("someone ambles and veers off to their left");
+    assert_eq!(restated.text, "someone walks and turns off to their left");
+    let nearest = prior.nearest_caption("someone ambles and veers off to their left").unwrap().unwrap();
+    assert!(nearest.caption.contains("turn") && nearest.caption.contains("left"), "{nearest:?}");
+    // A prompt in the captions' words is left as it is.
+    assert!(prior.restate(WALK).replaced.is_empty());
+}

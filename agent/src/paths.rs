@@ -131,6 +131,11 @@ pub fn default_evaluator() -> PathBuf {
     fixtures_dir().join("model").join("evaluator").join("evaluator.safetensors")
 }
 
+/// The held-out paraphrases of the prior report (in the source tree's fixtures; not embedded).
+pub fn default_paraphrases() -> PathBuf {
+    fixtures_dir().join("model").join("held_out_paraphrases.tsv")
+}
+
 /// The folder of the sentence encoders a prior may condition on (one folder per encoder).
 pub fn text_models() -> PathBuf {
     fixtures_dir().join("text")

@@ -104,7 +104,8 @@ fn progress_goes_to_a_log_and_errors_carry_no_backtrace() {
 }
 
 /// `mogen sample` says which training caption a prompt is conditioned on: a paraphrase far
-/// from every caption takes the nearest one (a crawl), a caption keeps its own vector.
+/// from every caption takes the nearest one (a crawl), a caption keeps its own vector, and a
+/// prompt whose verbs no caption uses says how it was restated (WordNet).
 #[test]
 fn sample_names_the_training_caption_a_prompt_is_conditioned_on() {
     let dir = tempfile::tempdir().unwrap();
@@ -122,6 +123,12 @@ fn sample_names_the_training_caption_a_prompt_is_conditioned_on() {
     assert!(
         near.contains("the nearest training caption: \"a person walks forward\" (cosine similarity 1.00)"),
         "{near}"
+    );
+    assert!(!near.contains("restated"), "{near}");
+    let restated = sample("someone ambles and veers off to their left", "restated");
+    assert!(
+        restated.contains("\"someone walks and turns off to their left\" (ambles → walks, veers → turns)"),
+        "{restated}"
     );
 }
 

@@ -130,6 +130,23 @@ pub const RIG_JOINTS: Limit = Limit {
 pub const MOCAP_FILE_BYTES: Limit =
     Limit { name: "mocap file size", max: 512 << 20, unit: "bytes", advice: "split the capture into shorter files" };
 
+/// Bytes of a list of prompts read for a report (`mogen report prior --paraphrases`).
+pub const PROMPT_LIST_FILE_BYTES: Limit = Limit {
+    name: "prompt list file size",
+    max: 1 << 20,
+    unit: "bytes",
+    advice: "a prompt list is a short text file of `family<TAB>prompt` lines; is this the right file?",
+};
+
+/// Bytes of one WordNet database file once unpacked (WordNet 3.0's largest read, `index.noun`,
+/// is 4.8 MB).
+pub const WORDNET_FILE_BYTES: Limit = Limit {
+    name: "WordNet file size",
+    max: 64 << 20,
+    unit: "bytes",
+    advice: "the text models folder's `wordnet/` should hold WordNet 3.0's files; re-create it with fixtures/text/extract_wordnet.sh",
+};
+
 /// Bytes of one LLM reply body (a program with the largest allowed constraints fits in far less).
 pub const LLM_REPLY_BYTES: Limit = Limit {
     name: "LLM reply size",

@@ -11,7 +11,9 @@
 //! on a sentence encoder may carry its [`CaptionBank`]: the distinct training captions' vectors
 //! as `conditioning.captions` (`[captions, text_dim]`, f16) and the captions themselves as
 //! `caption_bank` (a JSON list); a free prompt far from every training caption is then
-//! conditioned on the nearest one ([`Prior::caption_conditions`]).
+//! conditioned on the nearest one ([`Prior::caption_conditions`]), after its verbs that no
+//! caption uses are restated through WordNet (read from the text models folder's
+//! [`wordnet::FOLDER`]).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -29,6 +31,8 @@ use crate::representation::{
 };
 use crate::tensor_file::{read_metadata, write_safetensors};
 use crate::text::caption_bank::{CaptionBank, NearestCaption};
+use crate::text::restatement::Restated;
+use crate::text::wordnet::{self, WordNet};
 use crate::text::{ConditionEncoder, TextEncoder, MINILM_NAME};
 
 const MEAN_KEY: &str = "normalization.mean";
@@ -233,7 +237,10 @@ impl Prior {
                 if vectors.dims().get(1) != Some(&cfg.text_dim) {
                     return Err(format(format!("`{BANK_KEY}` is {:?}, not [_, {}]", vectors.dims(), cfg.text_dim)));
                 }
-                Some(CaptionBank::new(captions, vectors).map_err(|e| format(format!("`{BANK_KEY}`: {e}")))?)
+                let bank = CaptionBank::new(captions, vectors).map_err(|e| format(format!("`{BANK_KEY}`: {e}")))?;
+                let wordnet = WordNet::load(&text_models.join(wordnet::FOLDER))
+                    .map_err(|e| format(format!("its caption bank's WordNet: {e}")))?;
+                Some(bank.with_wordnet(std::sync::Arc::new(wordnet)))
             }
             (Some(_), Some(_)) => return Err(format(format!("`{BANK_KEY}` needs a sentence encoder"))),
             _ => return Err(format(format!("`{BANK_KEY}` and `{BANK_TEXT_KEY}` come together; one is missing"))),
@@ -308,20 +315,33 @@ impl Prior {
     /// text_dim]`: [`Self::encode_text`]'s, except that for a prior with a [`CaptionBank`] a
     /// prompt far from every training caption takes the nearest one's ([`CaptionBank::snap`]).
     pub fn caption_conditions(&self, prompts: &[&str], device: &Device) -> candle_core::Result<Tensor> {
-        let own = self.encode_text(prompts, device)?;
         match &self.captions {
-            Some(bank) => bank.snap(&own, prompts, device),
-            None => Ok(own),
+            Some(bank) => {
+                let restated: Vec<String> = prompts.iter().map(|p| bank.restate(p).text).collect();
+                let restated: Vec<&str> = restated.iter().map(String::as_str).collect();
+                bank.snap(&self.encode_text(&restated, device)?, &restated, device)
+            }
+            None => self.encode_text(prompts, device),
         }
     }
 
-    /// The training caption a non-blank prompt is conditioned on (`None` without a
-    /// [`CaptionBank`] or for a blank prompt).
+    /// A free prompt as [`Self::caption_conditions`] encodes it: restated in the training
+    /// captions' verbs ([`CaptionBank::restate`]; as it is without a bank).
+    pub fn restate(&self, prompt: &str) -> Restated {
+        match &self.captions {
+            Some(bank) => bank.restate(prompt),
+            None => Restated::unchanged(prompt),
+        }
+    }
+
+    /// The training caption a non-blank prompt, restated ([`Self::restate`]), is conditioned on
+    /// (`None` without a [`CaptionBank`] or for a blank prompt).
     pub fn nearest_caption(&self, prompt: &str) -> candle_core::Result<Option<NearestCaption>> {
         match &self.captions {
             Some(bank) if !prompt.trim().is_empty() => {
-                let own = self.encoder.encode(&[prompt], bank.vectors().device())?;
-                Ok(bank.nearest(&own, &[prompt])?.pop())
+                let restated = bank.restate(prompt).text;
+                let own = self.encoder.encode(&[&restated], bank.vectors().device())?;
+                Ok(bank.nearest(&own, &[&restated])?.pop())
             }
             _ => Ok(None),
         }

@@ -14,6 +14,7 @@ use motion_core::metrics::MetricMeans;
 use motion_core::prior::{RootDecode, Sampling};
 use motion_core::quality::families::{family_report, FamilyConfig, FamilyQuality};
 use motion_core::quality::held_out_ratio::{ratios, Ratio, RATIO_FIGURES};
+use motion_core::quality::paraphrases::{paraphrase_report, read_paraphrases, ParaphraseOutcome};
 use motion_core::quality::text_motion::{
     text_motion_report, TextMotionConfig, TextMotionReport, CLEANED, HELD_OUT, SAMPLES, TRAIN,
 };
@@ -41,7 +42,7 @@ pub struct ReportArgs {
     /// Only this skill family (repeatable; all when absent): walk, run, "turn left",
     /// "turn right", "sideways walk", "sneak/crouch walk", jump, "hop on one foot",
     /// "one-leg balance", carry, "sit down", crawl.
-    #[arg(long = "family", value_parser = family_by_name)]
+    #[arg(long = "family", value_parser = Family::from_name)]
     families: Vec<Family>,
     /// Samples per label (per family with the corpus).
     #[arg(long, default_value_t = ReportSampling::default().samples)]
@@ -89,6 +90,14 @@ pub struct ReportArgs {
     /// train-split windows) for R-precision and FID; 0 leaves them out.
     #[arg(long, default_value_t = TextMotionConfig::default().pairs)]
     pairs: usize,
+    /// Held-out paraphrases (`family<TAB>prompt` lines, written before they were ever sampled),
+    /// each sampled and judged by its family's detector, with the corpus; the report says so
+    /// and leaves them out when the file is missing.
+    #[arg(long, default_value_os_t = paths::default_paraphrases())]
+    paraphrases: PathBuf,
+    /// Samples per held-out paraphrase; 0 leaves them out.
+    #[arg(long, default_value_t = 16)]
+    paraphrase_samples: usize,
     /// Output folder (report.json, report.md, samples.png).
     #[arg(long, short, default_value = "out/report")]
     out: PathBuf,
@@ -121,14 +130,6 @@ impl ReportArgs {
     fn denoising(&self) -> Denoising {
         Denoising { ddim_steps: self.steps, guidance: self.guidance, seed: self.seed }
     }
-}
-
-/// A family by its [`Family::name`].
-fn family_by_name(name: &str) -> Result<Family, String> {
-    Family::ALL.into_iter().find(|f| f.name() == name).ok_or_else(|| {
-        let names: Vec<&str> = Family::ALL.iter().map(|f| f.name()).collect();
-        format!("unknown family {name:?}; the families are: {}", names.join(", "))
-    })
 }
 
 pub fn run(args: ReportArgs) -> anyhow::Result<()> {
@@ -382,11 +383,11 @@ fn run_families(
         lines.extend([
             String::new(),
             format!(
-                "The training caption nearest each prompt (cosine similarity of the sentence vectors); a prompt under {KEEP_OWN_SIMILARITY} is conditioned on the caption's vector, the others on their own:"
+                "The training caption nearest each prompt as restated in the captions' verbs (WordNet; cosine similarity of the sentence vectors); a prompt under {KEEP_OWN_SIMILARITY} is conditioned on the caption's vector, the others on their own:"
             ),
             String::new(),
-            "| family | prompt | conditioned on | cosine |".to_owned(),
-            "|---|---|---|---|".to_owned(),
+            "| family | prompt | restated | conditioned on | cosine |".to_owned(),
+            "|---|---|---|---|---|".to_owned(),
         ]);
         for r in &rows {
             for prompt in &r.prompts {
@@ -396,15 +397,27 @@ fn run_families(
                     } else {
                         format!("(its own vector; nearest: {})", n.caption)
                     };
-                    lines.push(format!("| {} | {prompt} | {caption} | {:.2} |", r.family.name(), n.similarity));
+                    let restated = prior.restate(prompt);
+                    let restated = if restated.replaced.is_empty() { "–".to_owned() } else { restated.text };
+                    lines.push(format!(
+                        "| {} | {prompt} | {restated} | {caption} | {:.2} |",
+                        r.family.name(),
+                        n.similarity
+                    ));
                 }
             }
         }
     }
+    let paraphrases = paraphrase_section(args, prior, &mut lines)?;
     let text_motion = text_motion_section(args, prior, &corpus, device, &mut lines)?;
     std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
-    let json =
-        serde_json::json!({ "prior": prior.identity, "families": rows, "ratios": ratios, "text_motion": text_motion });
+    let json = serde_json::json!({
+        "prior": prior.identity,
+        "families": rows,
+        "ratios": ratios,
+        "paraphrases": paraphrases,
+        "text_motion": text_motion,
+    });
     std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&json)?)?;
     println!("wrote {}/{{report.md,report.json,families/*.png}}", args.out.display());
     Ok(())
@@ -502,6 +515,56 @@ pub fn run_loss(args: LossArgs) -> anyhow::Result<()> {
 /// R-precision and FID of samples against held-out capture (and of the train split, for scale),
 /// appended to the report's lines; `None` when `--pairs 0` or without an evaluator file (the
 /// lines say which).
+/// The held-out paraphrases' table ([`paraphrase_report`]); `None` when left out.
+fn paraphrase_section(
+    args: &ReportArgs,
+    prior: &motion_core::prior::Prior,
+    lines: &mut Vec<String>,
+) -> anyhow::Result<Option<Vec<ParaphraseOutcome>>> {
+    lines.push(String::new());
+    if args.paraphrase_samples == 0 {
+        lines.push("Held-out paraphrases: left out (`--paraphrase-samples 0`).".to_owned());
+        return Ok(None);
+    }
+    if !args.paraphrases.is_file() {
+        let note = format!("Held-out paraphrases: left out, no file at `{}`.", args.paraphrases.display());
+        eprintln!("{note}");
+        lines.push(note);
+        return Ok(None);
+    }
+    let paraphrases = read_paraphrases(&args.paraphrases)?;
+    let outcomes = paraphrase_report(prior, &paraphrases, args.paraphrase_samples, args.frames, args.denoising())?;
+    lines.extend([
+        format!(
+            "Held-out paraphrases (`{}`, written before any was sampled): {} samples of each (paraphrase i's noise from seed {} + 100·i), the share passing its family's detector on the network's output. Each is restated in the training captions' verbs (WordNet; – when unchanged) and heard as its nearest training caption:",
+            args.paraphrases.display(),
+            args.paraphrase_samples,
+            args.seed
+        ),
+        String::new(),
+        "| family | prompt | restated | heard as (cosine) | passed |".to_owned(),
+        "|---|---|---|---|---|".to_owned(),
+    ]);
+    for o in &outcomes {
+        let p = &o.paraphrase;
+        let restated = if o.restated == p.prompt { "–" } else { o.restated.as_str() };
+        let heard = o.heard_as.as_ref().map_or("–".to_owned(), |(caption, cos)| format!("{caption} ({cos:.2})"));
+        let passed = o.detected.map_or("–".to_owned(), |v| format!("{:.0} %", 100.0 * v));
+        lines.push(format!("| {} | {} | {restated} | {heard} | {passed} |", p.family.name(), p.prompt));
+    }
+    let shares: Vec<f64> = outcomes.iter().filter_map(|o| o.detected).collect();
+    if !shares.is_empty() {
+        let mean = shares.iter().sum::<f64>() / shares.len() as f64;
+        lines.push(String::new());
+        lines.push(format!(
+            "Mean share passing over the {} paraphrases with a detector: {:.0} %.",
+            shares.len(),
+            100.0 * mean
+        ));
+    }
+    Ok(Some(outcomes))
+}
+
 fn text_motion_section(
     args: &ReportArgs,
     prior: &motion_core::prior::Prior,

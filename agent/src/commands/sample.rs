@@ -68,6 +68,11 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         Some(heard) => eprintln!("the prior hears: {}", heard.join(" ")),
         None => {}
     }
+    let restated = prior.restate(&args.prompt);
+    if !restated.replaced.is_empty() {
+        let words: Vec<String> = restated.replaced.iter().map(|(word, by)| format!("{word} → {by}")).collect();
+        eprintln!("restated in the training captions' verbs (WordNet): {:?} ({})", restated.text, words.join(", "));
+    }
     match prior.nearest_caption(&args.prompt)? {
         Some(n) if n.replaces_prompt() => eprintln!(
             "no training caption is near the prompt; conditioned on the nearest: {:?} (cosine similarity {:.2})",

@@ -98,6 +98,14 @@ impl Family {
         }
     }
 
+    /// The family called `name` ([`Family::name`]); the error lists the names.
+    pub fn from_name(name: &str) -> Result<Family, String> {
+        Family::ALL.into_iter().find(|f| f.name() == name).ok_or_else(|| {
+            let names: Vec<&str> = Family::ALL.iter().map(|f| f.name()).collect();
+            format!("unknown family {name:?}; the families are: {}", names.join(", "))
+        })
+    }
+
     /// The prompts its samples are drawn for: a caption-like one and a paraphrase whose verbs
     /// and direction words the caption rules (`caption.rs`) never use ("someone strolls ahead"
     /// and "someone stands on one foot" are captions since session 33).

@@ -1,10 +1,12 @@
 //! The prior quality report: unconstrained samples per label against the training data, on
 //! the motion metrics, plus a memorisation check (nearest training window); and per skill
 //! family against the corpus's held-out capture ([`families`]), with issue 40's ratio bars
-//! ([`held_out_ratio`]).
+//! ([`held_out_ratio`]); and held-out paraphrases through the families' detectors
+//! ([`paraphrases`]).
 
 pub mod families;
 pub mod held_out_ratio;
+pub mod paraphrases;
 pub mod text_motion;
 
 #[cfg(test)]

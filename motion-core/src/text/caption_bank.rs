@@ -17,8 +17,17 @@
 //! Session 37 measured it: with the shipped weights banked on the session-37 captions,
 //! "someone ambles and veers off to their right" was heard as "upset: a person stands in place,
 //! turning to the left" and its samples turned right in 12 % (50 % heard as "... turns right").
+//!
+//! A bank loaded with WordNet ([`CaptionBank::with_wordnet`]) first restates a prompt's verbs
+//! that no caption uses in verbs the captions do ([`super::restatement`]); the prompt is encoded
+//! as restated.
+
+use std::sync::Arc;
 
 use candle_core::{DType, Device, Result, Tensor};
+
+use super::restatement::{Restated, Restatement};
+use super::wordnet::WordNet;
 
 /// Cosine similarity to its nearest training caption from which a prompt keeps its own vector.
 /// Measured on the session-33 prior (16 samples per prompt, `fixtures/model/report.md`): "a
@@ -35,6 +44,7 @@ pub struct CaptionBank {
     captions: Vec<String>,
     sides: Vec<Sides>,
     vectors: Tensor,
+    restatement: Option<Restatement>,
 }
 
 /// The sides a text names: the whole words "left" and "right", in any case.
@@ -86,7 +96,22 @@ impl CaptionBank {
         }
         let vectors = vectors.to_dtype(DType::F32).map_err(|e| format!("caption vectors: {e}"))?;
         let sides = captions.iter().map(|c| Sides::of(c)).collect();
-        Ok(Self { captions, sides, vectors })
+        Ok(Self { captions, sides, vectors, restatement: None })
+    }
+
+    /// The bank restating prompts in its captions' verbs through `wordnet` ([`Self::restate`]).
+    pub fn with_wordnet(self, wordnet: Arc<WordNet>) -> Self {
+        let restatement = Some(Restatement::new(wordnet, &self.captions));
+        Self { restatement, ..self }
+    }
+
+    /// `prompt` restated in the captions' verbs ([`super::restatement`]); as it is without
+    /// WordNet.
+    pub fn restate(&self, prompt: &str) -> Restated {
+        match &self.restatement {
+            Some(r) => r.restate(prompt),
+            None => Restated::unchanged(prompt),
+        }
     }
 
     /// The captions, in row order.

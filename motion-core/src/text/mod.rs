@@ -6,8 +6,10 @@
 pub mod caption_bank;
 pub mod clip;
 pub mod minilm;
+pub mod restatement;
 pub mod vocabulary;
 pub mod weights;
+pub mod wordnet;
 
 use std::path::Path;
 use std::sync::Arc;
