@@ -17,6 +17,9 @@
 //! Session 37 measured it: with the shipped weights banked on the session-37 captions,
 //! "someone ambles and veers off to their right" was heard as "upset: a person stands in place,
 //! turning to the left" and its samples turned right in 12 % (50 % heard as "... turns right").
+//! Nor may it name one foot where the prompt names both, or both where it names one: MiniLM
+//! heard "someone jumps onward with both feet" as "someone jumps along on one foot" (0.89), and
+//! its samples left the ground in 38 % (session 38).
 //!
 //! A bank loaded with WordNet ([`CaptionBank::with_wordnet`]) first restates a prompt's verbs
 //! that no caption uses in verbs the captions do ([`super::restatement`]); the prompt is encoded
@@ -42,28 +45,51 @@ pub const KEEP_OWN_SIMILARITY: f32 = 0.95;
 #[derive(Debug, Clone)]
 pub struct CaptionBank {
     captions: Vec<String>,
-    sides: Vec<Sides>,
+    named: Vec<Named>,
     vectors: Tensor,
     restatement: Option<Restatement>,
 }
 
-/// The sides a text names: the whole words "left" and "right", in any case.
+/// Which of two values a sentence encoder hardly tells apart a text names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-struct Sides {
-    left: bool,
-    right: bool,
+struct Pair {
+    first: bool,
+    second: bool,
 }
 
-impl Sides {
+impl Pair {
+    /// Whether a caption naming these may stand for a prompt naming `prompt`'s: a prompt naming
+    /// neither takes any caption, one naming a value only captions naming no other.
+    fn fit(self, prompt: Pair) -> bool {
+        prompt == Pair::default() || ((!self.first || prompt.first) && (!self.second || prompt.second))
+    }
+}
+
+/// What a text names of the pairs MiniLM hardly tells apart, in whole words of any case: the
+/// sides ("left", "right") and the feet (one: "one", "single", "left" or "right" before
+/// "foot", "leg" or "legged"; both: "both" or "two" before "feet" or "legs", or "feet"/"legs"
+/// before "together").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+struct Named {
+    sides: Pair,
+    feet: Pair,
+}
+
+impl Named {
     fn of(text: &str) -> Self {
-        let named = |side: &str| text.split(|c: char| !c.is_alphanumeric()).any(|w| w.eq_ignore_ascii_case(side));
-        Sides { left: named("left"), right: named("right") }
+        let words: Vec<String> =
+            text.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).map(str::to_lowercase).collect();
+        let has = |word: &str| words.iter().any(|w| w == word);
+        let pair = |first: &[&str], second: &[&str]| {
+            words.windows(2).any(|w| first.contains(&w[0].as_str()) && second.contains(&w[1].as_str()))
+        };
+        let one = pair(&["one", "single", "left", "right"], &["foot", "leg", "legged"]);
+        let both = pair(&["both", "two"], &["feet", "legs"]) || pair(&["feet", "legs"], &["together"]);
+        Named { sides: Pair { first: has("left"), second: has("right") }, feet: Pair { first: one, second: both } }
     }
 
-    /// Whether a caption naming these sides may stand for a prompt naming `prompt`'s: a prompt
-    /// naming no side takes any caption, one naming a side only captions naming no other.
-    fn fit(self, prompt: Sides) -> bool {
-        prompt == Sides::default() || ((!self.left || prompt.left) && (!self.right || prompt.right))
+    fn fit(self, prompt: Named) -> bool {
+        self.sides.fit(prompt.sides) && self.feet.fit(prompt.feet)
     }
 }
 
@@ -95,8 +121,8 @@ impl CaptionBank {
             return Err(format!("{} captions but {rows} caption vectors", captions.len()));
         }
         let vectors = vectors.to_dtype(DType::F32).map_err(|e| format!("caption vectors: {e}"))?;
-        let sides = captions.iter().map(|c| Sides::of(c)).collect();
-        Ok(Self { captions, sides, vectors, restatement: None })
+        let named = captions.iter().map(|c| Named::of(c)).collect();
+        Ok(Self { captions, named, vectors, restatement: None })
     }
 
     /// The bank restating prompts in its captions' verbs through `wordnet` ([`Self::restate`]).
@@ -125,8 +151,8 @@ impl CaptionBank {
     }
 
     /// The nearest caption of each of `prompts`, whose unit sentence vectors are the rows of
-    /// `condition` `[prompts.len(), dim]`, among the captions naming no side the prompt does not
-    /// name (the module's note), or among all when none does.
+    /// `condition` `[prompts.len(), dim]`, among the captions naming no side and no number of
+    /// feet the prompt does not name (the module's note), or among all when none does.
     pub fn nearest(&self, condition: &Tensor, prompts: &[&str]) -> Result<Vec<NearestCaption>> {
         let device = self.vectors.device();
         let similarity = condition.to_device(device)?.to_dtype(DType::F32)?.matmul(&self.vectors.t()?)?;
@@ -138,11 +164,11 @@ impl CaptionBank {
             .iter()
             .zip(prompts)
             .map(|(row, prompt)| {
-                let asked = Sides::of(prompt);
+                let asked = Named::of(prompt);
                 let best = |fitting: bool| {
                     row.iter()
                         .enumerate()
-                        .filter(|&(k, _)| !fitting || self.sides[k].fit(asked))
+                        .filter(|&(k, _)| !fitting || self.named[k].fit(asked))
                         .max_by(|a, b| a.1.total_cmp(b.1))
                         .map(|(k, &s)| (k, s))
                 };
@@ -221,9 +247,35 @@ mod tests {
         let expected = 0.5 / (0.5f32 * 0.5 + 0.8 * 0.8).sqrt();
         assert!((nearest[0].similarity - expected).abs() < 1e-3, "{nearest:?}");
         // A caption naming no side fits every prompt; whole words only.
-        assert!(Sides::of("walks forward").fit(Sides::of("turns left")));
-        assert_eq!(Sides::of("Reach_Left002 (leftover)"), Sides { left: false, right: false });
+        assert!(Named::of("walks forward").fit(Named::of("turns left")));
+        assert_eq!(Named::of("Reach_Left002 (leftover)"), Named::default());
         assert!(bank.nearest(&condition, &prompts[..2]).is_err());
+    }
+
+    #[test]
+    fn a_prompt_naming_one_foot_or_both_is_not_heard_as_the_other() {
+        let one = Pair { first: true, second: false };
+        let both = Pair { first: false, second: true };
+        for (text, feet) in [
+            ("someone jumps along on one foot", one),
+            ("a girl hops on her LEFT leg", one),
+            ("a one-legged stance", one),
+            ("someone bounds onward with both feet", both),
+            ("a standing jump with her feet together", both),
+            ("someone jumps off two legs", both),
+            ("a person jumps forward", Pair::default()),
+            ("someone walks a foot to the left", Pair::default()),
+        ] {
+            assert_eq!(Named::of(text).feet, feet, "{text}");
+        }
+        let rows = [unit([1.0, 0.0, 0.0]), unit([0.9, 0.1, 0.0])];
+        let vectors = Tensor::new(&rows, &Device::Cpu).unwrap();
+        let captions = vec!["someone jumps along on one foot".into(), "a person jumps forward".into()];
+        let bank = CaptionBank::new(captions, vectors).unwrap();
+        let condition = Tensor::new(&[unit([1.0, 0.0, 0.0]), unit([1.0, 0.0, 0.0])], &Device::Cpu).unwrap();
+        let nearest = bank.nearest(&condition, &["someone jumps with both feet", "someone jumps on one leg"]).unwrap();
+        assert_eq!(nearest[0].caption, "a person jumps forward");
+        assert_eq!(nearest[1].caption, "someone jumps along on one foot");
     }
 
     #[test]
