@@ -243,3 +243,17 @@ fn retries_leave_samples_that_meet_every_constraint_alone() {
     assert!(!log.contains("attempt 2"), "{log}");
     assert_eq!(report["attempt"], serde_json::json!([0]), "{report}");
 }
+
+/// A bad held-out paraphrase file stops `mogen report prior` before any family is sampled, with
+/// the file and the line, and writes no report.
+#[test]
+fn report_refuses_a_bad_paraphrase_file_before_sampling() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = write(dir.path(), "bad.tsv", "walk\tsomeone strolls\nskate\tsomeone glides\n");
+    let out = dir.path().join("report").display().to_string();
+    let output = mogen(&["report", "prior", "--paraphrases", &bad, "-o", &out]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("bad.tsv: line 2: unknown family \"skate\""), "{stderr}");
+    assert!(!dir.path().join("report").join("report.md").exists());
+}

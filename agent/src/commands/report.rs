@@ -14,7 +14,7 @@ use motion_core::metrics::MetricMeans;
 use motion_core::prior::{RootDecode, Sampling};
 use motion_core::quality::families::{family_report, FamilyConfig, FamilyQuality};
 use motion_core::quality::held_out_ratio::{ratios, Ratio, RATIO_FIGURES};
-use motion_core::quality::paraphrases::{paraphrase_report, read_paraphrases, ParaphraseOutcome};
+use motion_core::quality::paraphrases::{paraphrase_report, read_paraphrases, Paraphrase, ParaphraseOutcome};
 use motion_core::quality::text_motion::{
     text_motion_report, TextMotionConfig, TextMotionReport, CLEANED, HELD_OUT, SAMPLES, TRAIN,
 };
@@ -98,7 +98,8 @@ pub struct ReportArgs {
     /// Samples per held-out paraphrase; 0 leaves them out.
     #[arg(long, default_value_t = 16)]
     paraphrase_samples: usize,
-    /// Output folder (report.json, report.md, samples.png).
+    /// Output folder (report.md, report.json, and samples.png per label or families/*.png per
+    /// family).
     #[arg(long, short, default_value = "out/report")]
     out: PathBuf,
 }
@@ -312,6 +313,8 @@ fn run_families(
 ) -> anyhow::Result<()> {
     let corpus =
         corpus_file::load(&args.corpus).with_context(|| format!("reading the corpus {}", args.corpus.display()))?;
+    // Read before the families are sampled, so that a bad file fails at once.
+    let paraphrases = held_out_paraphrases(args)?;
     let config = FamilyConfig { sampling: args.sampling(), families: args.families.clone(), ..FamilyConfig::default() };
     let strips = args.out.join("families");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
@@ -408,7 +411,7 @@ fn run_families(
             }
         }
     }
-    let paraphrases = paraphrase_section(args, prior, &mut lines)?;
+    let paraphrases = paraphrase_section(args, prior, paraphrases, &mut lines)?;
     let text_motion = text_motion_section(args, prior, &corpus, device, &mut lines)?;
     std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
     let json = serde_json::json!({
@@ -515,24 +518,40 @@ pub fn run_loss(args: LossArgs) -> anyhow::Result<()> {
 /// R-precision and FID of samples against held-out capture (and of the train split, for scale),
 /// appended to the report's lines; `None` when `--pairs 0` or without an evaluator file (the
 /// lines say which).
-/// The held-out paraphrases' table ([`paraphrase_report`]); `None` when left out.
-fn paraphrase_section(
-    args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
-    lines: &mut Vec<String>,
-) -> anyhow::Result<Option<Vec<ParaphraseOutcome>>> {
-    lines.push(String::new());
+/// The held-out paraphrases a report judges, or why it leaves them out.
+enum HeldOut {
+    Judged(Vec<Paraphrase>),
+    LeftOut(String),
+}
+
+/// The held-out paraphrases of `--paraphrases`; a bad file is an error.
+fn held_out_paraphrases(args: &ReportArgs) -> anyhow::Result<HeldOut> {
     if args.paraphrase_samples == 0 {
-        lines.push("Held-out paraphrases: left out (`--paraphrase-samples 0`).".to_owned());
-        return Ok(None);
+        return Ok(HeldOut::LeftOut("Held-out paraphrases: left out (`--paraphrase-samples 0`).".to_owned()));
     }
     if !args.paraphrases.is_file() {
         let note = format!("Held-out paraphrases: left out, no file at `{}`.", args.paraphrases.display());
         eprintln!("{note}");
-        lines.push(note);
-        return Ok(None);
+        return Ok(HeldOut::LeftOut(note));
     }
-    let paraphrases = read_paraphrases(&args.paraphrases)?;
+    Ok(HeldOut::Judged(read_paraphrases(&args.paraphrases)?))
+}
+
+/// The held-out paraphrases' table ([`paraphrase_report`]); `None` when left out.
+fn paraphrase_section(
+    args: &ReportArgs,
+    prior: &motion_core::prior::Prior,
+    paraphrases: HeldOut,
+    lines: &mut Vec<String>,
+) -> anyhow::Result<Option<Vec<ParaphraseOutcome>>> {
+    lines.push(String::new());
+    let paraphrases = match paraphrases {
+        HeldOut::Judged(paraphrases) => paraphrases,
+        HeldOut::LeftOut(note) => {
+            lines.push(note);
+            return Ok(None);
+        }
+    };
     let outcomes = paraphrase_report(prior, &paraphrases, args.paraphrase_samples, args.frames, args.denoising())?;
     lines.extend([
         format!(
