@@ -1,4 +1,5 @@
-//! Writing named f32 (or f16) tensors and string metadata as one safetensors file.
+//! Writing named f32 (or f16) tensors and string metadata as one safetensors file, and reading
+//! the metadata back.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -49,6 +50,35 @@ pub fn read_metadata(bytes: &[u8]) -> Result<HashMap<String, String>, String> {
     Ok(meta.metadata().clone().unwrap_or_default())
 }
 
+/// Largest safetensors header read (the format's own bound, 100 MB).
+const MAX_HEADER_BYTES: u64 = 100_000_000;
+
+/// The string metadata of the safetensors file at `path` (empty when it has none), reading its
+/// JSON header only, not the tensors behind it (which are not checked). Errors are messages;
+/// callers add the path.
+pub fn read_file_metadata(path: &Path) -> Result<HashMap<String, String>, String> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let mut length = [0u8; 8];
+    file.read_exact(&mut length)
+        .map_err(|_| "not a safetensors file: shorter than its 8-byte header length".to_owned())?;
+    let n = u64::from_le_bytes(length);
+    if n > MAX_HEADER_BYTES {
+        return Err(format!("not a safetensors file: a {n}-byte header"));
+    }
+    let mut header = Vec::new();
+    file.take(n).read_to_end(&mut header).map_err(|e| e.to_string())?;
+    if header.len() as u64 != n {
+        return Err(format!("not a safetensors file: it ends inside its {n}-byte header"));
+    }
+    let header: serde_json::Value =
+        serde_json::from_slice(&header).map_err(|e| format!("not a safetensors file: its header is not JSON: {e}"))?;
+    match header.get("__metadata__") {
+        None => Ok(HashMap::new()),
+        Some(meta) => serde_json::from_value(meta.clone()).map_err(|e| format!("metadata that is not strings: {e}")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -65,6 +95,14 @@ mod tests {
         write_safetensors(&path, &[("h".into(), half), ("d".into(), double)], meta.clone()).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         assert_eq!(read_metadata(&bytes).unwrap(), meta);
+        assert_eq!(read_file_metadata(&path).unwrap(), meta);
+        let short = dir.path().join("short");
+        std::fs::write(&short, [1u8, 2]).unwrap();
+        assert!(read_file_metadata(&short).unwrap_err().contains("8-byte"));
+        std::fs::write(&short, u64::MAX.to_le_bytes()).unwrap();
+        assert!(read_file_metadata(&short).unwrap_err().contains("header"));
+        std::fs::write(&short, [&40u64.to_le_bytes()[..], b"{}"].concat()).unwrap();
+        assert!(read_file_metadata(&short).unwrap_err().contains("ends inside"));
         let read = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu).unwrap();
         assert_eq!(read["h"].dtype(), DType::F16);
         assert_eq!(read["d"].dtype(), DType::F32);

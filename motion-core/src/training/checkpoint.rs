@@ -8,7 +8,7 @@ use std::path::Path;
 use candle_core::Tensor;
 
 use crate::model::MdmConfig;
-use crate::tensor_file::{read_metadata, write_safetensors};
+use crate::tensor_file::{read_file_metadata, read_metadata, write_safetensors};
 
 use super::{TrainError, Trainer};
 
@@ -16,8 +16,7 @@ use super::{TrainError, Trainer};
 /// resumed run or a fine-tune can take its sizes from the file instead of from the caller.
 pub fn saved_model_config(path: &Path) -> Result<MdmConfig, TrainError> {
     let err = |message: String| TrainError::Checkpoint { path: path.into(), message };
-    let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
-    let meta = read_metadata(&bytes).map_err(err)?;
+    let meta = read_file_metadata(path).map_err(err)?;
     model_config(&meta).map(|(config, _)| config).map_err(err)
 }
 
