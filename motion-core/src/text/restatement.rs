@@ -6,7 +6,7 @@
 //! "someone ambles and veers off to their left" lies nearer "a person stays where they are (a
 //! take of: Reach_Left002)" (cosine 0.59) than any walking-and-turning caption, so the caption
 //! bank ([`super::caption_bank`]) heard a reach and the prior's samples turned left in 6 %
-//! (session 36's report). WordNet says an amble is a walk and a veer a turn.
+//! (the report before session 38). WordNet says an amble is a walk and a veer a turn.
 //!
 //! The rule, word by word (maximal runs of ASCII letters; everything else is kept as it is):
 //! 1. a word some caption uses, or one WordNet does not know as a verb, is kept;
