@@ -17,12 +17,17 @@
 //!    WordNet's order, is searched breadth first: the sense's own words, its hypernyms, theirs
 //!    (at most [`HYPERNYM_LEVELS`] up). The first word found that is a caption verb (a caption
 //!    word WordNet knows as a verb lemma, not a light one: "turn" must itself be a caption word,
-//!    "turns" is not enough) replaces the word, inflected as the word was
-//!    ("ambles" → "walks", "veering" → "turning"), in the captions' own spelling where they
-//!    have it.
+//!    "turns" is not enough) in its own first sense (the synset found is the word's most common
+//!    one, so that the sentence encoder reads it as WordNet meant it: "gallop" reaches {ride,
+//!    sit} and "strut" {swagger, strut, cock}, but neither is the first sense of "sit" or
+//!    "cock") replaces the word, inflected as the word was ("ambles" → "walks", "veering" →
+//!    "turning"), in the captions' own spelling where they have it.
 //!
 //! The rule was written on the report's paraphrases and a dozen of session 35's, then frozen
-//! before `fixtures/model/held_out_paraphrases.tsv` was read.
+//! before `fixtures/model/held_out_paraphrases.tsv` was read. The first-sense condition was
+//! added after, on a list of about 120 motion verbs read through the rule ("gallop" → "sit",
+//! "strut" → "cock", "roam" → "roll", "twist" → "wrestle" before it); it changes no restatement
+//! of the report's or the held-out paraphrases.
 
 use std::collections::{HashSet, VecDeque};
 use std::sync::Arc;
@@ -179,8 +184,9 @@ impl Restatement {
         })
     }
 
-    /// The first caption verb met searching `lemma`'s senses of bodily motion in order, each
-    /// breadth first through its words and [`HYPERNYM_LEVELS`] of hypernyms.
+    /// The first caption verb met in its own first sense searching `lemma`'s senses of bodily
+    /// motion in order, each breadth first through its words and [`HYPERNYM_LEVELS`] of
+    /// hypernyms.
     fn nearest_caption_verb(&self, lemma: &str) -> Option<String> {
         let wordnet = &self.wordnet;
         wordnet
@@ -191,7 +197,10 @@ impl Restatement {
                 let mut queue = VecDeque::from([(sense, 0)]);
                 while let Some((row, level)) = queue.pop_front() {
                     let synset = wordnet.synset(row);
-                    if let Some(verb) = synset.words.iter().find(|w| *w != lemma && self.verbs.contains(*w)) {
+                    let first_sense_of = |w: &String| wordnet.verb_senses(w).first() == Some(&row);
+                    if let Some(verb) =
+                        synset.words.iter().find(|w| *w != lemma && self.verbs.contains(*w) && first_sense_of(w))
+                    {
                         return Some(verb.clone());
                     }
                     if level < HYPERNYM_LEVELS {
@@ -209,8 +218,13 @@ mod tests {
     use crate::text::wordnet::tests::tiny;
 
     fn restatement() -> Restatement {
-        let captions =
-            ["a person walks forward", "Walk Left: someone turns left at a slow pace", "walking", "a sharp turn"];
+        let captions = [
+            "a person walks forward",
+            "Walk Left: someone turns left at a slow pace",
+            "walking",
+            "a sharp turn",
+            "sit",
+        ];
         Restatement::new(Arc::new(tiny()), &captions.map(String::from))
     }
 
@@ -231,6 +245,7 @@ mod tests {
             "a person walks forward",    // every word a caption's
             "someone paces ahead",       // "pace" is a caption word
             "someone keeps one foot up", // a light verb; "foot" is tagged more as a noun
+            "someone gallops",           // reaches {ride, sit}, not the first sense of "sit"
             "someone travels",           // only a light verb above it
             "a sofa",                    // not a verb
             "",

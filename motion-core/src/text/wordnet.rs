@@ -259,12 +259,16 @@ pub(crate) mod tests {
             500 38 v 04 swerve 0 veer 0 curve 0 slew 0 001 @ 400 v 0000 | turn sharply\n\
             600 30 v 01 keep 0 000 | retain\n\
             700 31 v 01 pace 0 001 @ 200 v 0000 | measure by walking\n\
-            800 35 v 02 foot 0 hoof 0 001 @ 200 v 0000 | go on foot\n";
+            800 35 v 02 foot 0 hoof 0 001 @ 200 v 0000 | go on foot\n\
+            900 35 v 01 sit 0 000 | be seated\n\
+            950 38 v 02 ride 0 sit 0 000 | sit and travel on the back of an animal\n\
+            990 38 v 01 gallop 0 001 @ 950 v 0000 | ride at a gallop\n";
         let (synsets, offsets) = parse_data(data).unwrap();
         let index_verb =
             "travel v 1 1 @ 1 0 100\nwalk v 1 1 @ 1 30 200\namble v 1 1 @ 1 1 300\nmosey v 1 1 @ 1 0 300\n\
             turn v 1 1 @ 1 40 400\nswerve v 1 1 @ 1 0 500\nveer v 1 1 @ 1 0 500\ncurve v 1 1 @ 1 0 500\n\
-            slew v 1 1 @ 1 0 500\nkeep v 1 0 1 50 600\npace v 1 0 1 0 700\nfoot v 1 0 1 0 800\nhoof v 1 0 1 0 800\n";
+            slew v 1 1 @ 1 0 500\nkeep v 1 0 1 50 600\npace v 1 0 1 0 700\nfoot v 1 0 1 0 800\nhoof v 1 0 1 0 800\n\
+            sit v 2 0 2 60 900 950\nride v 1 0 1 5 950\ngallop v 1 1 @ 1 0 990\n";
         let verbs = Index {
             lemmas: parse_index(index_verb, Some(&offsets)).unwrap(),
             exceptions: parse_exceptions("ran run\n").unwrap(),
