@@ -11,15 +11,14 @@ use super::{descriptors, mean_pairwise, nearest_distances, ReportSampling};
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::corpus::family::Family;
 use crate::corpus::{Corpus, CorpusWindow, Split};
-use crate::diffusion::Guidance;
 use crate::metrics::MetricMeans;
 use crate::motion::tensor_to_poses;
-use crate::prior::{Prior, PriorError, Sampling};
+use crate::prior::{Prior, PriorError};
 use crate::representation::{extract_features, FEATURE_DIM, RIC};
 use crate::skeleton::Pose;
 
 /// Share of motions passing a detector (`None` without a detector or without motions).
-fn detected_share(family: Family, motions: &[Vec<Pose>]) -> Option<f64> {
+pub(super) fn detected_share(family: Family, motions: &[Vec<Pose>]) -> Option<f64> {
     share_passing(motions.iter().map(|m| family.detect(m)))
 }
 
@@ -149,14 +148,7 @@ pub fn family_report(
             if batch == 0 {
                 continue;
             }
-            let request = Sampling {
-                prompt,
-                frames: sampling.frames,
-                batch,
-                seed: sampling.denoising.seed + 100 * i as u64 + k as u64,
-                steps: sampling.denoising.ddim_steps,
-                guidance: Guidance { scale: sampling.denoising.guidance },
-            };
+            let request = sampling.denoising.request(prompt, sampling.frames, batch, 100 * i as u64 + k as u64);
             let x = prior.sample(&request, device)?;
             let raw = prior.to_features(&x).map_err(tensor)?;
             samples.extend(tensor_to_poses(&prior.joints_of(&raw).map_err(tensor)?).map_err(tensor)?);

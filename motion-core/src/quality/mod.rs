@@ -61,6 +61,21 @@ pub struct Denoising {
     pub seed: u64,
 }
 
+impl Denoising {
+    /// The sampling request for `batch` motions of `frames` frames of `prompt`, from the noise
+    /// of seed [`Self::seed`] + `seed_offset`.
+    pub fn request<'a>(&self, prompt: &'a str, frames: usize, batch: usize, seed_offset: u64) -> Sampling<'a> {
+        Sampling {
+            prompt,
+            frames,
+            batch,
+            seed: self.seed + seed_offset,
+            steps: self.ddim_steps,
+            guidance: Guidance { scale: self.guidance },
+        }
+    }
+}
+
 impl Default for Denoising {
     fn default() -> Self {
         Self { ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0 }
@@ -129,14 +144,7 @@ pub fn quality_report(
         if !config.labels.is_empty() && !config.labels.contains(label) {
             continue;
         }
-        let request = Sampling {
-            prompt: label,
-            frames: t,
-            batch: config.sampling.samples,
-            seed: config.sampling.denoising.seed + i as u64,
-            steps: config.sampling.denoising.ddim_steps,
-            guidance: Guidance { scale: config.sampling.denoising.guidance },
-        };
+        let request = config.sampling.denoising.request(label, t, config.sampling.samples, i as u64);
         let x = prior.sample(&request, device)?;
         let raw = prior.to_features(&x).map_err(fail)?;
         let samples = tensor_to_poses(&prior.joints_of(&raw).map_err(fail)?).map_err(fail)?;

@@ -10,13 +10,12 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::Denoising;
+use super::families::detected_share;
+use super::{joints_of, Denoising};
 use crate::corpus::family::Family;
-use crate::diffusion::Guidance;
 use crate::files::{read_text, FileError};
 use crate::limits::PROMPT_LIST_FILE_BYTES;
-use crate::motion::tensor_to_poses;
-use crate::prior::{Prior, PriorError, Sampling};
+use crate::prior::{Prior, PriorError};
 
 /// One paraphrase of a family.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -81,19 +80,9 @@ pub fn paraphrase_report(
         .iter()
         .enumerate()
         .map(|(i, p)| {
-            let request = Sampling {
-                prompt: &p.prompt,
-                frames,
-                batch: samples,
-                seed: denoising.seed + 100 * i as u64,
-                steps: denoising.ddim_steps,
-                guidance: Guidance { scale: denoising.guidance },
-            };
-            let x = prior.sample(&request, &device)?;
-            let raw = prior.to_features(&x).map_err(tensor)?;
-            let motions = tensor_to_poses(&prior.joints_of(&raw).map_err(tensor)?).map_err(tensor)?;
-            let hits: Vec<bool> = motions.iter().filter_map(|m| p.family.detect(m)).collect();
-            let detected = (!hits.is_empty()).then(|| hits.iter().filter(|h| **h).count() as f64 / hits.len() as f64);
+            let request = denoising.request(&p.prompt, frames, samples, 100 * i as u64);
+            let motions = joints_of(prior, &prior.sample(&request, &device)?).map_err(tensor)?;
+            let detected = detected_share(p.family, &motions);
             let heard_as = prior.nearest_caption(&p.prompt).map_err(tensor)?.map(|n| (n.caption, n.similarity));
             Ok(ParaphraseOutcome {
                 paraphrase: p.clone(),
