@@ -253,4 +253,12 @@ fn unknown_verbs_are_restated_in_the_captions_verbs_before_the_bank_hears_them()
     assert!(nearest.caption.contains("turn") && nearest.caption.contains("left"), "{nearest:?}");
     // A prompt in the captions' words is left as it is.
     assert!(prior.restate(WALK).replaced.is_empty());
+    // Session 39, on WordNet 3.0: only a word's first sense of bodily motion is searched
+    // ("landing" reached "carrying" through bring ashore), a third-person verb after its subject
+    // is a verb however often it is a noun ("vaults"), and a word read more often as an
+    // adjective is kept ("full").
+    assert_eq!(prior.restate("a boy leaps ahead landing on both feet").text, "a boy leaps ahead landing on both feet");
+    assert_eq!(prior.restate("a man vaults forward off both feet").text, "a man jumps forward off both feet");
+    let restated = prior.restate("a woman bolts ahead at full speed");
+    assert!(restated.replaced.iter().all(|(word, _)| word != "full"), "{restated:?}");
 }

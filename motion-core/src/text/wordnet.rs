@@ -1,13 +1,14 @@
 //! WordNet 3.0's verbs (Princeton University; `fixtures/text/wordnet/`, with its licence and
 //! provenance): each verb lemma's senses in WordNet's order (most often tagged first), each
 //! sense's synset (its words, lexicographer file and hypernyms), the irregular forms, and how
-//! often a lemma was tagged as a verb and as a noun in WordNet's sense-tagged texts. With
+//! often a lemma was tagged as a verb, a noun, an adjective and an adverb in WordNet's
+//! sense-tagged texts. With
 //! WordNet's `morphy` ([`WordNet::lemmas`]) a word is brought back to its lemmas. What
 //! [`super::restatement`] reads to restate a prompt's unknown verbs in a prior's caption words.
 //!
 //! The files are WordNet's own database format (`wndb(5WN)`), gzipped: `data.verb`,
-//! `index.verb`, `verb.exc`, `index.noun`, `noun.exc`. Lines starting with two spaces are the
-//! licence header.
+//! `index.verb`, `verb.exc`, `index.noun`, `noun.exc`, `index.adj`, `adj.exc`, `index.adv`.
+//! Lines starting with two spaces are the licence header.
 
 use std::collections::HashMap;
 use std::io::Read;
@@ -28,8 +29,12 @@ pub const BODILY_MOTION: [u8; 3] = [29, 35, 38];
 pub enum PartOfSpeech {
     /// Verbs: senses, synsets and tagged counts.
     Verb,
-    /// Nouns: tagged counts only.
+    /// Nouns: lemmas and tagged counts only.
     Noun,
+    /// Adjectives: lemmas and tagged counts only.
+    Adjective,
+    /// Adverbs: lemmas and tagged counts only.
+    Adverb,
 }
 
 /// One verb synset.
@@ -54,15 +59,21 @@ struct Lemma {
 #[derive(Debug, Clone, Default)]
 struct Index {
     lemmas: HashMap<String, Lemma>,
+    /// Irregular form → its lemmas.
     exceptions: HashMap<String, Vec<String>>,
+    /// Lemma → its irregular forms, in the file's order.
+    irregular: HashMap<String, Vec<String>>,
 }
 
-/// WordNet's verbs, and the noun lemmas that are also verbs ([module doc](self)).
+/// WordNet's verbs, and its noun, adjective and adverb lemmas with their tagged counts
+/// ([module doc](self)).
 #[derive(Debug, Clone)]
 pub struct WordNet {
     synsets: Vec<Synset>,
     verbs: Index,
     nouns: Index,
+    adjectives: Index,
+    adverbs: Index,
 }
 
 /// WordNet's detachment rules (`morphy`): an ending and what replaces it.
@@ -70,9 +81,22 @@ const VERB_ENDINGS: [(&str, &str); 8] =
     [("s", ""), ("ies", "y"), ("es", "e"), ("es", ""), ("ed", "e"), ("ed", ""), ("ing", "e"), ("ing", "")];
 const NOUN_ENDINGS: [(&str, &str); 8] =
     [("s", ""), ("ses", "s"), ("xes", "x"), ("zes", "z"), ("ches", "ch"), ("shes", "sh"), ("men", "man"), ("ies", "y")];
+const ADJECTIVE_ENDINGS: [(&str, &str); 4] = [("er", ""), ("est", ""), ("er", "e"), ("est", "e")];
+
+impl Index {
+    fn new(lemmas: HashMap<String, Lemma>, exceptions: Vec<(String, Vec<String>)>) -> Self {
+        let mut irregular: HashMap<String, Vec<String>> = HashMap::new();
+        for (form, of) in &exceptions {
+            for lemma in of {
+                irregular.entry(lemma.clone()).or_default().push(form.clone());
+            }
+        }
+        Self { lemmas, exceptions: exceptions.into_iter().collect(), irregular }
+    }
+}
 
 impl WordNet {
-    /// Reads the five gzipped files from `dir` (`fixtures/text/wordnet`). Errors name the file
+    /// Reads the eight gzipped files from `dir` (`fixtures/text/wordnet`). Errors name the file
     /// and the line.
     pub fn load(dir: &Path) -> Result<Self, FileError> {
         let read = |name: &str| -> Result<(std::path::PathBuf, String), FileError> {
@@ -86,33 +110,43 @@ impl WordNet {
             FILE_BYTES.check_stream(text.len() as u64, path.display())?;
             Ok((path, text))
         };
-        let parts = ["data.verb", "index.verb", "verb.exc", "index.noun", "noun.exc"].map(read);
-        let [data_verb, index_verb, verb_exc, index_noun, noun_exc] = parts;
-        let (data_verb, index_verb, verb_exc, index_noun, noun_exc) =
-            (data_verb?, index_verb?, verb_exc?, index_noun?, noun_exc?);
+        let parts =
+            ["data.verb", "index.verb", "verb.exc", "index.noun", "noun.exc", "index.adj", "adj.exc", "index.adv"]
+                .map(read);
+        let [data_verb, index_verb, verb_exc, index_noun, noun_exc, index_adj, adj_exc, index_adv] = parts;
+        let (data_verb, index_verb, verb_exc, index_noun, noun_exc, index_adj, adj_exc, index_adv) =
+            (data_verb?, index_verb?, verb_exc?, index_noun?, noun_exc?, index_adj?, adj_exc?, index_adv?);
         fn at(path: &Path) -> impl Fn(String) -> FileError + '_ {
             move |message| FileError::format(path, message)
         }
         let (synsets, offsets) = parse_data(&data_verb.1).map_err(at(&data_verb.0))?;
-        let mut verbs = Index {
-            lemmas: parse_index(&index_verb.1, Some(&offsets)).map_err(at(&index_verb.0))?,
-            exceptions: parse_exceptions(&verb_exc.1).map_err(at(&verb_exc.0))?,
-        };
+        let mut verbs = Index::new(
+            parse_index(&index_verb.1, Some(&offsets)).map_err(at(&index_verb.0))?,
+            parse_exceptions(&verb_exc.1).map_err(at(&verb_exc.0))?,
+        );
         verbs.lemmas.shrink_to_fit();
-        let mut nouns = Index {
-            lemmas: parse_index(&index_noun.1, None).map_err(at(&index_noun.0))?,
-            exceptions: parse_exceptions(&noun_exc.1).map_err(at(&noun_exc.0))?,
+        let tagged_only = |index: &(std::path::PathBuf, String), exceptions: Option<&(std::path::PathBuf, String)>| {
+            let lemmas = parse_index(&index.1, None).map_err(at(&index.0))?;
+            let exceptions = match exceptions {
+                Some((path, text)) => parse_exceptions(text).map_err(at(path))?,
+                None => Vec::new(),
+            };
+            let mut index = Index::new(lemmas, exceptions);
+            index.lemmas.shrink_to_fit();
+            Ok::<_, FileError>(index)
         };
-        // Only a verb's noun reading is ever asked for.
-        nouns.lemmas.retain(|lemma, _| verbs.lemmas.contains_key(lemma));
-        nouns.exceptions.retain(|_, lemmas| lemmas.iter().any(|l| verbs.lemmas.contains_key(l)));
-        Ok(Self { synsets, verbs, nouns })
+        let nouns = tagged_only(&index_noun, Some(&noun_exc))?;
+        let adjectives = tagged_only(&index_adj, Some(&adj_exc))?;
+        let adverbs = tagged_only(&index_adv, None)?;
+        Ok(Self { synsets, verbs, nouns, adjectives, adverbs })
     }
 
     fn index(&self, pos: PartOfSpeech) -> &Index {
         match pos {
             PartOfSpeech::Verb => &self.verbs,
             PartOfSpeech::Noun => &self.nouns,
+            PartOfSpeech::Adjective => &self.adjectives,
+            PartOfSpeech::Adverb => &self.adverbs,
         }
     }
 
@@ -122,8 +156,10 @@ impl WordNet {
     pub fn lemmas(&self, word: &str, pos: PartOfSpeech) -> Vec<String> {
         let index = self.index(pos);
         let endings = match pos {
-            PartOfSpeech::Verb => &VERB_ENDINGS,
-            PartOfSpeech::Noun => &NOUN_ENDINGS,
+            PartOfSpeech::Verb => &VERB_ENDINGS[..],
+            PartOfSpeech::Noun => &NOUN_ENDINGS[..],
+            PartOfSpeech::Adjective => &ADJECTIVE_ENDINGS[..],
+            PartOfSpeech::Adverb => &[][..],
         };
         let mut found: Vec<String> = index.exceptions.get(word).cloned().unwrap_or_default();
         let detached = endings.iter().filter_map(|(ending, by)| {
@@ -140,6 +176,19 @@ impl WordNet {
     /// How often `lemma` was tagged as `pos` in WordNet's sense-tagged texts (0 for an unknown one).
     pub fn tagged(&self, lemma: &str, pos: PartOfSpeech) -> u32 {
         self.index(pos).lemmas.get(lemma).map_or(0, |l| l.tagged)
+    }
+
+    /// How often `word`'s lemmas as `pos` were tagged at most: `None` when WordNet does not know
+    /// it as `pos`.
+    pub fn most_tagged(&self, word: &str, pos: PartOfSpeech) -> Option<u32> {
+        self.lemmas(word, pos).iter().map(|l| self.tagged(l, pos)).max()
+    }
+
+    /// The irregular past forms of the verb `lemma` in `verb.exc`'s order ("bend": "bent";
+    /// its "-ing" and "-s" forms left out); empty for a regular verb.
+    pub fn irregular_past(&self, lemma: &str) -> Vec<String> {
+        let forms = self.verbs.irregular.get(lemma).map_or(&[][..], Vec::as_slice);
+        forms.iter().filter(|f| !f.ends_with("ing") && !f.ends_with('s')).cloned().collect()
     }
 
     /// The verb senses of `lemma` in WordNet's order, as rows for [`Self::synset`].
@@ -230,9 +279,9 @@ fn parse_index(text: &str, offsets: Option<&HashMap<u64, usize>>) -> Result<Hash
     Ok(lemmas)
 }
 
-/// `verb.exc` / `noun.exc`: an irregular form → its lemmas.
-fn parse_exceptions(text: &str) -> Result<HashMap<String, Vec<String>>, String> {
-    let mut exceptions = HashMap::new();
+/// `verb.exc` / `noun.exc`: each irregular form and its lemmas, in the file's order.
+fn parse_exceptions(text: &str) -> Result<Vec<(String, Vec<String>)>, String> {
+    let mut exceptions = Vec::new();
     for (line, content) in body(text) {
         let mut fields = content.split_whitespace().map(str::to_lowercase);
         let form = fields.next().ok_or_else(|| format!("line {line}: empty"))?;
@@ -240,7 +289,7 @@ fn parse_exceptions(text: &str) -> Result<HashMap<String, Vec<String>>, String> 
         if lemmas.is_empty() {
             return Err(format!("line {line}: {form:?} has no lemma"));
         }
-        exceptions.insert(form, lemmas);
+        exceptions.push((form, lemmas));
     }
     Ok(exceptions)
 }
@@ -262,22 +311,31 @@ pub(crate) mod tests {
             800 35 v 02 foot 0 hoof 0 001 @ 200 v 0000 | go on foot\n\
             900 35 v 01 sit 0 000 | be seated\n\
             950 38 v 02 ride 0 sit 0 000 | sit and travel on the back of an animal\n\
-            990 38 v 01 gallop 0 001 @ 950 v 0000 | ride at a gallop\n";
+            990 38 v 01 gallop 0 001 @ 950 v 0000 | ride at a gallop\n\
+            1000 38 v 01 stride 0 001 @ 200 v 0000 | walk with long steps\n\
+            1100 38 v 01 land 0 001 @ 100 v 0000 | come to rest on the ground\n\
+            1200 35 v 01 land 0 001 @ 200 v 0000 | (a later sense reaching a caption verb)\n\
+            1400 38 v 01 run 0 001 @ 100 v 0000 | move fast on foot\n\
+            1500 38 v 01 sprint 0 001 @ 1400 v 0000 | run very fast\n\
+            1600 35 v 01 full 0 001 @ 200 v 0000 | (a rare verb reaching a caption verb)\n";
         let (synsets, offsets) = parse_data(data).unwrap();
         let index_verb =
             "travel v 1 1 @ 1 0 100\nwalk v 1 1 @ 1 30 200\namble v 1 1 @ 1 1 300\nmosey v 1 1 @ 1 0 300\n\
             turn v 1 1 @ 1 40 400\nswerve v 1 1 @ 1 0 500\nveer v 1 1 @ 1 0 500\ncurve v 1 1 @ 1 0 500\n\
             slew v 1 1 @ 1 0 500\nkeep v 1 0 1 50 600\npace v 1 0 1 0 700\nfoot v 1 0 1 0 800\nhoof v 1 0 1 0 800\n\
-            sit v 2 0 2 60 900 950\nride v 1 0 1 5 950\ngallop v 1 1 @ 1 0 990\n";
-        let verbs = Index {
-            lemmas: parse_index(index_verb, Some(&offsets)).unwrap(),
-            exceptions: parse_exceptions("ran run\n").unwrap(),
-        };
-        let nouns = Index {
-            lemmas: parse_index("walk n 1 0 1 3 1\nfoot n 1 0 1 90 2\n", None).unwrap(),
-            exceptions: parse_exceptions("feet foot\n").unwrap(),
-        };
-        WordNet { synsets, verbs, nouns }
+            sit v 2 0 2 60 900 950\nride v 1 0 1 5 950\ngallop v 1 1 @ 1 0 990\nstride v 1 1 @ 1 0 1000\n\
+            land v 2 1 @ 2 5 1100 1200\nrun v 1 1 @ 1 20 1400\nsprint v 1 1 @ 1 0 1500\n\
+            full v 1 1 @ 1 0 1600\n";
+        let verbs =
+            Index::new(parse_index(index_verb, Some(&offsets)).unwrap(), parse_exceptions("ran run\n").unwrap());
+        let nouns = Index::new(
+            parse_index("walk n 1 0 1 3 1\nfoot n 1 0 1 90 2\nwoman n 1 0 1 2 3\nstride n 1 0 1 3 4\n", None).unwrap(),
+            parse_exceptions("feet foot\n").unwrap(),
+        );
+        let adjectives =
+            Index::new(parse_index("full a 1 0 1 6 1\n", None).unwrap(), parse_exceptions("fuller full\n").unwrap());
+        let adverbs = Index::new(parse_index("ahead r 1 0 1 4 1\n", None).unwrap(), Vec::new());
+        WordNet { synsets, verbs, nouns, adjectives, adverbs }
     }
 
     #[test]
@@ -291,6 +349,12 @@ pub(crate) mod tests {
         assert!(wn.lemmas("sofa", PartOfSpeech::Verb).is_empty());
         assert_eq!(wn.tagged("foot", PartOfSpeech::Noun), 90);
         assert_eq!(wn.tagged("foot", PartOfSpeech::Verb), 0);
+        assert_eq!(wn.most_tagged("strides", PartOfSpeech::Noun), Some(3));
+        assert_eq!(wn.most_tagged("sofa", PartOfSpeech::Noun), None);
+        assert_eq!(wn.irregular_past("run"), ["ran"]);
+        assert!(wn.irregular_past("walk").is_empty());
+        assert_eq!(wn.most_tagged("fuller", PartOfSpeech::Adjective), Some(6));
+        assert_eq!(wn.most_tagged("ahead", PartOfSpeech::Adverb), Some(4));
     }
 
     #[test]
