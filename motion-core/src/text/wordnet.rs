@@ -2,9 +2,9 @@
 //! provenance): each verb lemma's senses in WordNet's order (most often tagged first), each
 //! sense's synset (its words, lexicographer file and hypernyms), the irregular forms, and how
 //! often a lemma was tagged as a verb, a noun, an adjective and an adverb in WordNet's
-//! sense-tagged texts. With
-//! WordNet's `morphy` ([`WordNet::lemmas`]) a word is brought back to its lemmas. What
-//! [`super::restatement`] reads to restate a prompt's unknown verbs in a prior's caption words.
+//! sense-tagged texts. With WordNet's `morphy` ([`WordNet::lemmas`]) a word is brought back to
+//! its lemmas. What [`super::restatement`] reads to restate a prompt's unknown verbs in a
+//! prior's caption words.
 //!
 //! The files are WordNet's own database format (`wndb(5WN)`), gzipped: `data.verb`,
 //! `index.verb`, `verb.exc`, `index.noun`, `noun.exc`, `index.adj`, `adj.exc`, `index.adv`.
