@@ -15,7 +15,8 @@
 //! - one-leg balance: one foot more than 10 cm up while the other is down, for 2 s at a stretch;
 //! - sit down: the first second stands (pelvis above the crouch line) and the last is seated
 //!   (pelvis low, at knee height, still): a body seated throughout has not sat down;
-//! - walk, run, crawl: the caption rule names the same action; walks also travel forwards;
+//! - walk, run, crawl: the caption rule names the same action; walks also travel forwards, and
+//!   runs step at a running cadence while they move ([`RUN_MIN_STEPS_PER_S`]);
 //! - turns: at least [`TURN_MIN_DEG`](crate::corpus::tags::TURN_MIN_DEG) the asked way.
 //!
 //! Carrying has no detector: nothing in the joints says a hand holds something.
@@ -26,6 +27,7 @@ use super::caption::Action;
 use super::skill::Skill;
 use super::tags::{standing_pelvis_height, MotionTags, TravelDirection};
 use super::{Corpus, CorpusWindow, Split};
+use crate::metrics::moving_pace;
 use crate::skeleton::{Joint, Pose, FPS};
 
 /// A skill family.
@@ -62,6 +64,12 @@ pub enum Family {
 pub const CROUCH_PELVIS_FRACTION: f64 = 0.85;
 /// Shortest one-leg stance that passes the balance detector, s.
 pub const BALANCE_MIN_S: f64 = 2.0;
+/// Fewest leg alternations a second while moving ([`moving_pace`]) of a run. Running steps at
+/// 2.5 a second and faster (the shipped DeepMimic run 2.5, the held-out CMU run windows
+/// 3.9–5.0), walking at 2 or fewer (the DeepMimic walks 1.6). A body that covers more than
+/// 2 m/s at a walking cadence bounds or glides in strides longer than a run's: it is not
+/// running.
+pub const RUN_MIN_STEPS_PER_S: f64 = 2.2;
 
 impl Family {
     /// Every family, in report order.
@@ -173,7 +181,7 @@ impl Family {
     pub fn detector(self) -> Option<&'static str> {
         Some(match self {
             Family::Walk => "walks forwards",
-            Family::Run => "runs",
+            Family::Run => "runs (> 2 m/s, ≥ 2.2 steps/s moving)",
             Family::TurnLeft => "turns ≥ 45° left",
             Family::TurnRight => "turns ≥ 45° right",
             Family::Sideways => "travels more sideways than forwards",
@@ -193,7 +201,7 @@ impl Family {
         let action = Action::of(&tags);
         Some(match self {
             Family::Walk => action == Action::Walk && tags.direction == Some(TravelDirection::Forwards),
-            Family::Run => action == Action::Run,
+            Family::Run => action == Action::Run && moving_pace(poses) >= RUN_MIN_STEPS_PER_S,
             Family::TurnLeft => tags.turn_left() == Some(true),
             Family::TurnRight => tags.turn_left() == Some(false),
             Family::Sideways => sideways(&tags),
@@ -254,6 +262,39 @@ mod tests {
                 p
             })
             .collect()
+    }
+
+    /// The shipped DeepMimic run (real capture, 2.5 steps/s) runs; the same run played at half
+    /// its cadence while covering the same ground (bounding strides at a walking cadence) does
+    /// not, though the caption rule calls both a run (faster than 2 m/s).
+    #[test]
+    fn a_run_steps_at_a_running_cadence() {
+        use crate::import::deepmimic::DeepMimicClip;
+        use crate::import::resample;
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic/humanoid3d_run.txt");
+        let (clip, _) = DeepMimicClip::read(&path).unwrap();
+        let run = put_on_floor(&resample(&clip, 1.0, Some(6.0)));
+        let slow = put_on_floor(&resample(&clip, 0.5, Some(6.0)));
+        // Slowed down, then carried forwards by as much again: the run's speed at half its cadence.
+        let start = slow[0][Joint::Pelvis.index()];
+        let bounding: Vec<Pose> = slow
+            .iter()
+            .map(|p| {
+                let shift = p[Joint::Pelvis.index()] - start;
+                let mut q = *p;
+                for j in q.iter_mut() {
+                    j.x += shift.x;
+                    j.z += shift.z;
+                }
+                q
+            })
+            .collect();
+        for (motion, runs) in [(&run, true), (&bounding, false)] {
+            let tags = MotionTags::measure(motion);
+            assert_eq!(Action::of(&tags), Action::Run, "speed {}", tags.speed_m_per_s);
+            assert_eq!(Family::Run.detect(motion), Some(runs), "{:.2} steps/s", moving_pace(motion));
+        }
     }
 
     #[test]

@@ -125,6 +125,29 @@ pub fn pace(poses: &[Pose]) -> (f64, Option<f64>) {
     (rate, (mean > 0.0).then(|| var.sqrt() / mean))
 }
 
+/// A frame whose pelvis moves faster than this horizontally is moving, m/s ([`moving_pace`]).
+pub const MOVING_M_PER_S: f64 = 1.0;
+
+/// Cadence while moving: the leg alternations ([`alternation_frames`]) at frames whose pelvis
+/// moves horizontally faster than [`MOVING_M_PER_S`] (central differences, one-sided at the
+/// ends), per second of such frames; 0 when no frame moves. Unlike [`pace`], a run that starts
+/// from standing keeps its running cadence, and steps taken on the spot do not count.
+pub fn moving_pace(poses: &[Pose]) -> f64 {
+    let n = poses.len();
+    let moving: Vec<bool> = (0..n)
+        .map(|t| {
+            let (a, b) = (t.saturating_sub(1), (t + 1).min(n - 1));
+            let d = poses[b][Joint::Pelvis.index()] - poses[a][Joint::Pelvis.index()];
+            b > a && d.x.hypot(d.z) * FPS / (b - a) as f64 > MOVING_M_PER_S
+        })
+        .collect();
+    let seconds = moving.iter().filter(|m| **m).count() as f64 / FPS;
+    if seconds == 0.0 {
+        return 0.0;
+    }
+    alternation_frames(poses).into_iter().filter(|&t| moving[t]).count() as f64 / seconds
+}
+
 /// Fraction of interior frames at which some toe's height zig-zags by more than
 /// [`FLICKER_M`] both ways (0 for fewer than 3 frames).
 pub fn toe_flicker(poses: &[Pose]) -> f64 {
@@ -354,6 +377,21 @@ mod tests {
             assert!((0.0..0.03).contains(&toe), "{name}: the lower toe at {toe} m");
             assert_eq!(airborne_frames(&poses), 0, "{name}");
         }
+    }
+
+    /// The run steps 2.5 times a second while it moves, and still does after 4 s of standing,
+    /// which halve its pace over the whole clip; standing alone never moves.
+    #[test]
+    fn a_run_keeps_its_moving_cadence_after_standing() {
+        let run = clip("humanoid3d_run.txt", Some(6.0));
+        let moving = moving_pace(&run);
+        assert!((2.2..2.8).contains(&moving), "{moving} steps/s");
+        let mut padded = vec![run[0]; 80];
+        padded.extend_from_slice(&run);
+        assert!((moving_pace(&padded) - moving).abs() < 0.2, "{} against {moving}", moving_pace(&padded));
+        assert!(pace(&padded).0 < 0.7 * moving, "pace {}", pace(&padded).0);
+        assert_eq!(moving_pace(&padded[..80]), 0.0);
+        assert_eq!(moving_pace(&[]), 0.0);
     }
 
     /// The backflip is left out because it does glitch: its 16-fps keyframes, interpolated to

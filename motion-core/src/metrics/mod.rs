@@ -7,9 +7,9 @@ mod means;
 
 pub use gait::{
     airborne_frames, alternation_frames, footfalls, heading_change_rad, longest_flight_s, longest_run,
-    mean_acceleration, pace, spike_frames, stance_toe_height, step_count, toe_flicker, toe_separation, AIRBORNE_M,
-    ALTERNATION_HYSTERESIS_M, FLICKER_M, FLOATING_FLIGHT_S, FOOTFALL_MIN_M, SPIKE_ACCELERATION_M, SWING_ENTER_M_PER_S,
-    SWING_LEAVE_M_PER_S,
+    mean_acceleration, moving_pace, pace, spike_frames, stance_toe_height, step_count, toe_flicker, toe_separation,
+    AIRBORNE_M, ALTERNATION_HYSTERESIS_M, FLICKER_M, FLOATING_FLIGHT_S, FOOTFALL_MIN_M, MOVING_M_PER_S,
+    SPIKE_ACCELERATION_M, SWING_ENTER_M_PER_S, SWING_LEAVE_M_PER_S,
 };
 
 pub use means::{MetricMeans, TURN_DEG};
