@@ -175,9 +175,8 @@ mod tests {
     }
 
     fn clip_tensor(name: &str) -> (Vec<crate::skeleton::Pose>, Tensor) {
-        use crate::import::{deepmimic::DeepMimicClip, resample};
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic").join(name);
-        let poses = resample(&DeepMimicClip::read(&path).unwrap().0, 1.0, Some(10.0));
+        use crate::import::{deepmimic::shipped, resample};
+        let poses = resample(&shipped::clip(name), 1.0, Some(10.0));
         let flat: Vec<f64> = poses.iter().flatten().flat_map(|v| [v.x, v.y, v.z]).collect();
         let t = Tensor::from_vec(flat, (1, poses.len(), 22, 3), &Device::Cpu).unwrap();
         (poses, t)

@@ -269,11 +269,8 @@ mod tests {
     /// not, though the caption rule calls both a run (faster than 2 m/s).
     #[test]
     fn a_run_steps_at_a_running_cadence() {
-        use crate::import::deepmimic::DeepMimicClip;
-        use crate::import::resample;
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic/humanoid3d_run.txt");
-        let (clip, _) = DeepMimicClip::read(&path).unwrap();
+        use crate::import::{deepmimic::shipped, resample};
+        let clip = shipped::clip("humanoid3d_run.txt");
         let run = put_on_floor(&resample(&clip, 1.0, Some(6.0)));
         let slow = put_on_floor(&resample(&clip, 0.5, Some(6.0)));
         // Slowed down, then carried forwards by as much again: the run's speed at half its cadence.

@@ -453,14 +453,13 @@ mod tests {
     use json::validation::Validate;
 
     use super::*;
-    use crate::import::{deepmimic::DeepMimicClip, MocapClip};
+    use crate::import::{deepmimic::shipped, MocapClip};
     use crate::skeleton::NUM_JOINTS;
 
     /// The first `frames` frames of the shipped DeepMimic kick at 20 fps (a clip whose branch
     /// offsets move), and their solve.
     fn kick(frames: usize) -> (Vec<Pose>, RotationTrack) {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic/humanoid3d_kick.txt");
-        let (clip, _) = DeepMimicClip::read(&path).unwrap();
+        let clip = shipped::clip("humanoid3d_kick.txt");
         let poses: Vec<Pose> = (0..frames).map(|k| clip.pose_at(k as f64 / 20.0)).collect();
         let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
         (poses, track)

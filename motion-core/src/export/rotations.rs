@@ -370,7 +370,7 @@ pub(super) mod tests {
     use crate::database::catalog::{Catalog, SourceFormat};
     use crate::import::bvh::{BvhClip, BvhOptions};
     use crate::import::isaaclab::IsaacAmpClip;
-    use crate::import::{deepmimic::DeepMimicClip, resample, MocapClip};
+    use crate::import::{deepmimic::shipped, resample, MocapClip};
 
     /// Every shipped clip (the catalog's, the mocapbank BVH and the three Isaac Lab AMP clips)
     /// with its name and format, resampled to 20 fps.
@@ -438,9 +438,7 @@ pub(super) mod tests {
 
     #[test]
     fn forward_kinematics_reproduces_a_real_clip() {
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic/humanoid3d_walk.txt");
-        let (clip, _) = DeepMimicClip::read(&path).unwrap();
+        let clip = shipped::clip("humanoid3d_walk.txt");
         let poses: Vec<Pose> = (0..60).map(|k| clip.pose_at(k as f64 / 20.0)).collect();
         let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
         let fit = track.fit(&poses);

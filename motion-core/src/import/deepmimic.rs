@@ -455,6 +455,24 @@ pub(crate) fn synthetic_walk(frames: usize, turn_rate: f64) -> Vec<Pose> {
     (0..frames).map(|k| clip.pose_at(k as f64 * dt)).collect()
 }
 
+/// The shipped DeepMimic clips (`fixtures/mocap/deepmimic/`), for tests.
+#[cfg(test)]
+pub(crate) mod shipped {
+    use std::path::PathBuf;
+
+    use super::DeepMimicClip;
+
+    /// The folder of the shipped clips.
+    pub fn dir() -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic")
+    }
+
+    /// The shipped clip `name` (such as `humanoid3d_run.txt`).
+    pub fn clip(name: &str) -> DeepMimicClip {
+        DeepMimicClip::read(&dir().join(name)).unwrap().0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

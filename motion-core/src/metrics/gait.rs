@@ -265,22 +265,17 @@ pub fn heading_change_rad(poses: &[Pose]) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use std::path::Path;
-
     use super::*;
-    use crate::import::deepmimic::DeepMimicClip;
+    use crate::import::deepmimic::shipped;
     use crate::import::{resample, MocapClip};
 
     /// A shipped DeepMimic clip at 20 fps, looped to `seconds` when given.
     fn clip(name: &str, seconds: Option<f64>) -> Vec<Pose> {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic").join(name);
-        let (clip, _) = DeepMimicClip::read(&path).unwrap();
-        resample(&clip, 1.0, seconds)
+        resample(&shipped::clip(name), 1.0, seconds)
     }
 
     fn cycle_s(name: &str) -> f64 {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic").join(name);
-        DeepMimicClip::read(&path).unwrap().0.duration_s()
+        shipped::clip(name).duration_s()
     }
 
     const WALKS: [&str; 6] = [
@@ -400,8 +395,7 @@ mod tests {
     /// (dance_b's elbow).
     #[test]
     fn no_real_clip_spikes() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic");
-        for entry in std::fs::read_dir(dir).unwrap() {
+        for entry in std::fs::read_dir(shipped::dir()).unwrap() {
             let name = entry.unwrap().file_name().to_string_lossy().into_owned();
             if name.ends_with(".txt") && name != "humanoid3d_backflip.txt" {
                 assert_eq!(spike_frames(&clip(&name, None)), 0, "{name}");

@@ -214,7 +214,7 @@ mod tests {
     use glam::DVec3;
 
     use super::*;
-    use crate::import::deepmimic::DeepMimicClip;
+    use crate::import::deepmimic::{shipped, DeepMimicClip};
     use crate::import::MocapClip;
     use crate::program::OverheadBarrier;
     use crate::skeleton::rest_pose;
@@ -383,8 +383,7 @@ mod tests {
     /// them) under an overhead barrier: 100 frames, well under 3 MB.
     #[test]
     fn animates_real_clips_in_a_small_file() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/deepmimic");
-        let clip = |name: &str| DeepMimicClip::read(&dir.join(name)).unwrap().0;
+        let clip = shipped::clip;
         let motion = |clip: &DeepMimicClip, shift: DVec3| -> Vec<Pose> {
             (0..100).map(|k| clip.pose_at(k as f64 / FPS).map(|v| v + shift)).collect()
         };

@@ -199,7 +199,7 @@ impl Restatement {
         // A third-person verb right after its subject ("a woman strides") is a verb however
         // often the word is a noun elsewhere.
         let subject_verb = after_noun && lemmas.iter().any(|l| Form::of(word, l) == Form::ThirdPerson);
-        let as_verb = self.wordnet.most_tagged(word, PartOfSpeech::Verb);
+        let as_verb = lemmas.iter().map(|l| self.wordnet.tagged(l, PartOfSpeech::Verb)).max();
         let as_other = [PartOfSpeech::Noun, PartOfSpeech::Adjective, PartOfSpeech::Adverb]
             .into_iter()
             .map(|pos| self.wordnet.most_tagged(word, pos))

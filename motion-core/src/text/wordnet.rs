@@ -61,8 +61,6 @@ struct Index {
     lemmas: HashMap<String, Lemma>,
     /// Irregular form → its lemmas.
     exceptions: HashMap<String, Vec<String>>,
-    /// Lemma → its irregular forms, in the file's order.
-    irregular: HashMap<String, Vec<String>>,
 }
 
 /// WordNet's verbs, and its noun, adjective and adverb lemmas with their tagged counts
@@ -71,6 +69,8 @@ struct Index {
 pub struct WordNet {
     synsets: Vec<Synset>,
     verbs: Index,
+    /// Verb lemma → its irregular forms (`verb.exc` inverted), in the file's order.
+    verb_forms: HashMap<String, Vec<String>>,
     nouns: Index,
     adjectives: Index,
     adverbs: Index,
@@ -84,15 +84,21 @@ const NOUN_ENDINGS: [(&str, &str); 8] =
 const ADJECTIVE_ENDINGS: [(&str, &str); 4] = [("er", ""), ("est", ""), ("er", "e"), ("est", "e")];
 
 impl Index {
-    fn new(lemmas: HashMap<String, Lemma>, exceptions: Vec<(String, Vec<String>)>) -> Self {
-        let mut irregular: HashMap<String, Vec<String>> = HashMap::new();
-        for (form, of) in &exceptions {
-            for lemma in of {
-                irregular.entry(lemma.clone()).or_default().push(form.clone());
-            }
-        }
-        Self { lemmas, exceptions: exceptions.into_iter().collect(), irregular }
+    fn new(mut lemmas: HashMap<String, Lemma>, exceptions: Vec<(String, Vec<String>)>) -> Self {
+        lemmas.shrink_to_fit();
+        Self { lemmas, exceptions: exceptions.into_iter().collect() }
     }
+}
+
+/// Lemma → its irregular forms, in the order of `exceptions` (form → lemmas).
+fn irregular_forms(exceptions: &[(String, Vec<String>)]) -> HashMap<String, Vec<String>> {
+    let mut forms: HashMap<String, Vec<String>> = HashMap::new();
+    for (form, of) in exceptions {
+        for lemma in of {
+            forms.entry(lemma.clone()).or_default().push(form.clone());
+        }
+    }
+    forms
 }
 
 impl WordNet {
@@ -120,25 +126,21 @@ impl WordNet {
             move |message| FileError::format(path, message)
         }
         let (synsets, offsets) = parse_data(&data_verb.1).map_err(at(&data_verb.0))?;
-        let mut verbs = Index::new(
-            parse_index(&index_verb.1, Some(&offsets)).map_err(at(&index_verb.0))?,
-            parse_exceptions(&verb_exc.1).map_err(at(&verb_exc.0))?,
-        );
-        verbs.lemmas.shrink_to_fit();
+        let verb_exceptions = parse_exceptions(&verb_exc.1).map_err(at(&verb_exc.0))?;
+        let verb_forms = irregular_forms(&verb_exceptions);
+        let verbs = Index::new(parse_index(&index_verb.1, Some(&offsets)).map_err(at(&index_verb.0))?, verb_exceptions);
         let tagged_only = |index: &(std::path::PathBuf, String), exceptions: Option<&(std::path::PathBuf, String)>| {
             let lemmas = parse_index(&index.1, None).map_err(at(&index.0))?;
             let exceptions = match exceptions {
                 Some((path, text)) => parse_exceptions(text).map_err(at(path))?,
                 None => Vec::new(),
             };
-            let mut index = Index::new(lemmas, exceptions);
-            index.lemmas.shrink_to_fit();
-            Ok::<_, FileError>(index)
+            Ok::<_, FileError>(Index::new(lemmas, exceptions))
         };
         let nouns = tagged_only(&index_noun, Some(&noun_exc))?;
         let adjectives = tagged_only(&index_adj, Some(&adj_exc))?;
         let adverbs = tagged_only(&index_adv, None)?;
-        Ok(Self { synsets, verbs, nouns, adjectives, adverbs })
+        Ok(Self { synsets, verbs, verb_forms, nouns, adjectives, adverbs })
     }
 
     fn index(&self, pos: PartOfSpeech) -> &Index {
@@ -187,7 +189,7 @@ impl WordNet {
     /// The irregular past forms of the verb `lemma` in `verb.exc`'s order ("bend": "bent";
     /// its "-ing" and "-s" forms left out); empty for a regular verb.
     pub fn irregular_past(&self, lemma: &str) -> Vec<String> {
-        let forms = self.verbs.irregular.get(lemma).map_or(&[][..], Vec::as_slice);
+        let forms = self.verb_forms.get(lemma).map_or(&[][..], Vec::as_slice);
         forms.iter().filter(|f| !f.ends_with("ing") && !f.ends_with('s')).cloned().collect()
     }
 
@@ -326,8 +328,9 @@ pub(crate) mod tests {
             sit v 2 0 2 60 900 950\nride v 1 0 1 5 950\ngallop v 1 1 @ 1 0 990\nstride v 1 1 @ 1 0 1000\n\
             land v 2 1 @ 2 5 1100 1200\nrun v 1 1 @ 1 20 1400\nsprint v 1 1 @ 1 0 1500\n\
             full v 1 1 @ 1 0 1600\n";
-        let verbs =
-            Index::new(parse_index(index_verb, Some(&offsets)).unwrap(), parse_exceptions("ran run\n").unwrap());
+        let verb_exceptions = parse_exceptions("ran run\n").unwrap();
+        let verb_forms = irregular_forms(&verb_exceptions);
+        let verbs = Index::new(parse_index(index_verb, Some(&offsets)).unwrap(), verb_exceptions);
         let nouns = Index::new(
             parse_index("walk n 1 0 1 3 1\nfoot n 1 0 1 90 2\nwoman n 1 0 1 2 3\nstride n 1 0 1 3 4\n", None).unwrap(),
             parse_exceptions("feet foot\n").unwrap(),
@@ -335,7 +338,7 @@ pub(crate) mod tests {
         let adjectives =
             Index::new(parse_index("full a 1 0 1 6 1\n", None).unwrap(), parse_exceptions("fuller full\n").unwrap());
         let adverbs = Index::new(parse_index("ahead r 1 0 1 4 1\n", None).unwrap(), Vec::new());
-        WordNet { synsets, verbs, nouns, adjectives, adverbs }
+        WordNet { synsets, verbs, verb_forms, nouns, adjectives, adverbs }
     }
 
     #[test]
