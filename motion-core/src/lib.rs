@@ -23,6 +23,7 @@ pub mod model;
 pub mod motion;
 pub mod nn;
 pub mod npy;
+pub mod numeric;
 pub mod objective;
 pub mod optim;
 pub mod pipeline;

@@ -35,7 +35,7 @@ const LAYERS: &[&[&str]] = &[
     &["skeleton"],
     &["npy", "tensor_file"],
     &["files"],
-    &["diffusion", "nn", "optim", "limits", "testing"],
+    &["diffusion", "nn", "optim", "limits", "numeric", "testing"],
 ];
 
 /// The layer of `module`, counted from 1 at the top as in the README.
