@@ -8,7 +8,8 @@ use candle_core::Device;
 use e2e_tests::fixtures;
 use motion_core::constraints::CompiledProgram;
 use motion_core::evaluation::report;
-use motion_core::generation::{generate, GenerationConfig, Method, Task};
+use motion_core::generation::generate;
+use motion_core::generation::method::{GenerationConfig, Method, Task};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
 

@@ -61,7 +61,7 @@ async fn bounded<T>(future: impl Future<Output = T>) -> T {
 async fn plan_with(settings: LlmSettings) -> (Result<PlannedTask, PlanError>, Duration) {
     let start = Instant::now();
     let llm = Llm::connect(settings).unwrap();
-    let result = bounded(plan_task(&gap().task, &llm, &PlanSettings::default())).await;
+    let result = bounded(plan_task(&gap().task, &llm, &PlanSettings::default(), &candle_core::Device::Cpu)).await;
     (result, start.elapsed())
 }
 
@@ -71,7 +71,7 @@ async fn plan(server: &LlmServer) -> (Result<PlannedTask, PlanError>, Duration) 
 
 fn assert_planned(result: Result<PlannedTask, PlanError>) {
     let planned = result.unwrap_or_else(|error| panic!("{error}"));
-    assert_eq!(planned.program, gap().planned_program());
+    assert_eq!(planned.program.program(), &gap().planned_program());
     let groups = planned.groups.unwrap();
     assert_eq!(
         (groups.retrieval, groups.random_noise),

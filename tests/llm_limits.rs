@@ -49,7 +49,7 @@ async fn plan_with(settings: LlmSettings) -> (Result<PlannedTask, PlanError>, Du
     let start = Instant::now();
     let llm = Llm::connect(settings).unwrap();
     let task = hand_written_named("gap_stop_5m").task;
-    let result = bounded(plan_task(&task, &llm, &PlanSettings::default())).await;
+    let result = bounded(plan_task(&task, &llm, &PlanSettings::default(), &candle_core::Device::Cpu)).await;
     (result, start.elapsed())
 }
 
@@ -155,7 +155,7 @@ async fn a_retry_after_longer_than_the_timeout_fails_at_once() {
     let server =
         LlmServer::start(vec![limited, Step::reply(&gap.program_reply()), Step::reply(&gap.parse_reply())]).await;
     let (result, took) = plan_with(settings(&server.base_url, timeout, 3)).await;
-    assert_eq!(result.unwrap_or_else(|error| panic!("{error}")).program.constraints, gap.program.constraints);
+    assert_eq!(result.unwrap_or_else(|error| panic!("{error}")).program.program().constraints, gap.program.constraints);
     assert!(took >= Duration::from_secs(1), "{took:?}");
 }
 

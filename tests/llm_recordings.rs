@@ -54,7 +54,7 @@ async fn every_hand_written_task_replays_offline() {
     assert!(tasks.len() >= 16, "only {} recorded tasks", tasks.len());
     let llm = Llm::connect(settings(None, ReplySource::Replay)).unwrap();
     for task in &tasks {
-        let planned = match plan_task(&task.task, &llm, &PlanSettings::default()).await {
+        let planned = match plan_task(&task.task, &llm, &PlanSettings::default(), &candle_core::Device::Cpu).await {
             Ok(planned) => planned,
             Err(PlanError::Stage(error))
                 if matches!(*error, StageError::Llm { source: LlmError::ReplayMiss { .. }, .. }) =>
@@ -67,7 +67,7 @@ async fn every_hand_written_task_replays_offline() {
             }
             Err(error) => panic!("{}: {error}", task.name),
         };
-        assert_eq!(planned.program, task.planned_program(), "{}", task.name);
+        assert_eq!(planned.program.program(), &task.planned_program(), "{}", task.name);
         assert!(planned.groups.is_some() && planned.analysis.is_some(), "{}", task.name);
     }
     assert_eq!(exchanges().len(), 2 * tasks.len(), "leftover recordings: regenerate with `{REGENERATE}`");
@@ -80,8 +80,8 @@ async fn recorded_replies_served_over_http_plan_the_same_programs() {
         let server =
             LlmServer::start(vec![Step::completion(&program.response), Step::completion(&parse.response)]).await;
         let llm = Llm::connect(settings(Some(server.base_url.clone()), ReplySource::Live)).unwrap();
-        let planned = plan_task(&task.task, &llm, &PlanSettings::default()).await.unwrap();
-        assert_eq!(planned.program, task.planned_program(), "{}", task.name);
+        let planned = plan_task(&task.task, &llm, &PlanSettings::default(), &candle_core::Device::Cpu).await.unwrap();
+        assert_eq!(planned.program.program(), &task.planned_program(), "{}", task.name);
         let sent: Vec<serde_json::Value> = server.received().into_iter().map(|request| request.body).collect();
         let recorded = [program, parse].map(|exchange| serde_json::to_value(exchange.request).unwrap());
         assert_eq!(
@@ -104,7 +104,7 @@ async fn record_fixtures() {
     for task in hand_written() {
         let server = LlmServer::start(vec![Step::reply(&task.program_reply()), Step::reply(&task.parse_reply())]).await;
         let llm = Llm::connect(settings(Some(server.base_url.clone()), ReplySource::Record)).unwrap();
-        let planned = plan_task(&task.task, &llm, &PlanSettings::default()).await.unwrap();
-        assert_eq!(planned.program, task.planned_program(), "{}", task.name);
+        let planned = plan_task(&task.task, &llm, &PlanSettings::default(), &candle_core::Device::Cpu).await.unwrap();
+        assert_eq!(planned.program.program(), &task.planned_program(), "{}", task.name);
     }
 }

@@ -10,13 +10,14 @@ use e2e_tests::fixtures;
 use motion_core::constraints::CompiledProgram;
 use motion_core::database::catalog::Catalog;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
-use motion_core::generation::{GenerationConfig, Method};
+use motion_core::generation::method::{GenerationConfig, Method};
+use motion_core::generation::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
+use motion_core::generation::rgdno::config::{RetrievalConfig, RgDnoConfig};
+use motion_core::generation::rgdno::mask::MaskKind;
+use motion_core::generation::rgdno::retrieval::{retrieve, RetrievalQuery};
+use motion_core::generation::rgdno::{generate_rg_dno, RgDnoTask};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
-use motion_core::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
-use motion_core::rgdno::mask::MaskKind;
-use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalQuery};
-use motion_core::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoTask};
 
 /// The shipped catalog's clips as a retrieval database (a user's own database takes this path).
 fn database() -> RetrievalDatabase {
@@ -135,7 +136,7 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
         final_steps: 3,
         segments: 2,
         mask_kinds: vec![MaskKind::Temporal],
-        inversion: motion_core::inversion::InversionConfig {
+        inversion: motion_core::generation::inversion::InversionConfig {
             feature_polish_steps: 2,
             polish_steps: 2,
             fixed_point_iterations: 1,
@@ -154,7 +155,7 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
         }
     })
     .unwrap();
-    use motion_core::rgdno::Stage::*;
+    use motion_core::generation::rgdno::report::Stage::*;
     assert_eq!(stages, vec![Inversion, Branches, Masks, SoftBlend, FinalRound]);
     assert_eq!(generated.joints.dims(), &[2, 40, 22, 3]);
     let values = generated.joints.flatten_all().unwrap().to_vec1::<f32>().unwrap();
@@ -182,7 +183,7 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     config.dno.restarts = 1;
 
     // Table 4's "M = 0.5": no mask search, the branches blended half and half.
-    let half = RgDnoConfig { ablation: motion_core::rgdno::Ablation::HalfMask, ..rg.clone() };
+    let half = RgDnoConfig { ablation: motion_core::generation::rgdno::config::Ablation::HalfMask, ..rg.clone() };
     let mut stages = Vec::new();
     let (_, halved) = generate_rg_dno(&prior, task, &config, &half, &device, |p| stages.push(p.stage)).unwrap();
     assert!(halved.masks.is_empty() && !stages.contains(&Masks) && !stages.contains(&SoftBlend));

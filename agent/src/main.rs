@@ -1,5 +1,6 @@
 //! `mogen`: constrained human motion generation from the command line.
 
+mod cli;
 mod commands;
 
 use agent::paths;
@@ -98,7 +99,7 @@ enum BenchCommand {
     /// Every shipped task × {unconstrained, IK, IK+Reg, DNO}: results table (markdown + JSON).
     Tasks(commands::bench_tasks::BenchTasksArgs),
     /// Wall time of a full DNO run (500 steps) at batch 1 and 8.
-    Dno(commands::bench_tasks::BenchDnoArgs),
+    Dno(commands::bench_dno::BenchDnoArgs),
     /// RG-DNO's retrieval for one task over the whole retrieval database (by default the
     /// corpus's train split): seconds per query, bytes held.
     Retrieval(commands::bench_retrieval::BenchRetrievalArgs),
@@ -179,7 +180,7 @@ fn run_command() -> anyhow::Result<()> {
         Command::Report(ReportCommand::Loss(args)) => commands::report::run_loss(args),
         Command::Bench(BenchCommand::Prior(args)) => commands::bench::run(args),
         Command::Bench(BenchCommand::Tasks(args)) => commands::bench_tasks::run_tasks(args),
-        Command::Bench(BenchCommand::Dno(args)) => commands::bench_tasks::run_dno(args),
+        Command::Bench(BenchCommand::Dno(args)) => commands::bench_dno::run(args),
         Command::Bench(BenchCommand::Retrieval(args)) => commands::bench_retrieval::run(args),
     }
 }

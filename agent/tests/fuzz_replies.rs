@@ -16,7 +16,6 @@ use std::sync::LazyLock;
 use agent::llm::extract::answer;
 use agent::llm::ChatResponse;
 use agent::stages::check_program;
-use motion_core::constraints::CompiledProgram;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
 use serde_json::{json, Value};
@@ -220,10 +219,11 @@ fn pipeline(text: &str, finish_reason: &str) {
     }))
     .unwrap();
     let Ok(answer) = answer(&response) else { return };
-    if let Ok(program) = check_program(&answer) {
+    if let Ok(checked) = check_program(&answer, &candle_core::Device::Cpu) {
         VALID.fetch_add(1, Ordering::Relaxed);
+        let program = checked.program();
         assert!(program.frames >= 1 && program.frames <= motion_core::program::MAX_FRAMES);
-        CompiledProgram::compile(&program, &candle_core::Device::Cpu).unwrap();
+        assert_eq!(checked.compiled().frames(), program.frames as usize);
     }
 }
 

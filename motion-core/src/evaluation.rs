@@ -1,16 +1,20 @@
 //! The report of one constrained-generation run: every constraint's error per sample and the
 //! papers' motion metrics (`reference/anchors.md` §3.7, RG-DNO §5), as serialisable data.
 
+use std::fmt;
+
 use candle_core::{DType, Tensor};
 use serde::{Deserialize, Serialize};
 
 use crate::cleanup::FootLockReport;
 use crate::constraints::{Check, CompiledProgram};
-use crate::generation::{Generated, GenerationConfig};
+use crate::generation::method::{Generated, GenerationConfig};
+use crate::generation::refine::RefineReport;
+use crate::generation::rgdno::report::RgDnoReport;
 use crate::metrics::{footfalls, step_count, MetricMeans};
 use crate::motion::tensor_to_poses;
+use crate::numeric::mean;
 use crate::program::TaskProgram;
-use crate::refine::RefineReport;
 use crate::skeleton::Pose;
 
 /// One constraint's errors.
@@ -75,7 +79,7 @@ pub struct BeforeCleanup {
     pub motion: MetricMeans,
 }
 
-/// What the finishing stages did to the run: the kinematic refinement ([`crate::refine`]) and
+/// What the finishing stages did to the run: the kinematic refinement ([`crate::generation::refine`]) and
 /// the contact-aware clean-up ([`crate::cleanup::foot_lock`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CleanupReport {
@@ -134,7 +138,7 @@ pub struct TaskReport {
     pub cleanup: CleanupReport,
     /// What each RG-DNO stage did (RG-DNO runs only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub rg_dno: Option<crate::rgdno::RgDnoReport>,
+    pub rg_dno: Option<RgDnoReport>,
     /// Why the method that ran is not the one asked for (RG-DNO falling back to DNO).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fallback: Option<String>,
@@ -193,10 +197,6 @@ fn judge(
     });
     let success_rate = successes as f64 / samples.max(1) as f64;
     Ok(Judged { per_sample, constraints, success_rate, penetration, steps, motions })
-}
-
-fn mean(values: &[f64]) -> f64 {
-    values.iter().sum::<f64>() / values.len().max(1) as f64
 }
 
 fn worst(values: &Option<Vec<f64>>) -> Option<f64> {
@@ -321,7 +321,7 @@ mod tests {
 
     use super::*;
     use crate::constraints::STANDING;
-    use crate::generation::Method;
+    use crate::generation::method::Method;
 
     /// The report's maximum scene penetration is the maximum over the samples, not their mean: of
     /// two standing figures, one with a toe 16 cm under the floor on one frame, the report gives
@@ -371,4 +371,168 @@ mod tests {
         assert!(!r.beaten_by(0, &r, 1));
         assert!(!r.beaten_by(1, &r, 1));
     }
+}
+
+impl TaskReport {
+    /// The headline figures as a person reads them after a run: every constraint with its
+    /// checks, RG-DNO's retrieval, masks and stage seconds, the motion figures, the refinement
+    /// and the foot clean-up.
+    pub fn summary(&self) -> Summary<'_> {
+        Summary(self)
+    }
+}
+
+/// [`TaskReport::summary`], written by its `Display`.
+#[derive(Debug, Clone, Copy)]
+pub struct Summary<'a>(&'a TaskReport);
+
+impl fmt::Display for Summary<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let report = self.0;
+        let per_sample: Vec<String> = report.constraint_error_per_sample.iter().map(|e| format!("{e:.5}")).collect();
+        writeln!(
+            f,
+            "{}: constraint error {:.6} (per sample {per_sample:?}) in {:.1} s",
+            report.config.method, report.constraint_error, report.seconds
+        )?;
+        for c in &report.constraints {
+            constraint_lines(f, c)?;
+        }
+        writeln!(f, "  all constraints met by {:.0}% of the samples", 100.0 * report.success_rate)?;
+        if let Some(why) = &report.fallback {
+            writeln!(f, "  RG-DNO fell back to DNO: {why}")?;
+        }
+        if let Some(attempt) = report.attempt.as_ref().filter(|a| a.iter().any(|&k| k > 0)) {
+            let kept: Vec<String> = attempt.iter().map(|k| (k + 1).to_string()).collect();
+            writeln!(f, "  attempt kept per sample (1 = the first): {}", kept.join(", "))?;
+        }
+        if let Some(rg) = &report.rg_dno {
+            rg_dno_lines(f, report, rg)?;
+        }
+        let penetration = report.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
+        writeln!(
+            f,
+            "  foot skate {:.3}, max acceleration {:.4} m/frame², max scene penetration {penetration}, head-neck \
+             incorrect {:.2}",
+            report.motion.foot_skate_ratio, report.motion.max_acceleration, report.motion.head_neck_incorrect_ratio
+        )?;
+        if let Some(steps) = &report.steps {
+            writeln!(
+                f,
+                "  steps (leg alternations) {} (target {}), success {:.2}",
+                steps.counts_text(),
+                steps.target,
+                steps.success_rate
+            )?;
+        }
+        refinement_line(f, &report.cleanup)?;
+        cleanup_line(f, &report.cleanup)
+    }
+}
+
+/// A constraint's loss, how many samples meet it, and each of its checks.
+fn constraint_lines(f: &mut fmt::Formatter<'_>, c: &ConstraintReport) -> fmt::Result {
+    let passed = c.pass.iter().filter(|p| **p).count();
+    writeln!(
+        f,
+        "  {} (weight {}): loss {:.6}, met by {passed}/{} samples  {}",
+        c.id,
+        c.weight,
+        mean(&c.error),
+        c.pass.len(),
+        c.description.as_deref().unwrap_or("")
+    )?;
+    for check in &c.checks {
+        let worst = check.value.iter().copied().fold(0.0, f64::max);
+        let per_sample: Vec<String> = check.value.iter().map(|v| format!("{v:.3}")).collect();
+        writeln!(
+            f,
+            "      {}: worst {worst:.3} {} (tolerance {}; per sample {per_sample:?})",
+            check.what, check.unit, check.tolerance
+        )?;
+    }
+    Ok(())
+}
+
+/// RG-DNO's retrieved motion, each sample's mask and the stages' seconds.
+fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoReport) -> fmt::Result {
+    if let Some(r) = rg.retrieved.first() {
+        writeln!(
+            f,
+            "  retrieved {} resized to {} frames, C_R score {:.4}, best of {} candidates ({} after the semantic \
+             check) in {:.1} s; inversion error {:.3} m",
+            r.source,
+            report.frames,
+            r.score,
+            rg.candidates,
+            rg.consistent_candidates,
+            rg.seconds.retrieval,
+            rg.inversion_error_m
+        )?;
+    }
+    let restarts = report.config.dno.restarts;
+    for (i, m) in rg.masks.iter().enumerate() {
+        let restart = rg
+            .restart
+            .get(i)
+            .filter(|_| restarts > 1)
+            .map_or(String::new(), |r| format!(" (restart {r} of {restarts})"));
+        writeln!(
+            f,
+            "  sample {i}: {:?} mask {:0w$b}, F_C {:.4}, reward {:.4}{restart}",
+            m.candidate.kind,
+            m.candidate.bits,
+            m.constraint_error,
+            m.reward,
+            w = m.candidate.segments
+        )?;
+    }
+    let s = &rg.seconds;
+    writeln!(
+        f,
+        "  RG-DNO seconds: retrieval {:.1}, inversion {:.1}, branches {:.1}, masks {:.1}, soft blend {:.1}, final \
+         round {:.1}",
+        s.retrieval, s.inversion, s.branches, s.masks, s.soft_blend, s.final_round
+    )
+}
+
+/// Whether the refinement was kept, how far it moved joints, and the error before and after.
+fn refinement_line(f: &mut fmt::Formatter<'_>, cleanup: &CleanupReport) -> fmt::Result {
+    if !cleanup.refine_enabled {
+        return writeln!(f, "  refinement: off");
+    }
+    let kept = cleanup.refine.iter().filter(|r| r.applied).count();
+    let moved = cleanup.refine.iter().filter(|r| r.applied).map(|r| r.max_offset_m).fold(0.0, f64::max);
+    let errors: Vec<String> =
+        cleanup.refine.iter().map(|r| format!("{:.4} → {:.4}", r.error_before, r.error_after)).collect();
+    writeln!(
+        f,
+        "  refinement: kept for {kept}/{} samples, joints moved up to {moved:.3} m, constraint error {}",
+        cleanup.refine.len(),
+        errors.join(", ")
+    )
+}
+
+/// What the foot clean-up did and the network's figures before the refinement and the clean-up.
+fn cleanup_line(f: &mut fmt::Formatter<'_>, cleanup: &CleanupReport) -> fmt::Result {
+    if !cleanup.enabled {
+        return writeln!(f, "  foot clean-up: off");
+    }
+    let before = &cleanup.before;
+    let locked: usize = cleanup.samples.iter().flat_map(|s| s.contacts.iter()).map(|c| c.locked_frames).sum();
+    let moved = cleanup.samples.iter().map(|s| s.max_displacement_m).fold(0.0, f64::max);
+    let shortened: usize = cleanup.samples.iter().map(|s| s.shortened).sum();
+    let raised = cleanup.samples.iter().map(|s| s.raised_m).fold(0.0, f64::max);
+    let held: usize = cleanup.samples.iter().map(|s| s.held_above_floor).sum();
+    let penetration = before.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
+    writeln!(
+        f,
+        "  foot clean-up: {locked} joint-frames locked ({shortened} sliding contacts cut to their steadiest \
+         stretch), sinking frames raised up to {raised:.3} m, {held} leg-frames held above the floor, joints \
+         moved up to {moved:.3} m; the network's motion before the refinement and the clean-up: foot skate {:.3}, \
+         all constraints met by {:.0}%, max scene penetration {penetration}{}",
+        before.motion.foot_skate_ratio,
+        100.0 * before.success_rate,
+        before.steps.as_ref().map_or(String::new(), |s| format!(", steps {s:?}"))
+    )
 }

@@ -1,8 +1,8 @@
-//! One planned task end to end, the way every command runs it: compile the program, generate
-//! its motions with the configured method, evaluate them in natural units, and write every
-//! output file.
+//! One checked task end to end, the way every command runs it ([`run_task`]): generate its
+//! motions with the configured method, evaluate them in natural units, and write every output
+//! file into a folder that appears whole or not at all.
 //!
-//! RG-DNO ([`crate::rgdno`]) takes the whole plan: the program with its relational parse (the
+//! RG-DNO ([`crate::generation::rgdno`]) takes the whole plan: the program with its relational parse (the
 //! most difficult constraint and its relations, from which Algorithm 1's groups `C_R`, `C1`,
 //! `C2` are derived), and the retrieval database, opened only when RG-DNO runs (the corpus's
 //! train split, a saved database file, or a catalog's clips built in memory). When the program
@@ -13,22 +13,24 @@
 //! With [`TaskSettings::retry_unmet`], the samples that miss a constraint at its tolerance are
 //! generated again from fresh noise, each keeping its best attempt (the report's `attempt`).
 
+use std::path::PathBuf;
 use std::time::Instant;
 
 use candle_core::Device;
 
-use crate::constraints::{CompiledProgram, ConstraintError};
+use crate::constraints::checked::CheckedProgram;
 use crate::evaluation::{self, TaskReport};
 use crate::export::bvh::BvhUnit;
 use crate::export::{position_targets, write_outputs, ExportError, ExportInput, ExportManifest, OutputFolder};
-use crate::generation::{generate, Event, GenerateError, Generated, GenerationConfig, Method, Retrieval, Task};
+use crate::generation::method::{Generated, GenerationConfig, Method, Task};
+use crate::generation::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
+use crate::generation::rgdno::config::RgDnoConfig;
+use crate::generation::rgdno::error::RetrievalError;
+use crate::generation::{generate, Event, GenerateError, Retrieval};
 use crate::motion::tensor_to_poses;
 use crate::prior::Prior;
 use crate::program::TaskProgram;
 use crate::render::{motion_gif, motion_strip, GifOptions, RenderError, StripRow};
-use crate::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
-use crate::rgdno::retrieval::RetrievalError;
-use crate::rgdno::RgDnoConfig;
 use crate::skeleton::{Pose, FPS};
 
 /// How a task is run: the method and its settings, RG-DNO's stages and where it retrieves from.
@@ -46,23 +48,33 @@ pub struct TaskSettings {
     /// keeps its best attempt (most constraints met, then the lowest constraint error), up to
     /// this many times (DNO's noise search, spent only where it is needed). 0: off.
     pub retry_unmet: usize,
+    /// Choices about the exported files.
+    pub exports: ExportOptions,
 }
 
 /// A finished run: the motions and their report.
 #[derive(Debug, Clone)]
-pub struct TaskRun {
+struct TaskRun {
     /// The motions (the cleaned joints, the network's beside them).
-    pub generated: Generated,
+    generated: Generated,
+    /// Every figure in natural units; RG-DNO's stages or the fallback's reason.
+    report: TaskReport,
+}
+
+/// A finished and written run: its report, the exported files and the folder they are in.
+#[derive(Debug, Clone)]
+pub struct TaskOutcome {
     /// Every figure in natural units; RG-DNO's stages or the fallback's reason.
     pub report: TaskReport,
+    /// The BVH, GLB and viewer files with the rotation solve's fit.
+    pub exports: ExportManifest,
+    /// The output folder, written whole.
+    pub folder: PathBuf,
 }
 
 /// Errors of a task run.
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
-    /// The program does not compile.
-    #[error(transparent)]
-    Program(#[from] ConstraintError),
     /// Generation failed or a setting is unusable.
     #[error(transparent)]
     Generation(#[from] GenerateError),
@@ -86,19 +98,36 @@ pub enum PipelineError {
     Json(#[from] serde_json::Error),
 }
 
-/// Runs `program` with `settings`: compile, generate (RG-DNO with its fallback to DNO), and
-/// evaluate; then, with [`TaskSettings::retry_unmet`], generate the samples that miss a
-/// constraint again and keep each one's best attempt. `on` gets every optimisation step and
+/// Runs `program` with `settings` on `device` and writes every output into `folder`, which is
+/// committed only when everything is made (a failure leaves the target as it was): the one
+/// call behind every command that generates for a task. `on` gets every optimisation step and
 /// the notes a user should read.
 pub fn run_task(
     prior: &Prior,
-    program: &TaskProgram,
+    program: &CheckedProgram,
+    settings: &TaskSettings,
+    folder: OutputFolder,
+    device: &Device,
+    on: impl FnMut(Event<'_>),
+) -> Result<TaskOutcome, PipelineError> {
+    let run = generate_task(prior, program, settings, device, on)?;
+    let exports = write_task(&folder, prior, program.program(), &run, settings.exports)?;
+    let folder = folder.commit()?;
+    Ok(TaskOutcome { report: run.report, exports, folder })
+}
+
+/// Generates and evaluates `program` with `settings` (RG-DNO with its fallback to DNO); then,
+/// with [`TaskSettings::retry_unmet`], generates the samples that miss a constraint again and
+/// keeps each one's best attempt.
+fn generate_task(
+    prior: &Prior,
+    checked: &CheckedProgram,
     settings: &TaskSettings,
     device: &Device,
     mut on: impl FnMut(Event<'_>),
 ) -> Result<TaskRun, PipelineError> {
-    let compiled = CompiledProgram::compile(program, device)?;
-    let task = Task { program, compiled: &compiled };
+    let (program, compiled) = (checked.program(), checked.compiled());
+    let task = Task { program, compiled };
     let mut config = settings.generation.clone();
     // The database is opened once for every attempt, and only when RG-DNO can use it.
     let database = if config.method == Method::RgDno && program.relational_parse.is_some() {
@@ -111,7 +140,7 @@ pub fn run_task(
     // After a fallback, the report and every retry are DNO's.
     config.method = first.method;
     let (mut generated, mut rg_report, fallback) = (first.generated, first.rg_dno, first.fallback);
-    let mut report = evaluation::report(program, &compiled, &generated, &config)?;
+    let mut report = evaluation::report(program, compiled, &generated, &config)?;
     let mut kept = vec![0; config.samples];
     for k in 1..=settings.retry_unmet {
         let unmet = report.unmet_samples();
@@ -127,7 +156,7 @@ pub fn run_task(
         )));
         let retry_config = GenerationConfig { samples: unmet.len(), seed, ..config.clone() };
         let retry = generate(prior, task, retrieval, &retry_config, device, &mut on)?;
-        let retry_report = evaluation::report(program, &compiled, &retry.generated, &retry_config)?;
+        let retry_report = evaluation::report(program, compiled, &retry.generated, &retry_config)?;
         let mut rows = vec![None; config.samples];
         for (i, &b) in unmet.iter().enumerate() {
             if report.beaten_by(b, &retry_report, i) {
@@ -140,7 +169,7 @@ pub fn run_task(
             (Some(own), Some(other)) => Some(own.with_rows_from(other, &rows)),
             (own, _) => own,
         };
-        report = evaluation::report(program, &compiled, &generated, &config)?;
+        report = evaluation::report(program, compiled, &generated, &config)?;
     }
     report.prior = prior.identity.clone();
     report.rg_dno = rg_report;
@@ -190,7 +219,7 @@ pub struct ExportOptions {
 /// Writes a run into `folder` (committed by the caller): `features.npy` (de-normalised
 /// features of the network's motion), `joints.npy` (the output), `report.json`, `strip.png`,
 /// `program.json`, and the exports of [`write_exports`].
-pub fn write_task(
+fn write_task(
     folder: &OutputFolder,
     prior: &Prior,
     program: &TaskProgram,

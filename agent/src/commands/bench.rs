@@ -15,6 +15,8 @@ use motion_core::prior::Prior;
 use motion_core::representation::FEATURE_DIM;
 use serde::Serialize;
 
+use crate::cli::load;
+use crate::cli::measure::{median, peak_rss_mib};
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -46,22 +48,6 @@ pub struct BenchArgs {
     dump: Option<PathBuf>,
 }
 
-/// The median of `v` (NaN when empty).
-pub(super) fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-}
-
-/// Peak resident memory of this process so far, MiB (Linux; NaN elsewhere).
-pub(super) fn peak_rss_mib() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map_or(f64::NAN, |kib| kib / 1024.0)
-}
-
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.threads {
         // A pool of its own for another thread count (the command's worker waits meanwhile).
@@ -82,8 +68,8 @@ struct Row {
 }
 
 fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
-    let device = candle_core::Device::Cpu;
-    let prior = super::load::load_prior(&args.prior, &device)?;
+    let device = load::device()?;
+    let prior = load::load_prior(&args.prior, &device)?;
     let cfg = prior.mdm.config();
     let sampler = DdimSampler::new(&NoiseSchedule::mdm(), args.ddim_steps)?;
     if let Some(dir) = &args.dump {
@@ -176,7 +162,7 @@ fn step_loss(
 /// `[1, frames, 263]`, the unrolled sample's joints `joints.npy` `[1, frames, 22, 3]`, the
 /// loss `loss.npy` `[1]` and its gradient `grad.npy` with respect to `z`.
 fn dump_step(prior: &Prior, sampler: &DdimSampler, frames: usize, dir: &Path) -> anyhow::Result<()> {
-    let device = candle_core::Device::Cpu;
+    let device = load::device()?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let text = prior.encode_text(&[""], &device)?;
     let z = Var::from_tensor(&gaussian((1, frames, FEATURE_DIM), 7, &device)?)?;

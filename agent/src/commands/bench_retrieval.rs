@@ -5,12 +5,14 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
-use motion_core::rgdno::candidates::Crop;
-use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig};
+use motion_core::generation::rgdno::candidates::Crop;
+use motion_core::generation::rgdno::config::RetrievalConfig;
+use motion_core::generation::rgdno::retrieval::retrieve;
 use serde::Serialize;
 
-use super::bench::{median, peak_rss_mib};
-use super::retrieve::RetrievalTask;
+use crate::cli::load;
+use crate::cli::measure::{median, peak_rss_mib};
+use crate::cli::retrieval_task::RetrievalTask;
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -56,7 +58,7 @@ struct Figures {
 }
 
 pub fn run(args: BenchRetrievalArgs) -> anyhow::Result<()> {
-    let device = candle_core::Device::Cpu;
+    let device = load::device()?;
     let task = RetrievalTask::open(&args.program, args.database.as_deref(), &device)?;
     let RetrievalTask { database, source, compiled, open_s, .. } = &task;
     let config = RetrievalConfig::default();

@@ -1,23 +1,21 @@
 //! `mogen bench tasks`: every shipped task × every method, written as a results table
-//! (markdown + JSON); `mogen bench dno`: the time of a full DNO run.
+//! (markdown + JSON).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
-use motion_core::constraints::CompiledProgram;
 use motion_core::evaluation::TaskReport;
-use motion_core::generation::{generate, GenerationConfig, Method, Task};
+use motion_core::export::{write_atomically, OutputFolder};
+use motion_core::generation::method::{GenerationConfig, Method};
 use motion_core::pipeline::TaskSettings;
 use motion_core::prior::PriorIdentity;
 use serde::{Deserialize, Serialize};
 
-use motion_core::export::{write_atomically, OutputFolder};
-
-use super::load::{load_prior, load_program};
-use super::run::{run_program, GenerationArgs, MethodArg};
+use crate::cli::generation_args::{GenerationArgs, MethodArg};
+use crate::cli::load::{device, load_prior, load_program};
+use crate::cli::progress::run_with_progress;
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -93,7 +91,7 @@ impl StoredRow {
 }
 
 pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
-    let device = candle_core::Device::Cpu;
+    let device = device()?;
     let prior = load_prior(&args.generation.prior, &device)?;
     let mut files: Vec<PathBuf> = std::fs::read_dir(&args.tasks)
         .with_context(|| format!("listing {}", args.tasks.display()))?
@@ -111,7 +109,7 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
     };
     for file in &files {
         let task = file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let program = load_program(file)?;
+        let program = load_program(file, &device)?;
         for &method in &args.methods {
             let method = Method::from(method);
             let settings = args.generation.settings(method);
@@ -127,13 +125,8 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
                 None => {}
             }
             eprintln!("{task} / {method}");
-            let report = run_program(
-                &prior,
-                &program,
-                &settings,
-                OutputFolder::create(&args.out.join(&task).join(method.name()))?,
-                args.generation.formats,
-            )?;
+            let folder = OutputFolder::create(&args.out.join(&task).join(method.name()))?;
+            let report = run_with_progress(&prior, &program, &settings, folder, &device)?;
             rows.push(StoredRow::new(ResultRow { task: task.clone(), report })?);
             write_atomically(&json_path, StoredRow::json(&rows)?.as_bytes())?;
             let table: Vec<ResultRow> = rows.iter().map(|r| r.row.clone()).collect();
@@ -288,61 +281,12 @@ pub fn markdown(rows: &[ResultRow]) -> String {
     out
 }
 
-#[derive(Debug, Args)]
-pub struct BenchDnoArgs {
-    /// Task program to optimise (its frame count sets the motion length).
-    #[arg(long, default_value_os_t = paths::fixtures_dir().join("tasks").join("rgdno_task1_narrow_gap.json"))]
-    task: PathBuf,
-    /// Batch sizes to time.
-    #[arg(long, value_delimiter = ',', default_values_t = [1usize, 8])]
-    batches: Vec<usize>,
-    /// DNO steps.
-    #[arg(long, default_value_t = 500)]
-    steps: usize,
-    /// Classifier-free guidance scale (1: one denoiser call per DDIM step; 2.5 doubles it).
-    #[arg(long, default_value_t = 1.0, value_parser = super::flags::guidance)]
-    guidance: f64,
-    /// Trained prior file.
-    #[arg(long, default_value_os_t = paths::default_prior())]
-    prior: PathBuf,
-}
-
-pub fn run_dno(args: BenchDnoArgs) -> anyhow::Result<()> {
-    let device = candle_core::Device::Cpu;
-    let prior = load_prior(&args.prior, &device)?;
-    let program = load_program(&args.task)?;
-    let compiled = CompiledProgram::compile(&program, &device)?;
-    println!(
-        "DNO {} steps on {} ({} frames), guidance {}; {} threads; the time includes the refinement and the foot clean-up",
-        args.steps,
-        args.task.display(),
-        program.frames,
-        args.guidance,
-        rayon::current_num_threads()
-    );
-    println!("| batch | total (s) | per step (s) | constraint error before → after |\n|---|---|---|---|");
-    for &batch in &args.batches {
-        let mut config = GenerationConfig::new(Method::Dno);
-        config.samples = batch;
-        config.guidance = args.guidance;
-        config.dno.steps = args.steps;
-        let start = Instant::now();
-        let generated =
-            generate(&prior, Task { program: &program, compiled: &compiled }, None, &config, &device, |_| {})?
-                .generated;
-        let total = start.elapsed().as_secs_f64();
-        let first: f64 = generated.loss_history.iter().filter_map(|h| h.first()).sum::<f64>() / batch as f64;
-        let last: f64 = generated.loss_history.iter().filter_map(|h| h.last()).sum::<f64>() / batch as f64;
-        println!("| {batch} | {total:.1} | {:.4} | {first:.5} → {last:.5} |", total / args.steps as f64);
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
-    use motion_core::generation::Guards;
-    use motion_core::rgdno::candidates::RetrievalSource;
-    use motion_core::rgdno::RgDnoConfig;
+    use motion_core::generation::objective::Guards;
+    use motion_core::generation::rgdno::candidates::RetrievalSource;
+    use motion_core::generation::rgdno::config::RgDnoConfig;
+    use motion_core::pipeline::ExportOptions;
 
     use super::*;
 
@@ -353,6 +297,7 @@ mod tests {
             rg_dno: RgDnoConfig::default(),
             database: RetrievalSource::from_path("corpus.safetensors.gz"),
             retry_unmet: 0,
+            exports: ExportOptions::default(),
         }
     }
 

@@ -25,7 +25,7 @@ pub enum DataCommand {
         #[arg(long, short, default_value_os_t = paths::default_database())]
         out: PathBuf,
         /// Seconds generated from each cyclic clip by looping it (positive, at most an hour).
-        #[arg(long, default_value_t = DatabaseConfig::default().loop_seconds, value_parser = super::flags::loop_seconds)]
+        #[arg(long, default_value_t = DatabaseConfig::default().loop_seconds, value_parser = crate::cli::flags::loop_seconds)]
         loop_seconds: f64,
         /// Leave out the left/right mirrored copies.
         #[arg(long)]

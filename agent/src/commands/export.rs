@@ -1,16 +1,17 @@
 //! `mogen export`: motions already made (an output folder, a `joints.npy`) → BVH, GLB and the
-//! viewer page; and the same files for every command that generates motions.
+//! viewer page.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
-use motion_core::export::bvh::BvhUnit;
-use motion_core::export::{read_joints_npy, ExportManifest, OutputFolder};
-use motion_core::pipeline::{write_exports, ExportOptions, Motions};
+use motion_core::export::{read_joints_npy, OutputFolder};
+use motion_core::pipeline::{write_exports, Motions};
 use motion_core::skeleton::FPS;
 
-use super::load::load_program;
+use crate::cli::export_formats::{print_exports, ExportFormats};
+use crate::cli::flags;
+use crate::cli::load::{device, load_program};
 
 #[derive(Debug, Args)]
 pub struct ExportArgs {
@@ -26,30 +27,10 @@ pub struct ExportArgs {
     #[arg(long, value_name = "FILE")]
     program: Option<PathBuf>,
     /// Frames per second of the motion.
-    #[arg(long, default_value_t = FPS, value_parser = super::flags::fps)]
+    #[arg(long, default_value_t = FPS, value_parser = flags::fps)]
     fps: f64,
     #[command(flatten)]
     formats: ExportFormats,
-}
-
-/// Choices about the exported files, shared by every command that writes them.
-#[derive(Debug, Clone, Copy, Default, Args)]
-pub struct ExportFormats {
-    /// Also write motion.gif: the side and top views in world coordinates, animated at the
-    /// motion's frame rate.
-    #[arg(long)]
-    pub gif: bool,
-    /// Write BVH in centimetres instead of metres.
-    #[arg(long)]
-    pub centimetres: bool,
-}
-
-impl ExportFormats {
-    /// The library's export choices.
-    pub fn options(self) -> ExportOptions {
-        let bvh_unit = if self.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
-        ExportOptions { gif: self.gif, bvh_unit }
-    }
 }
 
 pub fn run(args: ExportArgs) -> anyhow::Result<()> {
@@ -61,7 +42,9 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     };
     let motions = read_joints_npy(&joints)?;
     let program_path = args.program.clone().or_else(|| Some(folder.join("program.json")).filter(|p| p.is_file()));
-    let program = program_path.as_deref().map(load_program).transpose()?;
+    let device = device()?;
+    let checked = program_path.as_deref().map(|path| load_program(path, &device)).transpose()?;
+    let program = checked.as_ref().map(|checked| checked.program());
     let report_path = folder.join("report.json");
     let report = if report_path.is_file() {
         let text =
@@ -70,31 +53,15 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let title = program.as_ref().map_or_else(|| joints.display().to_string(), |p| p.text.clone());
+    let title = program.map_or_else(|| joints.display().to_string(), |p| p.text.clone());
     let out = OutputFolder::create(&args.out.unwrap_or(folder))?;
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
     let motions = Motions { title: &title, fps: args.fps, poses: &motions, labels };
-    let manifest = write_exports(&out, motions, program.as_ref(), report, args.formats.options())
+    let manifest = write_exports(&out, motions, program, report, args.formats.options())
         .with_context(|| format!("exporting into {}", out.target().display()))?;
-    print_exports(&out, &manifest, args.formats);
     // The folder's other files (the run's npy, report, strip) stay.
     out.keep_existing()?;
-    out.commit()?;
+    let folder = out.commit()?;
+    print_exports(&folder, &manifest, args.formats.gif);
     Ok(())
-}
-
-/// Prints what [`motion_core::pipeline::write_exports`] wrote into `out`, with the rotation
-/// solve's fit.
-pub fn print_exports(out: &OutputFolder, manifest: &ExportManifest, formats: ExportFormats) {
-    let worst = manifest.samples.iter().map(|s| s.fit_max_m).fold(0.0, f64::max);
-    eprintln!(
-        "wrote {}/{{sample_*/motion.bvh,sample_*/motion.glb,viewer.html,export.json}} ({} samples; rigid-skeleton \
-         fit: joints within {:.1} mm of the motion)",
-        out.target().display(),
-        manifest.samples.len(),
-        worst * 1000.0
-    );
-    if formats.gif {
-        eprintln!("wrote {}", out.target().join("motion.gif").display());
-    }
 }

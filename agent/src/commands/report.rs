@@ -9,7 +9,7 @@ use motion_core::cleanup::{foot_lock, FootLockConfig};
 use motion_core::corpus::family::Family;
 use motion_core::corpus::file as corpus_file;
 use motion_core::database::MotionDatabase;
-use motion_core::inversion::InversionConfig;
+use motion_core::generation::inversion::InversionConfig;
 use motion_core::metrics::MetricMeans;
 use motion_core::prior::{RootDecode, Sampling};
 use motion_core::quality::families::{family_report, FamilyConfig, FamilyQuality};
@@ -54,7 +54,7 @@ pub struct ReportArgs {
     #[arg(long, default_value_t = Denoising::default().ddim_steps)]
     steps: usize,
     /// Classifier-free guidance scale (1 = conditional model alone).
-    #[arg(long, default_value_t = Denoising::default().guidance, value_parser = super::flags::guidance)]
+    #[arg(long, default_value_t = Denoising::default().guidance, value_parser = crate::cli::flags::guidance)]
     guidance: f64,
     /// Only this label (repeatable; all labels when absent), e.g. "a person walks forward".
     #[arg(long = "label")]
@@ -134,8 +134,8 @@ impl ReportArgs {
 }
 
 pub fn run(args: ReportArgs) -> anyhow::Result<()> {
-    let device = candle_core::Device::Cpu;
-    let mut prior = super::load::load_prior(&args.prior, &device)?;
+    let device = crate::cli::load::device()?;
+    let mut prior = crate::cli::load::load_prior(&args.prior, &device)?;
     prior.root_decode = args.root_decode;
     let Some(database) = &args.database else {
         return run_families(&args, &prior, &device);

@@ -1,18 +1,14 @@
 //! `mogen retrieve`: RG-DNO's constraint-based retrieval for a program, on its own.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::Context;
-use candle_core::Device;
 use clap::Args;
-use motion_core::constraints::CompiledProgram;
-use motion_core::program::TaskProgram;
-use motion_core::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
-use motion_core::rgdno::retrieval::{retrieve, RetrievalConfig, RetrievalQuery, Retrieved};
+use motion_core::generation::rgdno::config::RetrievalConfig;
+use motion_core::generation::rgdno::retrieval::{retrieve, Retrieved};
 
-use super::load::load_program;
-use super::run::retrieval_source;
+use crate::cli::retrieval_task::RetrievalTask;
+use crate::cli::{flags, load};
 
 #[derive(Debug, Args)]
 pub struct RetrieveArgs {
@@ -27,62 +23,15 @@ pub struct RetrieveArgs {
     #[arg(long, default_value_t = 10)]
     top: usize,
     /// Weight of C_R's constraints other than the most difficult one.
-    #[arg(long, default_value_t = RetrievalConfig::default().related_weight, value_parser = super::flags::weight)]
+    #[arg(long, default_value_t = RetrievalConfig::default().related_weight, value_parser = flags::weight)]
     related_weight: f64,
     /// Also print the best crop of each clip among the exactly scored shortlist.
     #[arg(long)]
     per_clip: bool,
 }
 
-/// What a retrieval command works on: the program, its retrieval group C_R compiled, its most
-/// difficult constraint c_D, and the retrieval database opened (with the seconds that took).
-pub struct RetrievalTask {
-    /// The program.
-    pub program: TaskProgram,
-    /// C_R's constraint ids.
-    pub retrieval: Vec<String>,
-    /// C_R compiled.
-    pub compiled: CompiledProgram,
-    /// c_D's id.
-    pub most_difficult: String,
-    /// Where the database came from.
-    pub source: RetrievalSource,
-    /// The database.
-    pub database: RetrievalDatabase,
-    /// Seconds opening the database took.
-    pub open_s: f64,
-}
-
-impl RetrievalTask {
-    /// Reads the program at `program` (it needs a relational parse) and opens `database` (the
-    /// shipped corpus's train split when `None`).
-    pub fn open(program: &Path, database: Option<&Path>, device: &Device) -> anyhow::Result<Self> {
-        let task = load_program(program)?;
-        let groups = task
-            .constraint_groups()
-            .with_context(|| format!("{} has no relational parse: nothing to retrieve for", program.display()))?;
-        let most_difficult = task.relational_parse.as_ref().map(|p| p.most_difficult.clone()).unwrap_or_default();
-        let compiled = CompiledProgram::compile(&task, device)?.subset(&groups.retrieval);
-        let source = retrieval_source(database);
-        let clock = std::time::Instant::now();
-        let (database, _) = source.open().with_context(|| format!("opening {source}"))?;
-        let open_s = clock.elapsed().as_secs_f64();
-        Ok(Self { program: task, retrieval: groups.retrieval, compiled, most_difficult, source, database, open_s })
-    }
-
-    /// The retrieval query of the task.
-    pub fn query(&self) -> RetrievalQuery<'_> {
-        RetrievalQuery {
-            program: &self.compiled,
-            most_difficult: &self.most_difficult,
-            prompt: &self.program.text,
-            counting: !self.compiled.count_targets().is_empty(),
-        }
-    }
-}
-
 pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
-    let device = Device::Cpu;
+    let device = load::device()?;
     let task = RetrievalTask::open(&args.program, args.database.as_deref(), &device)?;
     let RetrievalTask { database, source, most_difficult, open_s: opened, .. } = &task;
     let config = RetrievalConfig { related_weight: args.related_weight, top_k: args.top, ..RetrievalConfig::default() };

@@ -6,16 +6,17 @@ use clap::Args;
 use motion_core::cleanup::FootLockConfig;
 use motion_core::diffusion::Guidance;
 use motion_core::export::OutputFolder;
-use motion_core::method::ensure_finite;
+use motion_core::generation::method::ensure_finite;
+use motion_core::generation::postprocess::clean_up;
 use motion_core::motion::tensor_to_poses;
 use motion_core::pipeline::{write_exports, Motions};
-use motion_core::postprocess::clean_up;
 use motion_core::prior::{RootDecode, Sampling};
 use motion_core::render::{motion_strip, StripRow};
 use motion_core::skeleton::FPS;
 
-use super::export::{print_exports, ExportFormats};
-use super::flags;
+use crate::cli::export_formats::{print_exports, ExportFormats};
+use crate::cli::flags;
+use crate::cli::load::{device, load_prior};
 use crate::paths;
 
 #[derive(Debug, Args)]
@@ -58,8 +59,8 @@ pub struct SampleArgs {
 
 pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     let folder = OutputFolder::create(&args.out)?;
-    let device = candle_core::Device::Cpu;
-    let mut prior = super::load::load_prior(&args.prior, &device)?;
+    let device = device()?;
+    let mut prior = load_prior(&args.prior, &device)?;
     prior.root_decode = args.root_decode;
     match prior.encoder.heard_words(&args.prompt) {
         Some(heard) if heard.is_empty() => {
@@ -123,8 +124,8 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
     let motions = Motions { title: &args.prompt, fps: FPS, poses: &poses, labels };
     let manifest = write_exports(&folder, motions, None, None, args.formats.options())?;
-    print_exports(&folder, &manifest, args.formats);
     let out = folder.commit()?;
+    print_exports(&out, &manifest, args.formats.gif);
     println!("wrote {}/{{joints.npy,features.npy,strip.png}}", out.display());
     Ok(())
 }

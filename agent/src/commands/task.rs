@@ -7,11 +7,14 @@ use agent::llm::{
     escape_controls, ApiKey, ClientConfig, Llm, LlmSettings, OutputMode, ReplySource, RetryPolicy, DEFAULT_MODEL,
 };
 use agent::plan::{plan_from_file, plan_task, PlanSettings, PlannedTask};
+use candle_core::Device;
 use clap::Args;
 use motion_core::export::OutputFolder;
 
-use super::generate::{self, RunOptions};
-use super::run::{GenerationArgs, MethodArg};
+use crate::cli::flags;
+use crate::cli::generation_args::{GenerationArgs, MethodArg};
+use crate::cli::load::{device, load_prior};
+use crate::cli::progress::run_with_progress;
 use crate::paths;
 
 /// No `Debug`: the arguments hold the API key.
@@ -85,7 +88,7 @@ struct LlmArgs {
     #[arg(long, default_value_t = RetryPolicy::default().max_retries)]
     retries: u32,
     /// Sampling temperature.
-    #[arg(long, default_value_t = 0.0, value_parser = super::flags::temperature)]
+    #[arg(long, default_value_t = 0.0, value_parser = flags::temperature)]
     temperature: f64,
     /// Reply token limit (default: the server's).
     #[arg(long)]
@@ -130,29 +133,31 @@ fn unit_interval(text: &str) -> Result<f64, String> {
 pub fn run(args: TaskArgs) -> anyhow::Result<()> {
     // A bad --out fails before the LLM and the generator run.
     let out = if args.dry_run { None } else { Some(OutputFolder::create(&args.out)?) };
+    let device = device()?;
     let planned = match (&args.program, &args.task) {
-        (Some(path), _) => plan_from_file(path)?,
-        (None, Some(task)) => plan_words(task, &args)?,
+        (Some(path), _) => plan_from_file(path, &device)?,
+        (None, Some(task)) => plan_words(task, &args, &device)?,
         (None, None) => anyhow::bail!("give a task in words or --program FILE"),
     };
     if args.show_program || args.dry_run {
-        println!("{}", planned.program.to_json_pretty()?);
+        println!("{}", planned.program.program().to_json_pretty()?);
     }
     print_plan(&planned);
     let Some(out) = out else {
         println!("dry run: the program is valid; stopping before generation");
         return Ok(());
     };
-    let options = RunOptions {
-        settings: args.generation.settings(args.method.into()),
-        prior: args.generation.prior.clone(),
-        formats: args.generation.formats,
-    };
-    generate::run(&planned, &options, out)
+    // RG-DNO, through the plan's relational parse and Algorithm 1's groups, falls back to DNO and
+    // says why without them.
+    let prior = load_prior(&args.generation.prior, &device)?;
+    let settings = args.generation.settings(args.method.into());
+    let report = run_with_progress(&prior, &planned.program, &settings, out, &device)?;
+    print!("{}", report.summary());
+    Ok(())
 }
 
-/// The two LLM stages for `task`.
-fn plan_words(task: &str, args: &TaskArgs) -> anyhow::Result<PlannedTask> {
+/// The two LLM stages for `task`; the program is checked and compiled on `device`.
+fn plan_words(task: &str, args: &TaskArgs, device: &Device) -> anyhow::Result<PlannedTask> {
     let settings = args.llm.settings();
     let endpoint_configured = settings.base_url.is_some() || settings.api_key.is_some();
     let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
@@ -166,13 +171,13 @@ fn plan_words(task: &str, args: &TaskArgs) -> anyhow::Result<PlannedTask> {
         }
         eprintln!("LLM: {}", llm.describe());
         let plan = PlanSettings { max_repairs: args.max_repairs, retrieval_confidence: args.retrieval_confidence };
-        Ok(plan_task(task, &llm, &plan).await?)
+        Ok(plan_task(task, &llm, &plan, device).await?)
     })
 }
 
 /// The relational parse and the groups of Algorithm 1, on stdout.
 fn print_plan(planned: &PlannedTask) {
-    let program = &planned.program;
+    let program = planned.program.program();
     println!(
         "program: {} constraint(s), {} frames, prompt {:?}",
         program.constraints.len(),

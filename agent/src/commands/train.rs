@@ -60,7 +60,7 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = TrainConfig::default().batch_size)]
     batch_size: usize,
     /// Peak learning rate.
-    #[arg(long, default_value_t = TrainConfig::default().lr, value_parser = super::flags::learning_rate)]
+    #[arg(long, default_value_t = TrainConfig::default().lr, value_parser = crate::cli::flags::learning_rate)]
     lr: f64,
     /// Longest crop in frames (20 fps).
     #[arg(long, default_value_t = TrainConfig::default().max_frames)]
@@ -69,37 +69,37 @@ pub struct TrainArgs {
     /// probability proportional to its frames to this power (1: as the data has them; 0: every
     /// family alike; 0.5 draws the rare skills 4-12x as often), instead of uniformly over the
     /// data. The validation loss still draws uniformly.
-    #[arg(long, value_parser = super::flags::weight)]
+    #[arg(long, value_parser = crate::cli::flags::weight)]
     family_balance: Option<f64>,
     /// EMA decay of the shipped weights (0.999 averages about the last 1,000 steps; small
     /// batches call for more).
-    #[arg(long, default_value_t = TrainConfig::default().ema_decay, value_parser = super::flags::fraction)]
+    #[arg(long, default_value_t = TrainConfig::default().ema_decay, value_parser = crate::cli::flags::fraction)]
     ema_decay: f64,
     /// Weight of the root features (yaw velocity, x/z velocity, height) in the x0 MSE
     /// (1 = MDM's plain MSE; 25 = HumanML3D's feat_bias 5).
-    #[arg(long, default_value_t = TrainConfig::default().root_weight, value_parser = super::flags::weight)]
+    #[arg(long, default_value_t = TrainConfig::default().root_weight, value_parser = crate::cli::flags::weight)]
     root_weight: f64,
     /// Weight of the ric features (root-relative joint positions, from which the joints are
     /// recovered) in the x0 MSE (1 = MDM's plain MSE).
-    #[arg(long, default_value_t = TrainConfig::default().ric_weight, value_parser = super::flags::weight)]
+    #[arg(long, default_value_t = TrainConfig::default().ric_weight, value_parser = crate::cli::flags::weight)]
     ric_weight: f64,
     /// Min-SNR-γ loss weighting: each sample's x0 MSE weighted by min(SNR_t, γ)
     /// (0 = off, MDM's uniform weighting; 5 is the paper's value).
-    #[arg(long, default_value_t = TrainConfig::default().snr_gamma, value_parser = super::flags::weight)]
+    #[arg(long, default_value_t = TrainConfig::default().snr_gamma, value_parser = crate::cli::flags::weight)]
     snr_gamma: f64,
     /// Fraction of timesteps drawn from the noisiest 30 % of the schedule (0 = MDM's uniform
     /// sampling); high-noise steps teach the denoiser to tie frames together.
-    #[arg(long, default_value_t = TrainConfig::default().high_noise_fraction, value_parser = super::flags::fraction)]
+    #[arg(long, default_value_t = TrainConfig::default().high_noise_fraction, value_parser = crate::cli::flags::fraction)]
     high_noise_fraction: f64,
     /// Noise on the text conditions: per row, σ uniform in [0, TEXT_NOISE] times the row's
     /// length, then scaled back to that length (0.05 moves a 384-d sentence vector to cosine
     /// about 0.71 of its caption), so the denoiser learns the space between its captions where
     /// paraphrases lie (0 = off).
-    #[arg(long, default_value_t = TrainConfig::default().text_noise, value_parser = super::flags::weight)]
+    #[arg(long, default_value_t = TrainConfig::default().text_noise, value_parser = crate::cli::flags::weight)]
     text_noise: f64,
     /// Fraction of frames whose noisy input is replaced by pure noise, target unchanged, so the
     /// denoiser learns to restore frames from their neighbours (0 = off).
-    #[arg(long, default_value_t = TrainConfig::default().frame_corruption, value_parser = super::flags::fraction)]
+    #[arg(long, default_value_t = TrainConfig::default().frame_corruption, value_parser = crate::cli::flags::fraction)]
     frame_corruption: f64,
     /// Weight of the joint-velocity loss on the recovered joints ((m/s)²; 0 = off).
     #[arg(long, default_value_t = TrainConfig::default().velocity_weight)]
@@ -131,7 +131,7 @@ pub struct TrainArgs {
     layers: Option<usize>,
     /// Dropout inside the denoiser while training, in [0, 1). Default: the checkpoint's or the
     /// --init prior's, else MDM's 0.1.
-    #[arg(long, value_parser = super::flags::fraction)]
+    #[arg(long, value_parser = crate::cli::flags::fraction)]
     dropout: Option<f64>,
     /// What the network's output head predicts: `x0` (MDM) or `velocity` (v = √ᾱ·ε − √(1−ᾱ)·x0;
     /// x̂0 stays close to a lightly noised input). Default: the checkpoint's or the --init
@@ -153,7 +153,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.shards > 1 && std::env::var_os("CANDLE_NUM_THREADS").is_none() {
         std::env::set_var("CANDLE_NUM_THREADS", "1");
     }
-    let device = candle_core::Device::Cpu;
+    let device = crate::cli::load::device()?;
     let (data, held_out) = match &args.database {
         Some(path) => {
             let db = MotionDatabase::load(path)

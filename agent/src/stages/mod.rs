@@ -7,10 +7,9 @@
 //!    retrieval set and the fitting sets.
 //!
 //! Every reply goes through extraction, JSON Schema validation with paths, deserialisation and
-//! the [`checks`] of meaning; the problems go back to the model for a bounded number of repair
+//! the meaning checks ([`motion_core::constraints::checked::CheckedProgram::check`]); the problems go back to the model for a bounded number of repair
 //! rounds ([`repair`]).
 
-pub mod checks;
 mod program;
 mod relational;
 mod repair;

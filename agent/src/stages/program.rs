@@ -1,12 +1,14 @@
 //! Stage 1, program generation: task text → [`TaskProgram`] (without its relational parse, which
 //! stage 2 writes).
 
+use candle_core::Device;
+use motion_core::constraints::checked::CheckedProgram;
 use motion_core::program::{json_schema, validate_json, TaskProgram};
 use motion_core::skeleton::{Joint, FPS};
 use serde_json::{json, Value};
 
 use super::repair::ask_until_valid;
-use super::{checks, Stage, StageError};
+use super::{Stage, StageError};
 use crate::llm::extract::Answer;
 use crate::llm::{strict_schema, Llm, Message, OutputMode, Question};
 use crate::prompts::vocabulary::describe;
@@ -83,21 +85,23 @@ pub fn program_question(prompts: &Prompts, task: &str) -> Result<Question, Promp
     })
 }
 
-/// Asks for the program of `task`, with at most `max_repairs` repair rounds.
+/// Asks for the program of `task`, with at most `max_repairs` repair rounds; the program is
+/// checked and compiled on `device`.
 pub async fn generate_program(
     llm: &Llm,
     prompts: &Prompts,
     task: &str,
     max_repairs: u32,
-) -> Result<TaskProgram, StageError> {
+    device: &Device,
+) -> Result<CheckedProgram, StageError> {
     let stage = Stage::Program;
     let question = program_question(prompts, task).map_err(|source| StageError::Prompt { stage, source })?;
-    ask_until_valid(llm, prompts, stage, &question, max_repairs, check_program).await
+    ask_until_valid(llm, prompts, stage, &question, max_repairs, |answer| check_program(answer, device)).await
 }
 
-/// A stage-1 answer as a program: JSON Schema (paths), types, then the meaning checks (which
-/// compile it).
-pub fn check_program(answer: &Answer) -> Result<TaskProgram, Vec<String>> {
+/// A stage-1 answer as a program: JSON Schema (paths), types, then the meaning checks, which
+/// compile it on `device` ([`CheckedProgram::check`]).
+pub fn check_program(answer: &Answer, device: &Device) -> Result<CheckedProgram, Vec<String>> {
     let mut value = answer.json.clone();
     // Written by stage 2; a model that adds one anyway (JSON mode) is not wrong, just early.
     if let Some(parse) = value.as_object_mut().and_then(|object| object.remove("relational_parse")) {
@@ -106,12 +110,7 @@ pub fn check_program(answer: &Answer) -> Result<TaskProgram, Vec<String>> {
     let to_strings = |errors: Vec<motion_core::program::ProgramError>| errors.iter().map(ToString::to_string).collect();
     validate_json(&value).map_err(to_strings)?;
     let program = TaskProgram::from_json(&value.to_string()).map_err(|error| vec![error.to_string()])?;
-    let problems = checks::meaning_problems(&program);
-    if problems.is_empty() {
-        Ok(program)
-    } else {
-        Err(to_strings(problems))
-    }
+    CheckedProgram::check(program, device).map_err(to_strings)
 }
 
 #[cfg(test)]
@@ -131,22 +130,22 @@ mod tests {
 
     #[test]
     fn valid_answers_pass_with_nulls_for_absent_fields() {
-        let program = check_program(&answer(small_program())).unwrap();
-        assert_eq!(program.constraints[0].id, "c1");
+        let program = check_program(&answer(small_program()), &Device::Cpu).unwrap();
+        assert_eq!(program.program().constraints[0].id, "c1");
         let mut with_parse = small_program();
         with_parse["relational_parse"] = json!({"most_difficult": "c1"});
-        assert!(check_program(&answer(with_parse)).is_ok());
+        assert!(check_program(&answer(with_parse), &Device::Cpu).is_ok());
     }
 
     #[test]
     fn problems_carry_json_paths() {
         let mut bad = small_program();
         bad["constraints"][0]["expr"]["quantity"]["of"]["joint"] = json!("left_hand");
-        let problems = check_program(&answer(bad)).unwrap_err();
+        let problems = check_program(&answer(bad), &Device::Cpu).unwrap_err();
         assert!(problems.iter().any(|p| p.starts_with("constraints[0].expr.quantity.of.joint")), "{problems:?}");
         let mut late = small_program();
         late["constraints"][0]["expr"]["frames"] = json!({"keyframes": [{"frame": 100}]});
-        let problems = check_program(&answer(late)).unwrap_err();
+        let problems = check_program(&answer(late), &Device::Cpu).unwrap_err();
         assert_eq!(problems.len(), 1, "{problems:?}");
         assert!(problems[0].contains("frames.keyframes[0].frame") && problems[0].contains("0..=99"), "{problems:?}");
     }

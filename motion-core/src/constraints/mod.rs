@@ -11,6 +11,7 @@
 
 mod body;
 mod carry;
+pub mod checked;
 mod count;
 mod flight;
 mod frames;
@@ -205,7 +206,7 @@ impl CompiledProgram {
 
     /// This program's geometric constraints only, without those a motion makes by moving (any
     /// constraint with a `steps`, `count`, `events` or `airborne` term): what a joint-space
-    /// refinement may act on ([`crate::refine`]), since a count is made by the motion's own
+    /// refinement may act on ([`crate::generation::refine`]), since a count is made by the motion's own
     /// strides and extrema and a flight by a jump, not by shifting joints.
     pub fn geometric(&self) -> CompiledProgram {
         let made_by_moving = |node: &Node| {

@@ -1,6 +1,6 @@
 //! The motion corpus: hours of real capture on the project's one skeleton, screened, cut into
 //! captioned windows and split by subject. It is what the prior is trained on, and its train
-//! split is what RG-DNO retrieves from ([`crate::rgdno::candidates`]); the validation and test
+//! split is what RG-DNO retrieves from ([`crate::generation::rgdno::candidates`]); the validation and test
 //! splits are held out of both.
 //!
 //! Sources: the CMU Graphics Lab Motion Capture Database in its shared 22-joint form

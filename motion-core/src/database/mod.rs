@@ -1,7 +1,7 @@
 //! The motion database: augmented 20 fps feature sequences cut into labelled windows, stored as
 //! one safetensors file with its index. It is the training set of the prior, and RG-DNO's
 //! retrieval database when one is named (`--database`; by default RG-DNO retrieves from the
-//! corpus's train split, [`crate::rgdno::candidates`]).
+//! corpus's train split, [`crate::generation::rgdno::candidates`]).
 //!
 //! Augmentations: left/right mirroring (labels swap "left" and "right"), time warps (replaying
 //! the source at other speeds, interpolating its rotations), looping of cyclic clips with

@@ -4,7 +4,7 @@
 
 use candle_core::{Result, Tensor, Var, D};
 
-use crate::method::DirectConfig;
+use crate::generation::method::DirectConfig;
 use crate::optim::AdamW;
 use crate::representation::ROT;
 

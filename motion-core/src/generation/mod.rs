@@ -1,18 +1,18 @@
 //! Constrained generation: every [`Method`] dispatched from one function, [`generate`]: the
 //! prior's unconstrained samples, the IK and IK+Reg baselines that optimise the motion directly
 //! (ProgMoGen's `task_configs_eval_others`, [`direct`]), ProgMoGen+DNO, which optimises the
-//! start noise through the unrolled DDIM sampler, and RG-DNO ([`crate::rgdno`]), which starts
+//! start noise through the unrolled DDIM sampler, and RG-DNO ([`crate::generation::rgdno`]), which starts
 //! DNO from a retrieved motion's noise blended with random noise.
 //!
 //! Every method starts from the same seeded noise `z0` `[B, T, 263]` and the same solver `G`
 //! (K-step DDIM of the prior with the task's prompt and classifier-free guidance): the
 //! unconstrained motion is `G(z0)`, IK starts from `G(z0)`, DNO optimises `z` from `z0`. Losses
 //! are the compiled program's `Σ wᵢ·Eᵢ` on the joints recovered from the features
-//! ([`crate::objective`]); terms that stay near "the initial motion" compare with `G(z0)`
+//! ([`crate::generation::objective`]); terms that stay near "the initial motion" compare with `G(z0)`
 //! (ProgMoGen's `pred_res_0`).
 //!
-//! Every method's motion then goes through the finishing stages ([`crate::postprocess`]): the
-//! kinematic refinement against the program's geometric constraints ([`crate::refine`],
+//! Every method's motion then goes through the finishing stages ([`crate::generation::postprocess`]): the
+//! kinematic refinement against the program's geometric constraints ([`crate::generation::refine`],
 //! switchable off with [`GenerationConfig::refine`]) and the contact-aware clean-up
 //! ([`crate::cleanup::foot_lock`], switchable off with [`GenerationConfig::foot_lock`]): the
 //! returned joints are the finished ones, the network's joints are kept beside them so that a
@@ -23,28 +23,30 @@
 //! ([`Generation::fallback`]).
 
 mod direct;
+pub mod inversion;
+pub mod method;
+pub mod objective;
+pub mod postprocess;
+pub mod refine;
+pub mod rgdno;
 
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
 
-pub use crate::method::{
-    ensure_finite, pick_rows, DirectConfig, Generated, GenerationConfig, GenerationError, Method, Task,
-};
-pub use crate::objective::{
-    ballistic_penalty, flight_penalty, floor_penalty, jitter_penalty, joints_objective, program_objective, Guards,
-    FLIGHT_LIMIT_FRAMES, JITTER_LIMIT,
-};
-
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
 use crate::dno::{optimize_with_restarts, DnoConfig, Solver, UnrolledDdim};
-use crate::postprocess::{finish, Unfinished};
 use crate::prior::Prior;
 use crate::representation::FEATURE_DIM;
-use crate::rgdno::candidates::RetrievalDatabase;
-use crate::rgdno::retrieval::RetrievalError;
-use crate::rgdno::{generate_rg_dno, RgDnoConfig, RgDnoError, RgDnoReport, RgDnoTask};
+use method::{Generated, GenerationConfig, GenerationError, Method, Task};
+use objective::{program_objective, Guards};
+use postprocess::{finish, Unfinished};
+use rgdno::candidates::RetrievalDatabase;
+use rgdno::config::RgDnoConfig;
+use rgdno::error::{RetrievalError, RgDnoError};
+use rgdno::report::RgDnoReport;
+use rgdno::{generate_rg_dno, RgDnoTask};
 
 /// What RG-DNO retrieves from and how it runs its stages.
 #[derive(Debug, Clone, Copy)]

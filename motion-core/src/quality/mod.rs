@@ -20,7 +20,7 @@ use crate::database::MotionDatabase;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
 use crate::diffusion::NoiseSchedule;
-use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
+use crate::generation::inversion::{invert_motion, mean_joint_distance, InversionConfig};
 use crate::metrics::MetricMeans;
 use crate::motion::tensor_to_poses;
 use crate::prior::{Prior, PriorError, Sampling};

@@ -1,6 +1,6 @@
 //! What every method ends with (after [`crate::generation::generate`]'s optimisation): the
 //! joints of its features, the kinematic refinement against the program's geometric
-//! constraints ([`crate::refine`]), the contact-aware foot clean-up ([`crate::cleanup`]) and a
+//! constraints ([`crate::generation::refine`]), the contact-aware foot clean-up ([`crate::cleanup`]) and a
 //! check that every result is finite.
 
 use std::time::Instant;
@@ -9,11 +9,11 @@ use candle_core::Tensor;
 
 use crate::cleanup::{foot_lock, FootLockConfig, FootLockReport};
 use crate::constraints::CompiledProgram;
-use crate::method::{ensure_finite, Generated, GenerationConfig, GenerationError, Task};
+use crate::generation::method::{ensure_finite, Generated, GenerationConfig, GenerationError, Task};
+use crate::generation::refine::{refine, RefineConfig, RefineReport};
 use crate::motion::{poses_to_tensor, tensor_to_poses};
 use crate::prior::Prior;
 use crate::program::{Primitive, TaskProgram};
-use crate::refine::{refine, RefineConfig, RefineReport};
 
 /// A method's motion before the finishing stages.
 #[derive(Debug, Clone)]

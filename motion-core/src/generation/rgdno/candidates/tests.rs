@@ -8,7 +8,7 @@ use crate::motion::test_support::walking_poses;
 
 /// A corpus of hand-made clips `(name, split, poses)`, windowed and captioned as
 /// [`Corpus::build`] does.
-pub(in crate::rgdno) fn tiny_corpus(clips: Vec<(&str, Split, Vec<Pose>)>) -> Corpus {
+pub(in crate::generation::rgdno) fn tiny_corpus(clips: Vec<(&str, Split, Vec<Pose>)>) -> Corpus {
     let mut corpus =
         Corpus { clips: Vec::new(), joints: Vec::new(), windows: Vec::new(), drops: DropReport::default() };
     for (name, split, poses) in clips {

@@ -6,15 +6,16 @@ use candle_core::Tensor;
 use rand::rngs::StdRng;
 
 use super::config::RgDnoConfig;
+use super::error::RgDnoError;
+use super::figures::to_vec;
 use super::mask::{blend, MaskCandidate};
 use super::report::{ChosenMask, Stage, StageProgress};
 use super::reward::{reward, RewardWeights};
-use super::{to_vec, RgDnoError};
 use crate::constraints::CompiledProgram;
 use crate::diffusion::Denoiser;
 use crate::dno::UnrolledDdim;
-use crate::method::GenerationError;
-use crate::objective::{joints_objective, Guards};
+use crate::generation::method::GenerationError;
+use crate::generation::objective::{joints_objective, Guards};
 use crate::prior::Prior;
 use crate::representation::FEATURE_DIM;
 
@@ -29,7 +30,7 @@ pub(super) struct MaskStages<'a, M: Denoiser + ?Sized> {
     pub(super) round: usize,
 }
 
-/// The program objective's parts ([`crate::objective::program_objective`]): the compiled
+/// The program objective's parts ([`crate::generation::objective::program_objective`]): the compiled
 /// program, the initial joints `[B or 1, T, 22, 3]` and the guards.
 #[derive(Clone, Copy)]
 pub(super) struct Objective<'a> {

@@ -3,12 +3,53 @@
 use serde::{Deserialize, Serialize};
 
 use super::mask::MaskKind;
-use super::retrieval::RetrievalConfig;
 use super::reward::RewardWeights;
 use crate::dno::DnoConfig;
-use crate::inversion::InversionConfig;
-use crate::method::GenerationError;
+use crate::generation::inversion::InversionConfig;
+use crate::generation::method::GenerationError;
 use crate::program::ConstraintGroups;
+
+/// Settings of constraint-based retrieval ([`super::retrieval::retrieve`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RetrievalConfig {
+    /// Frames between the starts of consecutive crops of one clip (default 20: 1 s).
+    pub crop_stride_frames: usize,
+    /// Crop lengths as multiples of the task's frame count, each resized to it (default 1,
+    /// 1.5, 2, 2.5: the crop played at 1–2.5× its speed).
+    pub resize_factors: Vec<f64>,
+    /// Weight of `C_R`'s constraints other than `c_D` in the score (default 0.1).
+    pub related_weight: f64,
+    /// Retrieved motions kept, best first (default 5).
+    pub top_k: usize,
+    /// A motion is kept only when its score is at most this (default `None`: no threshold).
+    pub threshold: Option<f64>,
+    /// Crops scored per batch (default 32: 0.7 MB of f32 joints for a 100-frame task, small
+    /// enough that candle runs the proxy's element-wise ops inline on the batch's worker).
+    pub batch: usize,
+    /// Candidates re-scored exactly (body-surface points, every frame) after ranking all on
+    /// the proxy (default 64; at least `top_k`).
+    pub exact_shortlist: usize,
+    /// The proxy that ranks every candidate reads every `proxy_frame_step`-th frame of the
+    /// spans its constraints reduce over, keyframes kept ([`CompiledProgram::thinned`]), and the
+    /// joint centres only (default 4: 5 Hz; 1: every frame).
+    pub proxy_frame_step: usize,
+}
+
+impl Default for RetrievalConfig {
+    fn default() -> Self {
+        Self {
+            crop_stride_frames: 20,
+            resize_factors: vec![1.0, 1.5, 2.0, 2.5],
+            related_weight: 0.1,
+            top_k: 5,
+            threshold: None,
+            batch: 32,
+            exact_shortlist: 64,
+            proxy_frame_step: 4,
+        }
+    }
+}
 
 /// Every RG-DNO setting (the paper's defaults, §5.2: N1 = 100 at lr 0.05, N2 = 400 at lr 0.02).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -38,7 +38,8 @@ use candle_core::{Device, Tensor};
 use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
-use super::retrieval::{RetrievalConfig, RetrievalError};
+use super::config::RetrievalConfig;
+use super::error::RetrievalError;
 use super::semantic::{semantically_consistent, Described};
 use crate::corpus::caption::captions;
 use crate::corpus::{file as corpus_file, Corpus, Split};

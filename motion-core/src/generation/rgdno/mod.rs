@@ -6,7 +6,7 @@
 //! 2. **retrieval** (§4.3, eqs. 5–6, [`retrieval`]): the motion `x_R` of the retrieval
 //!    database ([`candidates`]: by default the corpus's train split) that best satisfies `C_R`,
 //!    among those that pass the semantic check ([`semantic`]);
-//! 3. **inversion** (eq. 7, `invert.rs`): `z_R = G⁻¹(x_R)` ([`crate::inversion::invert_motion`]);
+//! 3. **inversion** (eq. 7, `invert.rs`): `z_R = G⁻¹(x_R)` ([`crate::generation::inversion::invert_motion`]);
 //! 4. **two branches** (eqs. 8–9, `branches.rs`): `z1` from random noise fitted to `C1`, `z2`
 //!    from `z_R` fitted to `C2`, each `N1` DNO steps;
 //! 5. **mask** (eqs. 10, 13, [`mask`], [`reward`]): the best of the binary temporal and spatial
@@ -17,11 +17,13 @@
 //!
 //! Settings and Table 4's ablations are in [`config`], what the stages did in [`report`]. The
 //! output goes through the same finishing stages as every other method
-//! ([`crate::postprocess`]); [`crate::generation::generate`] dispatches here.
+//! ([`crate::generation::postprocess`]); [`crate::generation::generate`] dispatches here.
 
 mod branches;
 pub mod candidates;
 pub mod config;
+pub mod error;
+mod figures;
 mod final_round;
 mod invert;
 pub mod mask;
@@ -31,67 +33,34 @@ pub mod retrieval;
 pub mod reward;
 pub mod semantic;
 mod soft_blend;
+mod stages;
 
 use std::time::Instant;
 
-use candle_core::{DType, Device, Tensor};
+use candle_core::{Device, Tensor};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-
-pub use config::{Ablation, RgDnoConfig, MAX_SEGMENTS};
-pub use report::{ChosenMask, RetrievedReport, RgDnoReport, Stage, StageProgress, StageSeconds};
 
 use crate::constraints::CompiledProgram;
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::{Denoiser, Guidance};
 use crate::dno::{self, UnrolledDdim};
-use crate::inversion::InversionConfig;
-use crate::method::{Generated, GenerationConfig, GenerationError, Task};
-use crate::postprocess::{finish, Unfinished};
+use crate::generation::inversion::InversionConfig;
+use crate::generation::method::{Generated, GenerationConfig, GenerationError, Task};
+use crate::generation::postprocess::{finish, Unfinished};
 use crate::prior::Prior;
-use crate::program::{ConstraintGroups, TaskProgram};
+use crate::program::TaskProgram;
 use crate::representation::FEATURE_DIM;
 use branches::Branches;
 use candidates::RetrievalDatabase;
+use config::{Ablation, RgDnoConfig};
+use error::RgDnoError;
 use mask::blend;
 use mask_search::{MaskStages, Objective};
+use report::{ChosenMask, RetrievedReport, RgDnoReport, StageProgress, StageSeconds};
 use retrieval::{retrieve, RetrievalQuery};
 use reward::RewardWeights;
-
-/// Why RG-DNO did not run ([`RgDnoError::falls_back`]: the caller falls back to DNO and says
-/// why).
-#[derive(Debug, thiserror::Error)]
-pub enum RgDnoError {
-    /// The program has no relational parse.
-    #[error("the program has no relational parse, so there is nothing to retrieve")]
-    NoParse,
-    /// No database motion passed the semantic check and the threshold.
-    #[error("no database motion passed the semantic check and the retrieval threshold")]
-    NothingRetrieved,
-    /// The caller gave no retrieval database.
-    #[error("no retrieval database was given")]
-    NoDatabase,
-    /// Retrieval failed.
-    #[error(transparent)]
-    Retrieval(#[from] retrieval::RetrievalError),
-    /// Generation failed.
-    #[error(transparent)]
-    Generation(#[from] GenerationError),
-}
-
-impl From<candle_core::Error> for RgDnoError {
-    fn from(error: candle_core::Error) -> Self {
-        RgDnoError::Generation(GenerationError::Tensor(error))
-    }
-}
-
-impl RgDnoError {
-    /// Whether this is a reason to fall back to DNO (nothing to retrieve, or no database to
-    /// retrieve from) rather than a failure.
-    pub fn falls_back(&self) -> bool {
-        matches!(self, RgDnoError::NoParse | RgDnoError::NothingRetrieved | RgDnoError::NoDatabase)
-    }
-}
+use stages::Stages;
 
 /// A task as RG-DNO takes it: the program (with its relational parse), compiled, and the
 /// retrieval database.
@@ -207,19 +176,6 @@ pub fn generate_rg_dno(
     Ok((generated, report))
 }
 
-/// What every restart shares: the compiled task and its groups, the settings, the two solvers
-/// (batch `B` and `2B`) and the inverted noise `z_R` `[B, T, 263]`.
-pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
-    pub(super) prior: &'a Prior,
-    pub(super) compiled: &'a CompiledProgram,
-    pub(super) groups: &'a ConstraintGroups,
-    pub(super) config: &'a GenerationConfig,
-    pub(super) rg: &'a RgDnoConfig,
-    pub(super) solver: &'a UnrolledDdim<'a, M>,
-    pub(super) both: &'a UnrolledDdim<'a, M>,
-    pub(super) z_r: &'a Tensor,
-}
-
 /// One restart's outcome, per sample.
 struct Attempt {
     /// Normalised features of the final motion `[B, T, 263]`.
@@ -313,16 +269,4 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             history: run.history.into_iter().map(|h| h.loss).collect(),
         })
     }
-}
-
-pub(super) fn to_vec(t: &Tensor) -> candle_core::Result<Vec<f64>> {
-    t.to_dtype(DType::F64)?.to_vec1::<f64>()
-}
-
-pub(super) fn scalar(t: &Tensor) -> candle_core::Result<f64> {
-    Ok(mean(&to_vec(t)?))
-}
-
-pub(super) fn mean(values: &[f64]) -> f64 {
-    values.iter().sum::<f64>() / values.len().max(1) as f64
 }

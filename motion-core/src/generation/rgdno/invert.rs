@@ -1,11 +1,13 @@
 //! Stage 3 (eq. 7): the retrieved motion `x_R` inverted to noise, `z_R = G⁻¹(x_R)`, once for the
-//! batch ([`crate::inversion::invert_motion`]: fixed-point DDIM inversion, then polishing).
+//! batch ([`crate::generation::inversion::invert_motion`]: fixed-point DDIM inversion, then polishing).
 
 use candle_core::{DType, Tensor};
 
+use super::error::RgDnoError;
+use super::figures::scalar;
 use super::report::{Stage, StageProgress};
-use super::{mean, scalar, RgDnoError};
-use crate::inversion::{invert_motion, mean_joint_distance, InversionConfig};
+use crate::generation::inversion::{invert_motion, mean_joint_distance, InversionConfig};
+use crate::numeric::mean;
 use crate::prior::Prior;
 
 /// The noise `[1, T, 263]` whose sample reproduces the raw features `x_r` `[T, 263]` under the

@@ -2,11 +2,12 @@
 
 use candle_core::Tensor;
 
+use super::error::RgDnoError;
 use super::report::{Stage, StageProgress};
-use super::{RgDnoError, Stages};
+use super::stages::Stages;
 use crate::diffusion::Denoiser;
 use crate::dno::{self, DnoConfig, DnoResult};
-use crate::objective::program_objective;
+use crate::generation::objective::program_objective;
 
 impl<M: Denoiser + ?Sized> Stages<'_, M> {
     /// The final round from `z_blend` `[B, T, 263]` on `F_C` with the jitter guard, keeping the

@@ -5,13 +5,15 @@
 use candle_core::{Tensor, Var};
 use rand::rngs::StdRng;
 
+use super::error::RgDnoError;
+use super::figures::to_vec;
 use super::mask::{soft_blend, soft_logits};
 use super::mask_search::MaskStages;
 use super::report::{Stage, StageProgress};
 use super::reward::reward;
-use super::{mean, to_vec, RgDnoError};
 use crate::diffusion::Denoiser;
 use crate::dno::{self, DnoConfig};
+use crate::numeric::mean;
 use crate::optim::AdamW;
 
 impl<M: Denoiser + ?Sized> MaskStages<'_, M> {

@@ -33,92 +33,12 @@
 
 use candle_core::{DType, Device, Tensor};
 use rayon::prelude::*;
-use serde::Serialize;
 
 use super::candidates::{CandidateSource, Crop, RetrievalDatabase};
-use crate::constraints::{CompiledProgram, ConstraintError};
-use crate::database::DatabaseError;
-use crate::files::FileError;
+use super::config::RetrievalConfig;
+use super::error::RetrievalError;
+use crate::constraints::CompiledProgram;
 use crate::skeleton::NUM_JOINTS;
-use crate::MotionError;
-
-/// Settings of [`retrieve`].
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RetrievalConfig {
-    /// Frames between the starts of consecutive crops of one clip (default 20: 1 s).
-    pub crop_stride_frames: usize,
-    /// Crop lengths as multiples of the task's frame count, each resized to it (default 1,
-    /// 1.5, 2, 2.5: the crop played at 1–2.5× its speed).
-    pub resize_factors: Vec<f64>,
-    /// Weight of `C_R`'s constraints other than `c_D` in the score (default 0.1).
-    pub related_weight: f64,
-    /// Retrieved motions kept, best first (default 5).
-    pub top_k: usize,
-    /// A motion is kept only when its score is at most this (default `None`: no threshold).
-    pub threshold: Option<f64>,
-    /// Crops scored per batch (default 32: 0.7 MB of f32 joints for a 100-frame task, small
-    /// enough that candle runs the proxy's element-wise ops inline on the batch's worker).
-    pub batch: usize,
-    /// Candidates re-scored exactly (body-surface points, every frame) after ranking all on
-    /// the proxy (default 64; at least `top_k`).
-    pub exact_shortlist: usize,
-    /// The proxy that ranks every candidate reads every `proxy_frame_step`-th frame of the
-    /// spans its constraints reduce over, keyframes kept ([`CompiledProgram::thinned`]), and the
-    /// joint centres only (default 4: 5 Hz; 1: every frame).
-    pub proxy_frame_step: usize,
-}
-
-impl Default for RetrievalConfig {
-    fn default() -> Self {
-        Self {
-            crop_stride_frames: 20,
-            resize_factors: vec![1.0, 1.5, 2.0, 2.5],
-            related_weight: 0.1,
-            top_k: 5,
-            threshold: None,
-            batch: 32,
-            exact_shortlist: 64,
-            proxy_frame_step: 4,
-        }
-    }
-}
-
-/// Why retrieval failed.
-#[derive(Debug, thiserror::Error)]
-pub enum RetrievalError {
-    /// The database has no clip to crop.
-    #[error("the retrieval database has no clip of at least 2 frames")]
-    Empty,
-    /// A setting cannot be used.
-    #[error("invalid retrieval setting: {0}")]
-    Setting(String),
-    /// The corpus file could not be read (the error names it).
-    #[error(transparent)]
-    Corpus(#[from] FileError),
-    /// The motion database could not be opened.
-    #[error("the retrieval database ({source_name}): {error}")]
-    Database {
-        /// Where it was looked for.
-        source_name: String,
-        /// What went wrong.
-        error: Box<DatabaseError>,
-    },
-    /// A retrieved crop's features could not be extracted.
-    #[error("retrieved crop {crop}: {error}")]
-    Features {
-        /// The crop.
-        crop: String,
-        /// What went wrong.
-        error: MotionError,
-    },
-    /// The retrieval set could not be evaluated.
-    #[error(transparent)]
-    Constraint(#[from] ConstraintError),
-    /// A tensor operation failed.
-    #[error(transparent)]
-    Tensor(#[from] candle_core::Error),
-}
 
 /// A retrieved motion `x_R`.
 #[derive(Debug, Clone)]

@@ -3,11 +3,12 @@
 
 use candle_core::Tensor;
 
+use super::error::RgDnoError;
 use super::report::{Stage, StageProgress};
-use super::{RgDnoError, Stages};
+use super::stages::Stages;
 use crate::diffusion::Denoiser;
 use crate::dno::{self, DnoConfig};
-use crate::objective::program_objective;
+use crate::generation::objective::program_objective;
 
 /// The fitted branches `[B, T, 263]` and their criteria `F_{C1}(G(z1))`, `F_{C2}(G(z2))` per
 /// sample.

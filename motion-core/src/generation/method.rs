@@ -11,10 +11,10 @@ use crate::cleanup::{FootLockConfig, FootLockError, FootLockReport};
 use crate::constraints::{CompiledProgram, ConstraintError};
 use crate::diffusion::Guidance;
 use crate::dno::DnoConfig;
+use crate::generation::objective::Guards;
+use crate::generation::refine::{RefineConfig, RefineReport};
 use crate::limits;
-use crate::objective::Guards;
 use crate::program::TaskProgram;
-use crate::refine::{RefineConfig, RefineReport};
 
 /// A generation method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -29,7 +29,7 @@ pub enum Method {
     /// Optimise the start noise through the prior (ProgMoGen's programmable generation with
     /// DNO's optimiser).
     Dno,
-    /// Retrieval-guided DNO ([`crate::rgdno`]): [`crate::generation::generate`] runs it with the
+    /// Retrieval-guided DNO ([`crate::generation::rgdno`]): [`crate::generation::generate`] runs it with the
     /// task's retrieval corpus, and falls back to DNO without a relational parse or a corpus.
     RgDno,
 }
@@ -85,7 +85,7 @@ pub struct GenerationConfig {
     #[serde(default)]
     pub foot_lock: FootLockConfig,
     /// The kinematic refinement of every method's output against the program's geometric
-    /// constraints ([`crate::refine`]; on by default), before the foot clean-up.
+    /// constraints ([`crate::generation::refine`]; on by default), before the foot clean-up.
     #[serde(default)]
     pub refine: RefineConfig,
 }

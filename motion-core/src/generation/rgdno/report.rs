@@ -6,9 +6,9 @@ use serde::{Deserialize, Serialize};
 use super::candidates::CandidateSource;
 use super::config::RgDnoConfig;
 use super::mask::MaskCandidate;
-use super::mean;
 use crate::dno;
-use crate::method::pick_rows;
+use crate::generation::method::pick_rows;
+use crate::numeric::mean;
 
 /// A retrieved motion as the report gives it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -66,7 +66,7 @@ impl StageSeconds {
 
 impl RgDnoReport {
     /// This report with the per-sample figures of `other` (another attempt at the same task)
-    /// where `rows[b]` is `Some(i)`, as [`crate::method::Generated::with_rows_from`]; the seconds add up.
+    /// where `rows[b]` is `Some(i)`, as [`crate::generation::method::Generated::with_rows_from`]; the seconds add up.
     pub fn with_rows_from(self, other: RgDnoReport, rows: &[Option<usize>]) -> RgDnoReport {
         RgDnoReport {
             z1_error: pick_rows(self.z1_error, &other.z1_error, rows),

@@ -1,0 +1,24 @@
+//! What every restart of RG-DNO's stages shares.
+
+use candle_core::Tensor;
+
+use super::config::RgDnoConfig;
+use crate::constraints::CompiledProgram;
+use crate::diffusion::Denoiser;
+use crate::dno::UnrolledDdim;
+use crate::generation::method::GenerationConfig;
+use crate::prior::Prior;
+use crate::program::ConstraintGroups;
+
+/// What every restart shares: the compiled task and its groups, the settings, the two solvers
+/// (batch `B` and `2B`) and the inverted noise `z_R` `[B, T, 263]`.
+pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
+    pub(super) prior: &'a Prior,
+    pub(super) compiled: &'a CompiledProgram,
+    pub(super) groups: &'a ConstraintGroups,
+    pub(super) config: &'a GenerationConfig,
+    pub(super) rg: &'a RgDnoConfig,
+    pub(super) solver: &'a UnrolledDdim<'a, M>,
+    pub(super) both: &'a UnrolledDdim<'a, M>,
+    pub(super) z_r: &'a Tensor,
+}
