@@ -8,7 +8,7 @@ use motion_core::skeleton::{Joint, FPS};
 use serde_json::{json, Value};
 
 use super::repair::ask_until_valid;
-use super::{Stage, StageError};
+use super::stage::{Stage, StageError};
 use crate::llm::extract::Answer;
 use crate::llm::{strict_schema, Llm, Message, OutputMode, Question};
 use crate::prompts::vocabulary::describe;

@@ -7,7 +7,7 @@
 
 use motion_core::limits::REPAIR_QUOTE_CHARS;
 
-use super::{Stage, StageError};
+use super::stage::{Stage, StageError};
 use crate::llm::extract::{answer, reply_text, Answer};
 use crate::llm::{escape_controls, truncate, Llm, Message, Question};
 use crate::prompts::Prompts;

@@ -8,7 +8,8 @@ use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
 
 use super::regularizer::noise_regularize_1d;
-use super::{DnoConfig, Solver};
+use super::config::DnoConfig;
+use super::solver::Solver;
 use crate::diffusion::noise::{gaussian, gaussian_from_rng};
 use crate::optim::AdamW;
 

@@ -3,7 +3,7 @@
 
 use candle_core::{Result, Tensor};
 
-use super::DnoConfig;
+use super::config::DnoConfig;
 use crate::diffusion::{DdimSampler, Denoiser, Guidance, NoiseSchedule};
 
 /// A differentiable map from start noise z to a motion x, both `[batch, frames, 263]`
