@@ -5,7 +5,7 @@
 // Test helpers may unwrap: a failure is the test failing.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use candle_core::{DType, Device};
+use candle_core::Device;
 use e2e_tests::fixtures;
 use motion_core::constraints::CompiledProgram;
 use motion_core::database::catalog::Catalog;
@@ -18,6 +18,7 @@ use motion_core::generation::rgdno::retrieval::{retrieve, RetrievalQuery};
 use motion_core::generation::rgdno::{generate_rg_dno, RgDnoTask};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
+use motion_core::testing::pinned_program_json;
 
 /// The shipped catalog's clips as a retrieval database (a user's own database takes this path).
 fn database() -> RetrievalDatabase {
@@ -27,28 +28,8 @@ fn database() -> RetrievalDatabase {
 }
 
 /// A program that pins the pelvis and both wrists of `joints` `[T, 22, 3]` at four keyframes.
-fn pinned_program(joints: &candle_core::Tensor, frames: usize) -> TaskProgram {
-    let joints = joints.to_dtype(DType::F64).unwrap().to_vec3::<f64>().unwrap();
-    let mut constraints = Vec::new();
-    for t in [0, frames / 3, 2 * frames / 3, frames - 1] {
-        for (name, j) in [("pelvis", 0), ("left_wrist", 20), ("right_wrist", 21)] {
-            let p = &joints[t][j];
-            constraints.push(format!(
-                r#"{{"id": "c{}", "expr": {{"op": "equal", "quantity": {{"kind": "position", "of": {{"joint": "{name}"}}, "axes": "xyz"}},
-                   "target": [{}, {}, {}], "frames": {{"keyframes": [{{"frame": {t}}}]}}}}}}"#,
-                constraints.len() + 1,
-                p[0],
-                p[1],
-                p[2]
-            ));
-        }
-    }
-    let text = format!(
-        r#"{{"text": "a person moves", "frames": {frames}, "constraints": [{}],
-            "relational_parse": {{"most_difficult": "c1", "connected": [], "conflicting": [], "retrieval_confidence": 1.0}}}}"#,
-        constraints.join(",")
-    );
-    TaskProgram::from_json_validated(&text).unwrap()
+fn pinned_program(joints: &candle_core::Tensor) -> TaskProgram {
+    TaskProgram::from_json_validated(&pinned_program_json(joints, "a person moves", true).unwrap()).unwrap()
 }
 
 #[test]
@@ -72,7 +53,7 @@ fn retrieval_finds_a_planted_crop_and_the_semantic_check_filters() {
     // The pins are where the generator's features of the crop put the joints.
     let features = database.features(planted, frames, &device).unwrap().unsqueeze(0).unwrap();
     let joints = motion_core::representation::recover_from_ric(&features).unwrap().squeeze(0).unwrap();
-    let program = pinned_program(&joints, frames);
+    let program = pinned_program(&joints);
     // Every pin counts fully: the score is the sum of all twelve.
     let all: Vec<String> = program.constraints.iter().map(|c| c.id.clone()).collect();
     let compiled = CompiledProgram::compile(&program, &device).unwrap().subset(&all);

@@ -62,3 +62,33 @@ pub fn finite_difference_check(x: &Tensor, f: impl Fn(&Tensor) -> Result<Tensor>
 pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> Result<f64> {
     (a.to_dtype(DType::F64)? - b.to_dtype(DType::F64)?)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f64>()
 }
+
+/// The JSON of a constraint program that pins the pelvis and both wrists of `joints`
+/// `[T, 22, 3]` (m) at four keyframes (the first, a third, two thirds, the last frame), with
+/// `text` as its prompt and, when `parse` is true, a relational parse whose most difficult
+/// constraint is the first pin `c1`. A program that a motion meets exactly where it was made
+/// from, for the retrieval tests.
+pub fn pinned_program_json(joints: &Tensor, text: &str, parse: bool) -> Result<String> {
+    let joints = joints.to_dtype(DType::F64)?.to_vec3::<f64>()?;
+    let frames = joints.len();
+    let mut constraints = Vec::new();
+    for t in [0, frames / 3, 2 * frames / 3, frames.saturating_sub(1)] {
+        for (name, j) in [("pelvis", 0), ("left_wrist", 20), ("right_wrist", 21)] {
+            let p = &joints[t][j];
+            constraints.push(format!(
+                r#"{{"id": "c{}", "expr": {{"op": "equal", "quantity": {{"kind": "position", "of": {{"joint": "{name}"}}, "axes": "xyz"}},
+                   "target": [{}, {}, {}], "frames": {{"keyframes": [{{"frame": {t}}}]}}}}}}"#,
+                constraints.len() + 1,
+                p[0],
+                p[1],
+                p[2]
+            ));
+        }
+    }
+    let parse = if parse {
+        r#", "relational_parse": {"most_difficult": "c1", "connected": [], "conflicting": [], "retrieval_confidence": 1.0}"#
+    } else {
+        ""
+    };
+    Ok(format!(r#"{{"text": "{text}", "frames": {frames}, "constraints": [{}]{parse}}}"#, constraints.join(",")))
+}

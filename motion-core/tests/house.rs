@@ -139,5 +139,9 @@ fn no_comment_names_a_work_session() {
             }
         }
     }
-    assert!(found.is_empty(), "comments that name a session (history belongs in fixtures/results/):\n{}", found.join("\n"));
+    assert!(
+        found.is_empty(),
+        "comments that name a session (history belongs in fixtures/results/):\n{}",
+        found.join("\n")
+    );
 }

@@ -7,8 +7,8 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
 
-use super::regularizer::noise_regularize_1d;
 use super::config::DnoConfig;
+use super::regularizer::noise_regularize_1d;
 use super::solver::Solver;
 use crate::diffusion::noise::{gaussian, gaussian_from_rng};
 use crate::optim::AdamW;

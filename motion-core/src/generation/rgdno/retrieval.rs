@@ -186,6 +186,7 @@ mod tests {
     use crate::program::TaskProgram;
     use crate::representation::{extract_features, recover_from_ric, FEATURE_DIM};
     use crate::skeleton::Pose;
+    use crate::testing::pinned_program_json;
 
     const FRAMES: usize = 40;
 
@@ -194,24 +195,8 @@ mod tests {
     fn pins(poses: &[Pose]) -> CompiledProgram {
         let features: Vec<f32> = extract_features(poses).unwrap().features.into_iter().flatten().collect();
         let features = Tensor::from_vec(features, (1, FRAMES, FEATURE_DIM), &Device::Cpu).unwrap();
-        let joints = recover_from_ric(&features).unwrap().squeeze(0).unwrap().to_dtype(DType::F64).unwrap();
-        let joints = joints.to_vec3::<f64>().unwrap();
-        let mut constraints = Vec::new();
-        for t in [0, FRAMES / 3, 2 * FRAMES / 3, FRAMES - 1] {
-            for (name, j) in [("pelvis", 0), ("left_wrist", 20), ("right_wrist", 21)] {
-                let p = &joints[t][j];
-                constraints.push(format!(
-                    r#"{{"id": "c{}", "expr": {{"op": "equal", "quantity": {{"kind": "position", "of": {{"joint": "{name}"}}, "axes": "xyz"}},
-                       "target": [{}, {}, {}], "frames": {{"keyframes": [{{"frame": {t}}}]}}}}}}"#,
-                    constraints.len() + 1,
-                    p[0],
-                    p[1],
-                    p[2]
-                ));
-            }
-        }
-        let text =
-            format!(r#"{{"text": "a person walks", "frames": {FRAMES}, "constraints": [{}]}}"#, constraints.join(","));
+        let joints = recover_from_ric(&features).unwrap().squeeze(0).unwrap();
+        let text = pinned_program_json(&joints, "a person walks", false).unwrap();
         CompiledProgram::compile(&TaskProgram::from_json_validated(&text).unwrap(), &Device::Cpu).unwrap()
     }
 
