@@ -149,6 +149,19 @@ fn fmt_opt(v: Option<f64>, digits: usize) -> String {
 /// The results table: one line per task and method, then DNO's gain over unconstrained
 /// sampling per task.
 pub fn markdown(rows: &[ResultRow]) -> String {
+    let mut by_task: BTreeMap<&str, BTreeMap<Method, &TaskReport>> = BTreeMap::new();
+    for r in rows {
+        by_task.entry(&r.task).or_default().insert(r.report.config.method, &r.report);
+    }
+    let mut out = settings_and_priors(rows);
+    out.push_str(&method_rows(rows));
+    out.push_str(&dno_against_unconstrained(&by_task));
+    out.push_str(&rg_dno_against_dno(&by_task));
+    out
+}
+
+/// The table's settings (and whether its rows mix settings) and the priors that made its rows.
+fn settings_and_priors(rows: &[ResultRow]) -> String {
     let mut out = String::new();
     if let Some(first) = rows.first() {
         let c = &first.report.config;
@@ -174,6 +187,12 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             many => out.push_str(&format!("**The rows were made by different priors**: {}.\n\n", many.join(", "))),
         }
     }
+    out
+}
+
+/// One line per task and method.
+fn method_rows(rows: &[ResultRow]) -> String {
+    let mut out = String::new();
     out.push_str(
         "Every figure is measured on the written joints, after the kinematic refinement and the foot clean-up; \
          \"all met\", \"max scene penetration\" and \"foot skate\" give the network's motion → the written one. \
@@ -222,13 +241,15 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             p.seconds
         ));
     }
-    let mut by_task: BTreeMap<&str, BTreeMap<Method, &TaskReport>> = BTreeMap::new();
-    for r in rows {
-        by_task.entry(&r.task).or_default().insert(r.report.config.method, &r.report);
-    }
+    out
+}
+
+/// DNO's gain over unconstrained sampling, per task.
+fn dno_against_unconstrained(by_task: &BTreeMap<&str, BTreeMap<Method, &TaskReport>>) -> String {
+    let mut out = String::new();
     out.push_str("\nDNO against unconstrained sampling (error ratio: unconstrained / DNO; acceleration ratio: DNO / unconstrained):\n\n");
     out.push_str("| task | error ratio | acceleration ratio |\n|---|---|---|\n");
-    for (task, methods) in &by_task {
+    for (task, methods) in by_task {
         if let (Some(u), Some(d)) = (methods.get(&Method::Unconstrained), methods.get(&Method::Dno)) {
             let ratio = if d.constraint_error > 0.0 {
                 format!("{:.1}", u.constraint_error / d.constraint_error)
@@ -241,6 +262,12 @@ pub fn markdown(rows: &[ResultRow]) -> String {
             ));
         }
     }
+    out
+}
+
+/// RG-DNO against DNO, per task that has both.
+fn rg_dno_against_dno(by_task: &BTreeMap<&str, BTreeMap<Method, &TaskReport>>) -> String {
+    let mut out = String::new();
     let pairs: Vec<_> =
         by_task.iter().filter_map(|(task, m)| Some((task, m.get(&Method::Dno)?, m.get(&Method::RgDno)?))).collect();
     if !pairs.is_empty() {
