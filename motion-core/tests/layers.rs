@@ -305,9 +305,73 @@ fn use_tree(code: &str) -> (Vec<Vec<String>>, usize) {
 }
 
 /// One crate's module files: the module path (`["render", "strip"]`) of each file, the root's
-/// the empty path.
+/// the empty path; and the names each file re-exports (`pub use strip::motion_strip;`) with the
+/// whole path each names.
 struct CrateFiles {
     modules: std::collections::BTreeMap<Vec<String>, PathBuf>,
+    reexports: std::collections::BTreeMap<Vec<String>, std::collections::BTreeMap<String, Vec<String>>>,
+}
+
+/// The whole path of `path` as written in the module `base` (`crate::`, `super::` and `self::`
+/// taken off).
+fn absolute(path: &[String], base: &[String]) -> Vec<String> {
+    let mut module = base.to_vec();
+    let mut rest = path;
+    while let Some((head, tail)) = rest.split_first() {
+        match head.as_str() {
+            "crate" => module.clear(),
+            "super" => {
+                module.pop();
+            }
+            "self" => {}
+            _ => break,
+        }
+        rest = tail;
+    }
+    module.extend(rest.iter().cloned());
+    module
+}
+
+/// The deepest module file on a whole path, and the rest of the path after it.
+fn split_at_file(mut path: Vec<String>, modules: &CrateFiles) -> (Vec<String>, Vec<String>) {
+    let mut rest = Vec::new();
+    while !modules.modules.contains_key(&path) {
+        rest.insert(0, path.pop().unwrap());
+    }
+    (path, rest)
+}
+
+/// The names that the code of the module `own` re-exports (`pub use ..;`, `pub(crate) use ..;`)
+/// from modules of its crate, each with the whole path it names.
+fn reexports_of(
+    code: &str,
+    own: &[String],
+    modules: &std::collections::BTreeMap<Vec<String>, PathBuf>,
+) -> std::collections::BTreeMap<String, Vec<String>> {
+    let mut found = std::collections::BTreeMap::new();
+    for (at, _) in code.match_indices("pub") {
+        if code[..at].chars().next_back().is_some_and(is_ident_char) {
+            continue;
+        }
+        let mut rest = &code[at + "pub".len()..];
+        if let Some(group) = rest.strip_prefix('(') {
+            rest = group.split_once(')').map_or("", |(_, after)| after);
+        }
+        let Some(tree) = rest.trim_start().strip_prefix("use ") else { continue };
+        for path in use_tree(tree).0 {
+            let local = path.first().is_some_and(|head| {
+                ["crate", "super", "self"].contains(&head.as_str())
+                    || modules.contains_key(&[own.to_vec(), vec![head.clone()]].concat())
+            });
+            match path.last() {
+                Some(name) if local && name != "*" => {
+                    found.insert(name.clone(), absolute(&path, own));
+                }
+                _ => {}
+            }
+        }
+    }
+    found
 }
 
 /// The crates of the source folder `src`: `lib.rs` and `main.rs` with the files of the modules
@@ -342,7 +406,14 @@ fn crates_of(src: &Path) -> Vec<CrateFiles> {
                 modules.insert(path, file.clone());
             }
         }
-        crates.push(CrateFiles { modules });
+        let reexports = modules
+            .iter()
+            .map(|(own, file)| {
+                let code = non_test_code(&std::fs::read_to_string(file).unwrap());
+                (own.clone(), reexports_of(&code, own, &modules))
+            })
+            .collect();
+        crates.push(CrateFiles { modules, reexports });
     }
     crates
 }
@@ -383,8 +454,10 @@ fn inline_modules(code: &str) -> Vec<(String, std::ops::Range<usize>)> {
 
 /// The files that `code` (of the module `own`) uses through `crate::`, `super::`, `self::` and
 /// child-module paths: each with the byte offset of its use tree or path, one path of it (a
-/// group's members one by one) and the module file that the path names (the deepest module file
-/// on it).
+/// group's members one by one) and the module file that the path names: the deepest module file
+/// on it, or, for a name that a module outside `own`'s ancestors re-exports (a folder's face seen
+/// from outside it), the file that the re-export names. A file inside the folder that reaches a
+/// name through the folder's face uses the face's file.
 fn used_files(code: &str, own: &[String], modules: &CrateFiles) -> Vec<(usize, String, Vec<String>)> {
     let inline = inline_modules(code);
     let mut found = Vec::new();
@@ -405,22 +478,12 @@ fn used_files(code: &str, own: &[String], modules: &CrateFiles) -> Vec<(usize, S
         parsed_to = start + used;
         for path in paths {
             let written = path.join("::");
-            let mut module = base.clone();
-            let mut rest = path.as_slice();
-            while let Some((head, tail)) = rest.split_first() {
-                match head.as_str() {
-                    "crate" => module.clear(),
-                    "super" => {
-                        module.pop();
-                    }
-                    "self" => {}
-                    _ => break,
-                }
-                rest = tail;
-            }
-            module.extend(rest.iter().cloned());
-            while !modules.modules.contains_key(&module) {
-                module.pop();
+            let (mut module, mut rest) = split_at_file(absolute(&path, &base), modules);
+            // Through re-exports, a few at most (a face may re-export a face).
+            for _ in 0..8 {
+                let Some(first) = rest.first().filter(|_| !own.starts_with(&module)) else { break };
+                let Some(target) = modules.reexports.get(&module).and_then(|names| names.get(first)) else { break };
+                (module, rest) = split_at_file([target.clone(), rest[1..].to_vec()].concat(), modules);
             }
             found.push((start, written, module));
         }
