@@ -8,6 +8,9 @@
 //! Every error is finite and ≥ 0 and is 0 when its constraint holds; each formula is documented
 //! on its [`Expr`] variant. Gradients flow to the joints through every term except the
 //! frame masks of conditions and scene gates, which select without gradient as ProgMoGen does.
+//!
+//! [`TaskProgram`]: crate::program::TaskProgram
+//! [`Expr`]: crate::program::Expr
 
 mod body;
 mod carry;

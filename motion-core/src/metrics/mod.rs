@@ -1,6 +1,8 @@
 //! Motion quality metrics on joint positions at 20 fps, as ProgMoGen and DNO define them
 //! (`reference/anchors.md` §3.7). Inputs are `[frames]` of [`Pose`]s in metres, y up, ground at
 //! y = 0.
+//!
+//! [`Pose`]: crate::skeleton::Pose
 
 mod body;
 mod events;

@@ -7,6 +7,8 @@
 //! - [`Mdm::forward_train`] / [`Mdm::forward_eval`]: primitive candle ops for everything with
 //!   weights, so weights held as `Var`s get gradients; the former applies dropout as
 //!   PyTorch's training mode.
+//!
+//! [`Denoiser::predict_x0`]: crate::diffusion::Denoiser::predict_x0
 
 pub mod bench;
 mod config;

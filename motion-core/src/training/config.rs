@@ -59,7 +59,7 @@ pub struct TrainConfig {
     /// min(SNR_t, γ) with SNR_t = ᾱ_t/(1 − ᾱ_t), which shifts the training signal from the
     /// nearly pure-noise steps to the low- and mid-noise steps that decide the details; 0 = off
     /// (the default: MDM's uniform weighting for x0 prediction; for
-    /// [`Prediction::Velocity`] the MSE of v, i.e. weight 1/(1 − ᾱ_t) = SNR_t + 1).
+    /// [`Prediction::Velocity`](crate::model::Prediction::Velocity) the MSE of v, i.e. weight 1/(1 − ᾱ_t) = SNR_t + 1).
     pub snr_gamma: f64,
     /// Fraction of each batch's timesteps drawn from the noisiest 30 % of the schedule
     /// (t ≥ 0.7 T), the rest uniformly from 0..T; default 0 (MDM's uniform sampling). At high
@@ -71,10 +71,10 @@ pub struct TrainConfig {
     /// the denoiser must restore them from their neighbours, so it learns to use temporal
     /// context instead of denoising each frame on its own; default 0 (off).
     pub frame_corruption: f64,
-    /// Weight of the joint-velocity term of [`GeometricLoss`] ((m/s)², added to the x0 MSE);
+    /// Weight of the joint-velocity term of [`GeometricLoss`](super::GeometricLoss) ((m/s)², added to the x0 MSE);
     /// default 0 (off).
     pub velocity_weight: f64,
-    /// Weight of the planted-foot term of [`GeometricLoss`] ((m/s)²); default 0 (off: at 1.0 a
+    /// Weight of the planted-foot term of [`GeometricLoss`](super::GeometricLoss) ((m/s)²); default 0 (off: at 1.0 a
     /// fine-tune taught the walks to stand still).
     pub foot_contact_weight: f64,
     /// Steps between checkpoints; default 500.
