@@ -209,3 +209,412 @@ fn no_source_file_is_over_700_lines() {
         .collect();
     assert!(long.is_empty(), "files over {MAX_LINES} lines:\n{}", long.join("\n"));
 }
+
+/// The code of a source file that the library builds: `library_code`, and also each other
+/// `#[cfg(test)]` item (a `use ..;` line, a `fn .. { }`) and each `//` comment at a line's end
+/// blanked, so that offsets keep their lines.
+fn non_test_code(text: &str) -> String {
+    let code = library_code(text);
+    let mut kept = Vec::new();
+    // Inside a `#[cfg(test)]` item: its brace depth so far, `None` before its first `{`.
+    let mut in_test: Option<Option<isize>> = None;
+    for line in code.lines() {
+        let trimmed = line.trim();
+        match in_test {
+            None if trimmed == "#[cfg(test)]" => {
+                in_test = Some(None);
+                kept.push(String::new());
+            }
+            None => {
+                // A `//` outside a string literal: an even number of quotes before it.
+                let cut = line
+                    .match_indices("//")
+                    .find(|(at, _)| line[..*at].matches('"').count() % 2 == 0)
+                    .map_or(line.len(), |(at, _)| at);
+                kept.push(line[..cut].to_owned());
+            }
+            Some(depth) => {
+                let opened = depth.unwrap_or(0) + trimmed.matches('{').count() as isize;
+                let depth = opened - trimmed.matches('}').count() as isize;
+                let ended = if depth > 0 || opened > 0 { depth <= 0 } else { trimmed.ends_with(';') };
+                in_test = (!ended).then_some((opened > 0).then_some(depth));
+                kept.push(String::new());
+            }
+        }
+    }
+    kept.join("\n")
+}
+
+fn is_ident_char(c: char) -> bool {
+    c.is_alphanumeric() || c == '_'
+}
+
+/// The paths of the use tree or path expression that starts at the head of `code`, each with its
+/// segments (a group's `self` names the group's module), and the length of the code they take.
+fn use_tree(code: &str) -> (Vec<Vec<String>>, usize) {
+    let mut segments: Vec<String> = Vec::new();
+    let mut at = 0;
+    loop {
+        let rest = &code[at..];
+        let start = rest.len() - rest.trim_start().len();
+        let ident: String = rest[start..].chars().take_while(|c| is_ident_char(*c) || *c == '$').collect();
+        if ident.is_empty() {
+            return (vec![segments], at);
+        }
+        segments.push(ident.trim_start_matches('$').to_owned());
+        at += start + ident.len();
+        let rest = &code[at..];
+        let Some(after) = rest.trim_start().strip_prefix("::") else {
+            return (vec![segments], at);
+        };
+        let after_at = at + rest.len() - after.len();
+        let trimmed = after.trim_start();
+        let next = after_at + after.len() - trimmed.len();
+        if trimmed.starts_with('*') {
+            segments.push("*".to_owned());
+            return (vec![segments], next + 1);
+        }
+        if trimmed.starts_with('{') {
+            let mut paths = Vec::new();
+            let mut member = next + 1;
+            loop {
+                let (members, used) = use_tree(&code[member..]);
+                for tail in members.into_iter().filter(|tail| !tail.is_empty()) {
+                    let mut path = segments.clone();
+                    path.extend(tail.into_iter().filter(|s| s != "self"));
+                    paths.push(path);
+                }
+                let rest = &code[member + used..];
+                let trimmed = rest.trim_start();
+                let here = member + used + rest.len() - trimmed.len();
+                match trimmed.chars().next() {
+                    Some(',') => member = here + 1,
+                    Some('}') => return (paths, here + 1),
+                    _ => return (paths, here),
+                }
+            }
+        }
+        if !trimmed.starts_with(|c: char| is_ident_char(c) || c == '$') {
+            return (vec![segments], at);
+        }
+        at = after_at;
+    }
+}
+
+/// One crate's module files: the module path (`["render", "strip"]`) of each file, the root's
+/// the empty path; and the names each file re-exports (`pub use strip::motion_strip;`) with the
+/// whole path each names.
+struct CrateFiles {
+    modules: std::collections::BTreeMap<Vec<String>, PathBuf>,
+    reexports: std::collections::BTreeMap<Vec<String>, std::collections::BTreeMap<String, Vec<String>>>,
+}
+
+/// The whole path of `path` as written in the module `base` (`crate::`, `super::` and `self::`
+/// taken off).
+fn absolute(path: &[String], base: &[String]) -> Vec<String> {
+    let mut module = base.to_vec();
+    let mut rest = path;
+    while let Some((head, tail)) = rest.split_first() {
+        match head.as_str() {
+            "crate" => module.clear(),
+            "super" => {
+                module.pop();
+            }
+            "self" => {}
+            _ => break,
+        }
+        rest = tail;
+    }
+    module.extend(rest.iter().cloned());
+    module
+}
+
+/// The deepest module file on a whole path, and the rest of the path after it.
+fn split_at_file(mut path: Vec<String>, modules: &CrateFiles) -> (Vec<String>, Vec<String>) {
+    let mut rest = Vec::new();
+    while !modules.modules.contains_key(&path) {
+        rest.insert(0, path.pop().unwrap());
+    }
+    (path, rest)
+}
+
+/// The names that the code of the module `own` re-exports (`pub use ..;`, `pub(crate) use ..;`)
+/// from modules of its crate, each with the whole path it names.
+fn reexports_of(
+    code: &str,
+    own: &[String],
+    modules: &std::collections::BTreeMap<Vec<String>, PathBuf>,
+) -> std::collections::BTreeMap<String, Vec<String>> {
+    let mut found = std::collections::BTreeMap::new();
+    for (at, _) in code.match_indices("pub") {
+        if code[..at].chars().next_back().is_some_and(is_ident_char) {
+            continue;
+        }
+        let mut rest = &code[at + "pub".len()..];
+        if let Some(group) = rest.strip_prefix('(') {
+            rest = group.split_once(')').map_or("", |(_, after)| after);
+        }
+        let Some(tree) = rest.trim_start().strip_prefix("use ") else { continue };
+        for path in use_tree(tree).0 {
+            let local = path.first().is_some_and(|head| {
+                ["crate", "super", "self"].contains(&head.as_str())
+                    || modules.contains_key(&[own.to_vec(), vec![head.clone()]].concat())
+            });
+            match path.last() {
+                Some(name) if local && name != "*" => {
+                    found.insert(name.clone(), absolute(&path, own));
+                }
+                _ => {}
+            }
+        }
+    }
+    found
+}
+
+/// The crates of the source folder `src`: `lib.rs` and `main.rs` with the files of the modules
+/// that each declares.
+fn crates_of(src: &Path) -> Vec<CrateFiles> {
+    let mut files = Vec::new();
+    rust_files(src, &mut files);
+    let mut crates = Vec::new();
+    for root in ["lib.rs", "main.rs"] {
+        let Ok(text) = std::fs::read_to_string(src.join(root)) else { continue };
+        let declared: BTreeSet<String> = library_code(&text)
+            .lines()
+            .filter_map(|l| {
+                let l = l.trim();
+                let l = l.strip_prefix("pub(crate) ").or_else(|| l.strip_prefix("pub ")).unwrap_or(l);
+                l.strip_prefix("mod ")?.strip_suffix(';').map(str::to_owned)
+            })
+            .collect();
+        let mut modules = std::collections::BTreeMap::new();
+        modules.insert(Vec::new(), src.join(root));
+        for file in &files {
+            let mut path: Vec<String> = file
+                .strip_prefix(src)
+                .unwrap()
+                .components()
+                .map(|c| c.as_os_str().to_string_lossy().trim_end_matches(".rs").to_owned())
+                .collect();
+            if path.last().is_some_and(|last| last == "mod") {
+                path.pop();
+            }
+            if path.first().is_some_and(|top| declared.contains(top)) {
+                modules.insert(path, file.clone());
+            }
+        }
+        let reexports = modules
+            .iter()
+            .map(|(own, file)| {
+                let code = non_test_code(&std::fs::read_to_string(file).unwrap());
+                (own.clone(), reexports_of(&code, own, &modules))
+            })
+            .collect();
+        crates.push(CrateFiles { modules, reexports });
+    }
+    crates
+}
+
+/// Whether a file of a source folder is test code (`tests.rs`, `tests/`, `test_*.rs`).
+fn is_test_file(relative: &Path) -> bool {
+    let name = relative.file_name().unwrap().to_string_lossy();
+    relative.components().any(|c| c.as_os_str() == "tests") || name == "tests.rs" || name.starts_with("test_")
+}
+
+/// The inline modules (`mod name { .. }`) of `code`: each name with the byte range of its body.
+fn inline_modules(code: &str) -> Vec<(String, std::ops::Range<usize>)> {
+    let mut found = Vec::new();
+    for (at, _) in code.match_indices("mod ") {
+        if code[..at].chars().next_back().is_some_and(is_ident_char) {
+            continue;
+        }
+        let rest = &code[at + "mod ".len()..];
+        let name: String = rest.chars().take_while(|c| is_ident_char(*c)).collect();
+        let Some(body) = rest[name.len()..].trim_start().strip_prefix('{') else { continue };
+        let open = code.len() - body.len();
+        let mut depth = 1;
+        let close = body
+            .char_indices()
+            .find(|(_, c)| {
+                match c {
+                    '{' => depth += 1,
+                    '}' => depth -= 1,
+                    _ => {}
+                }
+                depth == 0
+            })
+            .map_or(code.len(), |(i, _)| open + i);
+        found.push((name, open..close));
+    }
+    found
+}
+
+/// The files that `code` (of the module `own`) uses through `crate::`, `super::`, `self::` and
+/// child-module paths: each with the byte offset of its use tree or path, one path of it (a
+/// group's members one by one) and the module file that the path names: the deepest module file
+/// on it, or, for a name that a module outside `own`'s ancestors re-exports (a folder's face seen
+/// from outside it), the file that the re-export names. A file inside the folder that reaches a
+/// name through the folder's face uses the face's file.
+fn used_files(code: &str, own: &[String], modules: &CrateFiles) -> Vec<(usize, String, Vec<String>)> {
+    let inline = inline_modules(code);
+    let mut found = Vec::new();
+    let mut parsed_to = 0;
+    for (at, _) in code.match_indices("::") {
+        let start = code[..at].trim_end_matches(|c: char| is_ident_char(c) || c == '$').len();
+        if start < parsed_to || start == at || code[..start].trim_end().ends_with("::") {
+            continue;
+        }
+        let ident = code[start..at].trim_start_matches('$');
+        let mut base = own.to_vec();
+        base.extend(inline.iter().filter(|(_, body)| body.contains(&start)).map(|(name, _)| name.clone()));
+        let child = [base.clone(), vec![ident.to_owned()]].concat();
+        if !["crate", "super", "self"].contains(&ident) && !modules.modules.contains_key(&child) {
+            continue;
+        }
+        let (paths, used) = use_tree(&code[start..]);
+        parsed_to = start + used;
+        for path in paths {
+            let written = path.join("::");
+            let (mut module, mut rest) = split_at_file(absolute(&path, &base), modules);
+            // Through re-exports, a few at most (a face may re-export a face).
+            for _ in 0..8 {
+                let Some(first) = rest.first().filter(|_| !own.starts_with(&module)) else { break };
+                let Some(target) = modules.reexports.get(&module).and_then(|names| names.get(first)) else { break };
+                (module, rest) = split_at_file([target.clone(), rest[1..].to_vec()].concat(), modules);
+            }
+            found.push((start, written, module));
+        }
+    }
+    found
+}
+
+/// The strongly connected components of more than one node of a graph given as adjacency sets.
+fn circles(graph: &[BTreeSet<usize>]) -> Vec<Vec<usize>> {
+    struct Tarjan<'a> {
+        graph: &'a [BTreeSet<usize>],
+        index: Vec<Option<usize>>,
+        low: Vec<usize>,
+        stack: Vec<usize>,
+        on_stack: Vec<bool>,
+        next: usize,
+        found: Vec<Vec<usize>>,
+    }
+    impl Tarjan<'_> {
+        fn visit(&mut self, v: usize) {
+            self.index[v] = Some(self.next);
+            self.low[v] = self.next;
+            self.next += 1;
+            self.stack.push(v);
+            self.on_stack[v] = true;
+            for &w in self.graph[v].iter() {
+                match self.index[w] {
+                    None => {
+                        self.visit(w);
+                        self.low[v] = self.low[v].min(self.low[w]);
+                    }
+                    Some(i) if self.on_stack[w] => self.low[v] = self.low[v].min(i),
+                    Some(_) => {}
+                }
+            }
+            if Some(self.low[v]) == self.index[v] {
+                let mut component = Vec::new();
+                loop {
+                    let w = self.stack.pop().unwrap();
+                    self.on_stack[w] = false;
+                    component.push(w);
+                    if w == v {
+                        break;
+                    }
+                }
+                if component.len() > 1 {
+                    component.sort_unstable();
+                    self.found.push(component);
+                }
+            }
+        }
+    }
+    let n = graph.len();
+    let mut tarjan = Tarjan {
+        graph,
+        index: vec![None; n],
+        low: vec![0; n],
+        stack: Vec::new(),
+        on_stack: vec![false; n],
+        next: 0,
+        found: Vec::new(),
+    };
+    for v in 0..n {
+        if tarjan.index[v].is_none() {
+            tarjan.visit(v);
+        }
+    }
+    tarjan.found
+}
+
+/// The file-level import graph of each crate of `motion-core` and `agent`: no non-test file
+/// uses an item of an ancestor module's file (`super::X` from `render/strip.rs` reads
+/// `render/mod.rs`; the crate root, the crate's face, aside), and no files use each other in a
+/// circle. A parent's `pub use child::X` is an arrow down, and fine.
+#[test]
+fn no_file_uses_its_parent_module_and_no_files_use_each_other_in_a_circle() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let (mut up, mut loops) = (Vec::new(), Vec::new());
+    for src in ["motion-core/src", "agent/src"].map(|dir| root.join(dir)) {
+        for krate in crates_of(&src) {
+            let files: Vec<(&Vec<String>, &PathBuf)> = krate.modules.iter().collect();
+            let index: std::collections::BTreeMap<&Vec<String>, usize> =
+                files.iter().enumerate().map(|(i, (module, _))| (*module, i)).collect();
+            let mut graph = vec![BTreeSet::new(); files.len()];
+            // Each arrow's uses, `file:line: uses path, path (file used)`, in the order of the file.
+            let mut uses: std::collections::BTreeMap<(usize, usize), Vec<String>> = std::collections::BTreeMap::new();
+            let name = |file: &Path| file.strip_prefix(&root).unwrap().to_string_lossy().replace('\\', "/");
+            for (from, (own, file)) in files.iter().enumerate() {
+                if is_test_file(file.strip_prefix(&src).unwrap()) {
+                    continue;
+                }
+                let code = non_test_code(&std::fs::read_to_string(file).unwrap());
+                // The paths of each use tree or path, by its line and the file they name.
+                let mut by_line: std::collections::BTreeMap<(usize, usize), Vec<String>> =
+                    std::collections::BTreeMap::new();
+                for (at, written, used) in used_files(&code, own, &krate) {
+                    let to = index[&used];
+                    let line = code[..at].matches('\n').count() + 1;
+                    if to != from && !by_line.get(&(line, to)).is_some_and(|paths| paths.contains(&written)) {
+                        by_line.entry((line, to)).or_default().push(written);
+                    }
+                }
+                for ((line, to), paths) in by_line {
+                    let used = files[to].0;
+                    let what = format!("{}:{line}: uses {} ({})", name(file), paths.join(", "), name(files[to].1));
+                    if !used.is_empty() && used.len() < own.len() && own.starts_with(used) {
+                        up.push(what.clone());
+                    }
+                    graph[from].insert(to);
+                    uses.entry((from, to)).or_default().push(what);
+                }
+            }
+            for circle in circles(&graph) {
+                let members: Vec<String> = circle.iter().map(|&i| name(files[i].1)).collect();
+                let ties: Vec<&String> = uses
+                    .iter()
+                    .filter(|((from, to), _)| circle.contains(from) && circle.contains(to))
+                    .flat_map(|(_, what)| what)
+                    .collect();
+                loops.push(format!(
+                    "circle of {}: {}\n    {}",
+                    members.len(),
+                    members.join(", "),
+                    ties.iter().map(|t| t.as_str()).collect::<Vec<_>>().join("\n    ")
+                ));
+            }
+        }
+    }
+    assert!(
+        up.is_empty() && loops.is_empty(),
+        "files that use their parent module's file ({}):\n{}\ncircles of files ({}):\n{}",
+        up.len(),
+        up.join("\n"),
+        loops.len(),
+        loops.join("\n")
+    );
+}

@@ -6,7 +6,7 @@ use std::fmt;
 use reqwest::Url;
 
 use super::api_key::REDACTED;
-use super::LlmError;
+use super::error::LlmError;
 
 /// Secrets of a URL shorter than this are not scrubbed from server text: they are not keys
 /// (`?api-version=1`, user `me`), and scrubbing them would garble unrelated words. The printed

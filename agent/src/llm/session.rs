@@ -11,9 +11,9 @@ use serde_json::Value;
 use super::api_key::{ApiKey, REDACTED};
 use super::base_url::BaseUrl;
 use super::client::{ClientConfig, Endpoint, HttpClient, OPENAI_BASE_URL};
+use super::error::LlmError;
 use super::output::OutputMode;
 use super::wire::{ChatRequest, ChatResponse, Message};
-use super::LlmError;
 use crate::recording::{self, Exchange, Recordings};
 
 /// The default model: what the shipped recordings were made for.

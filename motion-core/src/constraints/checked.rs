@@ -11,7 +11,8 @@
 
 use candle_core::Device;
 
-use crate::constraints::{CompiledProgram, ConstraintError};
+use super::compiled::CompiledProgram;
+use super::error::ConstraintError;
 use crate::program::{Problem, ProgramError, RelationalParse, TaskProgram};
 
 /// A program that passed every meaning check, with its compiled loss.

@@ -1,7 +1,17 @@
 //! A compiled expression ([`Node`]) and its evaluation on joints `[B, T, 22, 3]`: each
 //! constraint's error per sample `[B]`, finite, ≥ 0 and 0 where it holds.
 
-use super::*;
+use candle_core::{Result, Tensor, D};
+
+use super::body::surface_points;
+use super::error::ConstraintError;
+use super::frames::{reduce, Frames};
+use super::geometry::{constant, joint, norm, select_axes};
+use super::scene::primitive_error;
+use super::signal::{point, signal};
+use super::{carry, count, flight, support};
+use crate::program::{CarriedLoad, Condition, EventRegion, Extremum, Metric, Primitive, Quantity, Reduce};
+use crate::skeleton::{Joint, FPS};
 
 /// A comparison of a quantity's components with targets or bounds, per frame.
 #[derive(Debug, Clone)]

@@ -4,7 +4,7 @@
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 
-use super::CompiledProgram;
+use super::compiled::CompiledProgram;
 use crate::skeleton::{FPS, NUM_JOINTS};
 
 /// A standing pose (m, y up, facing +z, +x left), hand-placed, in joint index order.

@@ -7,10 +7,13 @@
 use candle_core::{Tensor, D};
 use serde::{Deserialize, Serialize};
 
+use super::compiled::CompiledProgram;
+use super::error::ConstraintError;
 use super::geometry::{constant, joint, norm, select_axes};
+use super::node::{body_points, com_outside_support, Comparison, Node};
 use super::scene::{is_obstacle, primitive_error};
 use super::signal::signal;
-use super::{body_points, carry, com_outside_support, flight, Comparison, CompiledProgram, ConstraintError, Node};
+use super::{carry, flight};
 use crate::program::{Primitive, Quantity, Reduce};
 
 /// Tolerance on distances, penetrations and positions, m (the bar for ProgMoGen's HSI

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use super::{RawTake, Source};
+use super::source::{RawTake, Source};
 use crate::files::{read_text, FileError};
 use crate::import::ImportError;
 use crate::limits::MOCAP_FILE_BYTES;

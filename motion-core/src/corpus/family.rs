@@ -24,9 +24,10 @@
 use serde::Serialize;
 
 use super::caption::Action;
+use super::clips::{Corpus, CorpusWindow};
 use super::skill::Skill;
+use super::split::Split;
 use super::tags::{standing_pelvis_height, MotionTags, TravelDirection};
-use super::{Corpus, CorpusWindow, Split};
 use crate::metrics::moving_pace;
 use crate::skeleton::{Joint, Pose, FPS};
 

@@ -13,7 +13,7 @@ use std::path::Path;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use super::{Corpus, CorpusClip, CorpusWindow, DropReport};
+use super::clips::{Corpus, CorpusClip, CorpusWindow, DropReport};
 use crate::files::{read_bytes, FileError};
 use crate::limits::MOCAP_FILE_BYTES;
 use crate::skeleton::{Pose, FPS, NUM_JOINTS};

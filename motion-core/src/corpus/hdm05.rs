@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use super::{RawTake, Source};
+use super::source::{RawTake, Source};
 use crate::files::FileError;
 use crate::import::asf_amc::{AsfAmcClip, AsfAmcOptions};
 use crate::import::{resample, ImportError};

@@ -6,11 +6,12 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 use super::caption::Action;
+use super::clips::Corpus;
 use super::prepare::STANCE_TOE_HEIGHT_M;
 use super::skill::Skill;
+use super::source::Source;
 use super::split::Split;
 use super::tags::TravelDirection;
-use super::{Corpus, Source};
 use crate::metrics::{foot_skate_ratio, stance_toe_height};
 use crate::motion::bone_length_spread;
 use crate::skeleton::FPS;
@@ -156,7 +157,7 @@ impl fmt::Display for CorpusStats {
             hours(self.read_minutes),
             self.per_source.values().map(|v| v.0).sum::<usize>(),
             self.windows,
-            super::WINDOW_FRAMES as f64 / FPS,
+            super::clips::WINDOW_FRAMES as f64 / FPS,
         )?;
         writeln!(f, "\nper source:")?;
         for (source, (clips, minutes)) in &self.per_source {

@@ -11,9 +11,13 @@
 
 use candle_core::{Result, Tensor};
 
+pub(crate) use super::denoiser::timestep_tensor;
+pub use super::denoiser::{guided_move, DdimMove};
+
+use super::denoiser::Denoiser;
+use super::error::DiffusionError;
 use super::guidance::Guidance;
 use super::schedule::NoiseSchedule;
-use super::{Denoiser, DiffusionError};
 
 /// MDM's timestep respacing "ddimK": the timesteps `range(0, T, s)` for the smallest integer
 /// stride `s` in `1..T` with `len(range(0, T, s)) == steps` (`respace.py::space_timesteps`).
@@ -37,53 +41,6 @@ pub struct DdimProgress<'a> {
     pub timestep: usize,
     /// The (guided) x̂0 predicted at this step, `[batch, frames, 263]`.
     pub x0_hat: &'a Tensor,
-}
-
-/// One deterministic (eta = 0) DDIM move of x from spaced timestep `timestep` (ᾱ_from) to
-/// ᾱ_to, given the guided prediction x̂0 there: ε̂ = (x/√ᾱ_from − x̂0)/√(1/ᾱ_from − 1) and
-/// x_next = √ᾱ_to·x̂0 + √(1 − ᾱ_to)·ε̂, folded into x_next = `c_x`·x + `c_0`·x̂0 with
-/// c_x = √(1−ᾱ_to)/√(1−ᾱ_from) and c_0 = √ᾱ_to − c_x·√ᾱ_from. Denoising moves to ᾱ_{k−1}
-/// (ᾱ_{−1} := 1: c_x = 0, c_0 = 1, the last move returns x̂0), inversion to ᾱ_{k+1}.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct DdimMove {
-    /// Original-scale timestep of x, where the denoiser is evaluated.
-    pub timestep: usize,
-    /// Coefficient of x.
-    pub c_x: f64,
-    /// Coefficient of x̂0.
-    pub c_0: f64,
-}
-
-impl DdimMove {
-    /// The move from ᾱ_from (at `timestep`) to ᾱ_to.
-    pub fn new(timestep: usize, abar_from: f64, abar_to: f64) -> Self {
-        if abar_to == 1.0 {
-            return Self { timestep, c_x: 0.0, c_0: 1.0 };
-        }
-        let c_x = ((1.0 - abar_to) / (1.0 - abar_from)).sqrt();
-        Self { timestep, c_x, c_0: abar_to.sqrt() - c_x * abar_from.sqrt() }
-    }
-
-    /// x_next from x and x̂0 (x̂0 itself when c_x = 0 and c_0 = 1).
-    pub fn apply(&self, x: &Tensor, x0_hat: &Tensor) -> Result<Tensor> {
-        if self.c_x == 0.0 && self.c_0 == 1.0 {
-            return Ok(x0_hat.clone());
-        }
-        x.affine(self.c_x, 0.0)? + x0_hat.affine(self.c_0, 0.0)?
-    }
-}
-
-/// The move composed from its parts for any denoiser: x̂0 by [`Guidance::predict_x0`]
-/// (`guidance` already resolved by [`Guidance::for_text`]), then [`DdimMove::apply`].
-/// The default of [`Denoiser::ddim_move`]. Differentiable in `x`.
-pub fn guided_move<D: Denoiser + ?Sized>(
-    denoiser: &D,
-    x: &Tensor,
-    text: &Tensor,
-    guidance: Guidance,
-    step: DdimMove,
-) -> Result<Tensor> {
-    step.apply(x, &guidance.predict_x0(denoiser, x, &timestep_tensor(step.timestep, x.dim(0)?, x.device())?, text)?)
 }
 
 /// A K-step deterministic (eta = 0) DDIM sampler over a respaced schedule.
@@ -259,12 +216,6 @@ impl DdimSampler {
         }
         Ok(x)
     }
-}
-
-/// `[rows]` u32 tensor filled with timestep `t`, on `device`.
-pub(crate) fn timestep_tensor(t: usize, rows: usize, device: &candle_core::Device) -> Result<Tensor> {
-    let t = u32::try_from(t).map_err(|_| candle_core::Error::Msg(format!("timestep {t} overflows u32")))?;
-    Tensor::full(t, rows, device)
 }
 
 /// Errors unless `text` has one row per sample of `x`.

@@ -2,8 +2,6 @@
 
 use candle_core::{DType, Result, Tensor};
 
-use super::Denoiser;
-
 /// Classifier-free guidance (Ho & Salimans 2022) on the x̂0 output, as MDM's
 /// `ClassifierFreeSampleModel`: x̂0 = x̂0_uncond + scale·(x̂0_cond − x̂0_uncond), where the
 /// unconditional branch sees an all-zero text row.
@@ -45,37 +43,13 @@ impl Guidance {
         let magnitude = text.detach().abs()?.sum_all()?.to_dtype(DType::F64)?.to_scalar::<f64>()?;
         Ok(if magnitude == 0.0 { Self::none() } else { self })
     }
-
-    /// Guided x̂0 for `x_t` (`[batch, ...]`) at `timesteps` (`[batch]` u32, original scale).
-    ///
-    /// When active, makes ONE denoiser call on `2·batch` rows, the inputs concatenated as
-    /// `[x_t; x_t]`, `[t; t]`, `[text; 0]`, and splits the output into (cond, uncond); with
-    /// scale 1 it is one call on `batch` rows. Differentiable in `x_t`.
-    pub fn predict_x0<D: Denoiser + ?Sized>(
-        &self,
-        denoiser: &D,
-        x_t: &Tensor,
-        timesteps: &Tensor,
-        text: &Tensor,
-    ) -> Result<Tensor> {
-        if !self.is_active() {
-            return denoiser.predict_x0(x_t, timesteps, text);
-        }
-        let batch = x_t.dim(0)?;
-        let x2 = Tensor::cat(&[x_t, x_t], 0)?;
-        let t2 = Tensor::cat(&[timesteps, timesteps], 0)?;
-        let text2 = Tensor::cat(&[text, &text.zeros_like()?], 0)?;
-        let out = denoiser.predict_x0(&x2, &t2, &text2)?;
-        let cond = out.narrow(0, 0, batch)?;
-        let uncond = out.narrow(0, batch, batch)?;
-        &uncond + ((&cond - &uncond)? * self.scale)?
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::diffusion::test_denoiser::{start_noise, text, Call, GaussianDenoiser};
+    use crate::diffusion::Denoiser;
     use crate::testing::max_abs_diff;
     use candle_core::Device;
 

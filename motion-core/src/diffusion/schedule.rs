@@ -8,7 +8,7 @@
 use candle_core::{DType, Device, Result, Tensor};
 use rand::Rng;
 
-use super::DiffusionError;
+use super::error::DiffusionError;
 
 /// Number of diffusion timesteps MDM is trained with.
 pub const MDM_TIMESTEPS: usize = 1000;

@@ -4,9 +4,9 @@ use std::cell::RefCell;
 
 use candle_core::{DType, Device, Result, Tensor};
 
+use super::denoiser::Denoiser;
 use super::noise::gaussian;
 use super::schedule::NoiseSchedule;
-use super::Denoiser;
 
 /// Width of the test condition vectors.
 pub const TEXT_DIM: usize = 3;

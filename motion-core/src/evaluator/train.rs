@@ -4,7 +4,8 @@
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 
-use super::{Evaluator, EvaluatorConfig, EvaluatorError};
+use super::encoders::{Evaluator, EvaluatorConfig};
+use super::error::EvaluatorError;
 use crate::nn::unit_rows;
 use crate::optim::AdamW;
 use crate::representation::MeanStd;
@@ -99,7 +100,7 @@ mod tests {
             text_dim: 4,
             temperature: 0.1,
         };
-        let mut trainer = EvaluatorTrainer::new(config, super::super::tests::unit(), &dev, 0).unwrap();
+        let mut trainer = EvaluatorTrainer::new(config, super::super::encoders::tests::unit(), &dev, 0).unwrap();
         let offsets = Tensor::new(&[-1.5f32, -0.5, 0.5, 1.5], &dev).unwrap().reshape((4, 1, 1)).unwrap();
         let noise = crate::diffusion::noise::gaussian((4, 12, FEATURE_DIM), 5, &dev).unwrap();
         let x0 = (noise * 0.1).unwrap().broadcast_add(&offsets).unwrap();

@@ -39,8 +39,8 @@ use std::path::Path;
 
 use glam::{DQuat, DVec3, EulerRot};
 
-use super::rotations::ANIMATED_OFFSETS;
-use super::{write_atomically, ExportError, RotationTrack};
+use super::error::{write_atomically, ExportError};
+use super::rotations::{RotationTrack, ANIMATED_OFFSETS};
 use crate::skeleton::{Joint, NUM_JOINTS};
 
 /// Length of each End Site along its joint's bone, m: about the head above the SMPL head joint,

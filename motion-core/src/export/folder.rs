@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use candle_core::Tensor;
 
-use super::ExportError;
+use super::error::ExportError;
 
 /// Files whose presence marks a folder as a previous output of ours, which may be replaced.
 const OUTPUT_MARKERS: [&str; 4] = ["export.json", "report.json", "joints.npy", "viewer.html"];

@@ -36,8 +36,9 @@ use json::mesh::{Mode, Semantic};
 use json::validation::{Checked, Checked::Valid, USize64};
 use json::{Index, Root};
 
-use super::rotations::ANIMATED_OFFSETS;
-use super::{write_atomically, ExportError, RotationTrack, SceneBox, SceneRole};
+use super::error::{write_atomically, ExportError};
+use super::rotations::{RotationTrack, ANIMATED_OFFSETS};
+use super::scene::{SceneBox, SceneRole};
 use crate::skeleton::{Joint, Pose};
 
 mod geometry;

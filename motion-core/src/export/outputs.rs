@@ -16,11 +16,11 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::bvh::{write_bvh, BvhUnit};
+use super::error::{write_atomically, ExportError};
 use super::gltf::write_glb;
 use super::rotations::{RotationTrack, SolveFit};
 use super::scene::{scene_boxes, PositionTarget, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
-use super::{write_atomically, ExportError};
 use crate::files::FileError;
 use crate::program::{Carry, Primitive};
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};

@@ -39,7 +39,7 @@
 
 use glam::{DMat3, DQuat, DVec3};
 
-use super::ExportError;
+use super::error::ExportError;
 use crate::skeleton::{rest_pose, Joint, Pose, NUM_JOINTS};
 
 /// Below this length (m) a direction is taken as undefined and the parent's frame is kept.

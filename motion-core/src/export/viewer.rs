@@ -12,7 +12,8 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::{write_atomically, ExportError, SceneBox};
+use super::error::{write_atomically, ExportError};
+use super::scene::SceneBox;
 use crate::program::Carry;
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 

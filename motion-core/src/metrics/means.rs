@@ -4,10 +4,13 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{
-    airborne_frames, bone_length_range, foot_skate_ratio, ground_penetration, hands_raised, head_neck_incorrect,
-    heading_change_rad, longest_flight_s, max_acceleration, mean_acceleration, mean_foot_acceleration, pace,
-    root_travel, spike_frames, stance_toe_height, toe_flicker, FLOATING_FLIGHT_S,
+use super::body::{
+    bone_length_range, foot_skate_ratio, ground_penetration, hands_raised, head_neck_incorrect, max_acceleration,
+    mean_foot_acceleration, root_travel,
+};
+use super::gait::{
+    airborne_frames, heading_change_rad, longest_flight_s, mean_acceleration, pace, spike_frames, stance_toe_height,
+    toe_flicker, FLOATING_FLIGHT_S,
 };
 use crate::skeleton::{Joint, Pose};
 
@@ -62,7 +65,7 @@ pub struct MetricMeans {
     /// ([`hands_raised`]).
     pub hands_raised_rate: f64,
     /// Fraction of head–neck lengths at frames 0, L//2, L−1 outside
-    /// [`super::HEAD_NECK_VALID_M`] ([`head_neck_incorrect`]).
+    /// [`super::body::HEAD_NECK_VALID_M`] ([`head_neck_incorrect`]).
     pub head_neck_incorrect_ratio: f64,
     /// Motions measured.
     pub count: usize,

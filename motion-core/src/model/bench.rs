@@ -13,7 +13,8 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Serialize;
 
-use super::{Mdm, MdmConfig};
+use super::config::MdmConfig;
+use super::mdm::Mdm;
 use crate::diffusion::Denoiser;
 
 /// Frames per motion in the benchmark (5 s at 20 fps).

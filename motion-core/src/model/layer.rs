@@ -7,9 +7,9 @@ use candle_core::{Result, Shape, Tensor};
 use candle_nn::{Init, VarBuilder};
 use rand::RngCore;
 
+use super::config::MdmConfig;
 pub(crate) use super::fused_stack::{Ends, Epilogue};
 use super::fused_stack::{FusedEncoderStack, LayerWeights};
-use super::MdmConfig;
 use crate::nn::{self, LayerNorm, Linear, LAYER_NORM_EPS};
 
 /// Parameters fetched from a [`VarBuilder`], each recorded with its full checkpoint name.

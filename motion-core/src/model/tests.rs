@@ -8,7 +8,9 @@ use candle_nn::{VarBuilder, VarMap};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
+use super::layer::Dropout;
 use super::*;
+use crate::diffusion::{Denoiser, NoiseSchedule};
 use crate::nn::testing::randn;
 use crate::testing::finite_difference_check;
 use crate::testing::max_abs_diff;

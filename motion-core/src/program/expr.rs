@@ -225,7 +225,7 @@ pub struct Count {
     #[schemars(range(min = -1000.0, max = 1000.0))]
     pub threshold: f64,
     /// Required number of extrema.
-    #[schemars(range(max = super::MAX_FRAMES))]
+    #[schemars(range(max = super::limits::MAX_FRAMES))]
     pub target_count: u32,
     /// Sigmoid scale T, per unit of the signal (RG-DNO uses 10000).
     #[serde(default = "default_sharpness")]
@@ -273,7 +273,7 @@ pub struct Events {
     #[schemars(range(min = 0.0, max = 1000.0))]
     pub hysteresis: Option<f64>,
     /// Required number of events.
-    #[schemars(range(max = super::MAX_FRAMES))]
+    #[schemars(range(max = super::limits::MAX_FRAMES))]
     pub target_count: u32,
     /// Frames searched (default: all).
     #[serde(default)]
@@ -329,7 +329,7 @@ pub struct Airborne {
     #[schemars(range(min = 0.0, max = 100.0))]
     pub clearance_m: f64,
     /// Consecutive frames of flight (20 fps; a jump over a hurdle: about 4).
-    #[schemars(range(min = 1, max = super::MAX_FRAMES))]
+    #[schemars(range(min = 1, max = super::limits::MAX_FRAMES))]
     pub min_frames: u32,
     /// Frames where the flight may happen (default: all).
     #[serde(default)]

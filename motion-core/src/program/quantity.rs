@@ -303,7 +303,7 @@ pub enum FrameRef {
     /// Frame `n − 1`.
     Last,
     /// An explicit 0-based frame index (20 fps), `< n`.
-    Frame(#[schemars(range(max = super::MAX_FRAMES))] u32),
+    Frame(#[schemars(range(max = super::limits::MAX_FRAMES))] u32),
     /// `round(f · (n − 1))` for `f` in [0, 1].
     Fraction(#[schemars(range(min = 0.0, max = 1.0))] f64),
 }
@@ -333,7 +333,7 @@ pub enum FrameSelection {
     #[default]
     All,
     /// These frames ("key-frame constraint", ProgMoGen `keyframe_list`).
-    Keyframes(super::NonEmpty<FrameRef>),
+    Keyframes(super::serde_util::NonEmpty<FrameRef>),
     /// Frames `from..=to`.
     Range(FrameRange),
 }

@@ -9,7 +9,7 @@ use jsonschema::{ValidationError, Validator};
 use serde_json::Value;
 
 use super::error::{Problem, ProgramError};
-use super::TaskProgram;
+use super::task::TaskProgram;
 
 static SCHEMA: LazyLock<Value> = LazyLock::new(|| schemars::schema_for!(TaskProgram).to_value());
 

@@ -5,9 +5,10 @@ use std::collections::HashSet;
 
 use super::error::{Problem, ProgramError};
 use super::expr::{field, index, Airborne, Count, EventRegion, Events, Expr, FootContact, SelfCollision};
+use super::limits::MAX_FRAMES;
 use super::quantity::{CarriedLoad, Condition, FrameRange, FrameRef, FrameSelection, Point, Quantity};
 use super::scene::{JointSet, Primitive};
-use super::{RelationalParse, TaskProgram, MAX_FRAMES};
+use super::task::{RelationalParse, TaskProgram};
 use crate::limits::{PROGRAM_CONSTRAINTS, PROGRAM_FRAMES, PROGRAM_TEXT_CHARS};
 use crate::skeleton::Joint;
 

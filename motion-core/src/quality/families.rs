@@ -7,7 +7,8 @@
 use candle_core::{DType, Device, Tensor};
 use serde::Serialize;
 
-use super::{descriptors, mean_pairwise, nearest_distances, ReportSampling};
+use super::distances::{descriptors, mean_pairwise, nearest_distances};
+use super::sampling::ReportSampling;
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::corpus::family::Family;
 use crate::corpus::{Corpus, CorpusWindow, Split};

@@ -4,13 +4,17 @@
 //! ([`held_out_ratio`]); and held-out paraphrases through the families' detectors
 //! ([`paraphrases`]).
 
+mod distances;
 pub mod families;
 pub mod held_out_ratio;
 pub mod paraphrases;
+mod sampling;
 pub mod text_motion;
 
 #[cfg(test)]
 mod test_fixtures;
+
+pub use sampling::{joints_of, Denoising, ReportSampling};
 
 use candle_core::{Device, Tensor};
 use serde::Serialize;
@@ -18,14 +22,13 @@ use serde::Serialize;
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::database::MotionDatabase;
 use crate::diffusion::noise::gaussian;
-use crate::diffusion::Guidance;
 use crate::diffusion::NoiseSchedule;
 use crate::generation::inversion::{invert_motion, mean_joint_distance, InversionConfig};
 use crate::metrics::MetricMeans;
 use crate::motion::tensor_to_poses;
-use crate::prior::{Prior, PriorError, Sampling};
-use crate::representation::RIC;
+use crate::prior::{Prior, PriorError};
 use crate::skeleton::Pose;
+use distances::{descriptors, mean_pairwise, nearest_distances};
 
 /// One label's row of the report.
 #[derive(Debug, Clone, Serialize)]
@@ -49,56 +52,6 @@ pub struct LabelQuality {
     pub sample_diversity_m: f64,
 }
 
-/// How every report draws a sample from the prior: DDIM with classifier-free guidance, from
-/// seeded start noise.
-#[derive(Debug, Clone, Copy)]
-pub struct Denoising {
-    /// DDIM steps (default 50).
-    pub ddim_steps: usize,
-    /// Guidance scale (default 2.5, MDM's).
-    pub guidance: f64,
-    /// The first seed; each report says how it derives the others.
-    pub seed: u64,
-}
-
-impl Denoising {
-    /// The sampling request for `batch` motions of `frames` frames of `prompt`, from the noise
-    /// of seed [`Self::seed`] + `seed_offset`.
-    pub fn request<'a>(&self, prompt: &'a str, frames: usize, batch: usize, seed_offset: u64) -> Sampling<'a> {
-        Sampling {
-            prompt,
-            frames,
-            batch,
-            seed: self.seed + seed_offset,
-            steps: self.ddim_steps,
-            guidance: Guidance { scale: self.guidance },
-        }
-    }
-}
-
-impl Default for Denoising {
-    fn default() -> Self {
-        Self { ddim_steps: 50, guidance: Guidance::MDM_SCALE, seed: 0 }
-    }
-}
-
-/// How the prior's per-label and per-family reports draw their unconstrained samples.
-#[derive(Debug, Clone, Copy)]
-pub struct ReportSampling {
-    /// Samples per label or per family (default 32).
-    pub samples: usize,
-    /// Frames per sample (default 120, 6 s: a corpus window).
-    pub frames: usize,
-    /// Steps, guidance and the seed of the first label's or family's noise.
-    pub denoising: Denoising,
-}
-
-impl Default for ReportSampling {
-    fn default() -> Self {
-        Self { samples: 32, frames: 120, denoising: Denoising::default() }
-    }
-}
-
 /// Settings of the per-label report.
 #[derive(Debug, Clone, Default)]
 pub struct QualityConfig {
@@ -106,12 +59,6 @@ pub struct QualityConfig {
     pub sampling: ReportSampling,
     /// Only these labels (all of the database's when empty).
     pub labels: Vec<String>,
-}
-
-/// Joint positions of normalised features `[batch, frames, 263]` as per-sample pose lists.
-pub fn joints_of(prior: &Prior, normalized: &Tensor) -> candle_core::Result<Vec<Vec<Pose>>> {
-    let joints = prior.to_joints(normalized)?;
-    tensor_to_poses(&joints)
 }
 
 /// Runs the report over every label of the database; `on_label` is called after each.
@@ -359,58 +306,4 @@ fn label_crops(
         });
     }
     prior.mean_std.normalize(&Tensor::stack(&crops, 0).map_err(fail)?).map_err(fail)
-}
-
-/// Heading-free pose descriptors `[n, frames·63]`: the root-relative joint positions (ric) of
-/// raw features `[frames, 263]` each.
-fn descriptors(raw: &[Tensor]) -> candle_core::Result<Tensor> {
-    let rows = raw
-        .iter()
-        .map(|x| x.narrow(1, RIC.start, RIC.len())?.flatten_all())
-        .collect::<candle_core::Result<Vec<_>>>()?;
-    Tensor::stack(&rows, 0)
-}
-
-/// Mean over rows of `a` of the RMS per-joint distance to the nearest row of `b` allowed by
-/// `allowed(i, j)`.
-fn nearest_distances(a: &Tensor, b: &Tensor, allowed: impl Fn(usize, usize) -> bool) -> candle_core::Result<f64> {
-    let d2 = pairwise_sq(a, b)?.to_vec2::<f32>()?;
-    let joints_frames = (a.dim(1)? / 3) as f64;
-    let mut total = 0.0;
-    let mut n = 0;
-    for (i, row) in d2.iter().enumerate() {
-        let best = row
-            .iter()
-            .enumerate()
-            .filter(|(j, _)| allowed(i, *j))
-            .map(|(_, d)| f64::from(*d))
-            .fold(f64::INFINITY, f64::min);
-        if best.is_finite() {
-            total += (best.max(0.0) / joints_frames).sqrt();
-            n += 1;
-        }
-    }
-    Ok(if n == 0 { f64::NAN } else { total / n as f64 })
-}
-
-fn mean_pairwise(a: &Tensor) -> candle_core::Result<f64> {
-    let d2 = pairwise_sq(a, a)?.to_vec2::<f32>()?;
-    let joints_frames = (a.dim(1)? / 3) as f64;
-    let n = d2.len();
-    let mut total = 0.0;
-    for (i, row) in d2.iter().enumerate() {
-        for (j, d) in row.iter().enumerate() {
-            if i != j {
-                total += (f64::from(*d).max(0.0) / joints_frames).sqrt();
-            }
-        }
-    }
-    Ok(if n < 2 { 0.0 } else { total / (n * (n - 1)) as f64 })
-}
-
-/// Squared Euclidean distances `[a_rows, b_rows]`.
-fn pairwise_sq(a: &Tensor, b: &Tensor) -> candle_core::Result<Tensor> {
-    let a2 = a.sqr()?.sum_keepdim(1)?;
-    let b2 = b.sqr()?.sum_keepdim(1)?.t()?;
-    a2.broadcast_add(&b2)?.broadcast_sub(&(a.matmul(&b.t()?)? * 2.0)?)
 }

@@ -11,7 +11,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::families::detected_share;
-use super::{joints_of, Denoising};
+use super::sampling::{joints_of, Denoising};
 use crate::corpus::family::Family;
 use crate::files::{read_text, FileError};
 use crate::limits::PROMPT_LIST_FILE_BYTES;

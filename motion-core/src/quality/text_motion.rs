@@ -20,7 +20,7 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use super::Denoising;
+use super::sampling::Denoising;
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::corpus::{Corpus, Split, WINDOW_FRAMES};
 use crate::diffusion::Guidance;

@@ -15,9 +15,9 @@ use gif::{DisposalMethod, Encoder, Frame, Repeat};
 use tiny_skia::{Color, Pixmap};
 
 use super::draw::disc;
+use super::error::RenderError;
 use super::font::{char_width, draw_text};
 use super::layout::{colour, motion_rgb, Layout, StripRow, LEFT_RGB, MOTION_RGB, RIGHT_RGB};
-use super::RenderError;
 use crate::files::{write_atomically, WriteError};
 use crate::program::Primitive;
 use crate::skeleton::{Joint, FPS};

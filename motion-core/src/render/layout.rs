@@ -9,8 +9,8 @@ use glam::DVec3;
 use tiny_skia::{Color, Pixmap};
 
 use super::draw::{fill, line, polyline};
+use super::error::RenderError;
 use super::font::draw_text;
-use super::RenderError;
 use crate::program::{BalanceBeam, Gap, Hurdle, InsideBox, OverheadBarrier, Primitive, Wall};
 use crate::skeleton::{bones, Joint, Pose};
 

@@ -5,8 +5,8 @@ use std::path::Path;
 use tiny_skia::{Color, Pixmap};
 
 use super::draw::line;
+use super::error::{save_png, RenderError};
 use super::font::{char_width, draw_text};
-use super::{save_png, RenderError};
 
 /// One line of a plot.
 pub struct Series<'a> {

@@ -8,9 +8,9 @@ use std::path::Path;
 use tiny_skia::Color;
 
 use super::draw::disc;
+use super::error::{save_png, RenderError};
 use super::font::draw_text;
 use super::layout::{Layout, StripRow};
-use super::{save_png, RenderError};
 use crate::program::{Carry, Primitive};
 use crate::skeleton::{Joint, FPS};
 

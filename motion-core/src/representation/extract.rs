@@ -13,7 +13,7 @@
 
 use glam::{DMat3, DQuat, DVec3};
 
-use super::{FeatureFrame, FEATURE_DIM, FOOT_CONTACT, LOCAL_VEL, RIC, ROT};
+use super::layout::{FeatureFrame, FEATURE_DIM, FOOT_CONTACT, LOCAL_VEL, RIC, ROT};
 use crate::skeleton::{Joint, Pose, CONTACT_JOINTS, FACE_JOINTS, KINEMATIC_CHAIN, NUM_JOINTS};
 use crate::MotionError;
 

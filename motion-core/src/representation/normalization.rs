@@ -4,7 +4,7 @@ use std::path::Path;
 
 use candle_core::{DType, Device, Tensor};
 
-use super::{FeatureFrame, FEATURE_DIM, FOOT_CONTACT, LOCAL_VEL, RIC, ROOT_LIN_VEL, ROOT_ROT_VEL, ROOT_Y, ROT};
+use super::layout::{FeatureFrame, FEATURE_DIM, FOOT_CONTACT, LOCAL_VEL, RIC, ROOT_LIN_VEL, ROOT_ROT_VEL, ROOT_Y, ROT};
 
 /// Floor on each standard deviation so constant features cannot divide by zero.
 const MIN_STD: f64 = 1e-4;

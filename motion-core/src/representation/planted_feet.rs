@@ -6,7 +6,7 @@
 
 use candle_core::{Result, Tensor, D};
 
-use super::{FEATURE_DIM, FOOT_CONTACT, RIC, ROOT_LIN_VEL, ROOT_ROT_VEL};
+use super::layout::{FEATURE_DIM, FOOT_CONTACT, RIC, ROOT_LIN_VEL, ROOT_ROT_VEL};
 
 /// The foot joints whose contacts are features `[259..263]`, in that order: left ankle, left
 /// foot, right ankle, right foot.

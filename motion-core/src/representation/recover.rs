@@ -3,7 +3,7 @@
 
 use candle_core::{DType, Device, Result, Tensor, D};
 
-use super::{FEATURE_DIM, RIC, ROOT_LIN_VEL, ROOT_ROT_VEL, ROOT_Y};
+use super::layout::{FEATURE_DIM, RIC, ROOT_LIN_VEL, ROOT_ROT_VEL, ROOT_Y};
 use crate::skeleton::NUM_JOINTS;
 
 /// Recovers joint positions from **de-normalised** features.

@@ -26,8 +26,8 @@ use tokenizers::{Tokenizer, TruncationParams};
 
 use crate::nn::unit_rows;
 
+use super::encoder::TextEncoder;
 use super::weights::{no_extra_layer, take_tensor, EncoderError, TensorProblem};
-use super::TextEncoder;
 
 /// The weights file [`MiniLm::load`] reads from its folder.
 pub const WEIGHTS_FILE: &str = "model.safetensors";

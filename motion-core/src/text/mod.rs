@@ -5,11 +5,14 @@
 
 pub mod caption_bank;
 pub mod clip;
+mod encoder;
 pub mod minilm;
 pub mod restatement;
 pub mod vocabulary;
 pub mod weights;
 pub mod wordnet;
+
+pub use encoder::TextEncoder;
 
 use std::path::Path;
 use std::sync::Arc;
@@ -19,14 +22,6 @@ use candle_core::{Device, Result, Tensor};
 use minilm::MiniLm;
 use vocabulary::VocabularyEncoder;
 use weights::EncoderError;
-
-/// Turns prompts into condition vectors. Encode once per run, never inside a sampling loop.
-pub trait TextEncoder {
-    /// Width of the condition vectors.
-    fn dim(&self) -> usize;
-    /// `[prompts.len(), dim]` condition vectors.
-    fn encode(&self, prompts: &[&str], device: &Device) -> Result<Tensor>;
-}
 
 /// Name of the shipped sentence encoder, as a prior file names it and as its folder under the
 /// text models folder (`fixtures/text/all-MiniLM-L6-v2`) is called.

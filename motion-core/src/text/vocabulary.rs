@@ -9,7 +9,7 @@
 use candle_core::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
-use super::TextEncoder;
+use super::encoder::TextEncoder;
 
 /// Direction and manner words every vocabulary contains.
 const DIRECTION_WORDS: [&str; 10] =

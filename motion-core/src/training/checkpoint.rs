@@ -10,7 +10,8 @@ use candle_core::Tensor;
 use crate::model::MdmConfig;
 use crate::tensor_file::{read_file_metadata, read_metadata, write_safetensors};
 
-use super::{TrainError, Trainer};
+use super::error::TrainError;
+use super::trainer::Trainer;
 
 /// The model a checkpoint or a written prior was made with (its `mdm_config`), so that a
 /// resumed run or a fine-tune can take its sizes from the file instead of from the caller.

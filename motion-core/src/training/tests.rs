@@ -1,8 +1,17 @@
 //! The trainer: resumption, shards, loss terms, EMA, schedule and the corpus path.
 
+use std::path::Path;
+
+use candle_core::{Device, Tensor};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+
+use super::trainer::perturb_conditions;
 use super::*;
 use crate::database::catalog::Catalog;
 use crate::database::{DatabaseConfig, MotionDatabase};
+use crate::model::{MdmConfig, Prediction};
+use crate::prior::Prior;
 
 fn tiny_run() -> (TrainingSet, MdmConfig, TrainConfig) {
     let catalog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap/catalog.json");

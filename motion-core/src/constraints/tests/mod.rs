@@ -6,6 +6,8 @@ use proptest::prelude::*;
 
 use super::probe::STANDING;
 use super::*;
+use crate::program::TaskProgram;
+use crate::skeleton::Joint;
 use crate::skeleton::NUM_JOINTS;
 use crate::testing::finite_difference_check;
 

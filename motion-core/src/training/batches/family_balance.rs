@@ -8,36 +8,37 @@
 
 use rand::Rng;
 
-use super::{Sequence, TrainingSet};
+use super::sequence::Sequence;
 use crate::corpus::family::Family;
 
 /// The stretches of one skill family (`None`: of no family) and their frames.
 #[derive(Debug, Clone)]
 pub(super) struct FamilyStretches {
-    family: Option<Family>,
+    pub(super) family: Option<Family>,
     /// `(sequence, stretch)` indices.
-    stretches: Vec<(usize, usize)>,
-    frames: usize,
+    pub(super) stretches: Vec<(usize, usize)>,
+    pub(super) frames: usize,
 }
 
-/// How one batch draws its crops by family ([`TrainingSet::family_draw`]).
+/// How one batch draws its crops by family
+/// ([`TrainingSet::family_draw`](super::training_set::TrainingSet::family_draw)).
 pub(super) struct FamilyDraw {
     /// Cumulative probability of each family.
-    cumulative_weights: Vec<f64>,
+    pub(super) cumulative_weights: Vec<f64>,
     /// Per family, its usable `(sequence, stretch)` indices with their cumulative frames.
-    pools: Vec<Vec<((usize, usize), usize)>>,
+    pub(super) pools: Vec<Vec<((usize, usize), usize)>>,
 }
 
 impl FamilyDraw {
     /// `(sequence, offset)` of one crop of `frames` frames.
-    pub(super) fn crop(&self, set: &TrainingSet, frames: usize, rng: &mut impl Rng) -> (usize, usize) {
+    pub(super) fn crop(&self, sequences: &[Sequence], frames: usize, rng: &mut impl Rng) -> (usize, usize) {
         let u: f64 = rng.random();
         let family = self.cumulative_weights.partition_point(|&c| c <= u).min(self.pools.len() - 1);
         let pool = &self.pools[family];
         let total = pool.last().map_or(1, |(_, c)| *c);
         let middle = rng.random_range(0..total);
         let ((i, k), end) = pool[pool.partition_point(|(_, c)| *c <= middle)];
-        let sequence = &set.sequences[i];
+        let sequence = &sequences[i];
         // The drawn frame counted from the stretch's first frame.
         let frame = sequence.stretches[k].start + sequence.stretch_frames(k) - (end - middle);
         (i, frame.saturating_sub(frames / 2).min(sequence.frames() - frames))
@@ -65,57 +66,6 @@ impl FamilyStretches {
     }
 }
 
-impl TrainingSet {
-    /// Each skill family of the stretches (`None`: no family) with its share of the frames,
-    /// and its share of the crops drawn with [`TrainConfig::family_balance`] = `alpha`
-    /// (proportional to its frames to the power `alpha`).
-    pub fn family_shares(&self, alpha: f64) -> Vec<(Option<Family>, f64, f64)> {
-        let frames: f64 = self.families.iter().map(|f| f.frames as f64).sum();
-        let drawn = self.family_probabilities(alpha);
-        self.families.iter().zip(drawn).map(|(f, p)| (f.family, f.frames as f64 / frames, p)).collect()
-    }
-
-    /// Each family's probability of being drawn: its frames^`alpha`, normalised.
-    fn family_probabilities(&self, alpha: f64) -> Vec<f64> {
-        let weights: Vec<f64> = self.families.iter().map(|f| (f.frames as f64).powf(alpha)).collect();
-        let total: f64 = weights.iter().sum();
-        weights.into_iter().map(|w| w / total).collect()
-    }
-
-    /// The family draw of one batch's crops of `frames` frames: each family's weight
-    /// (frames^`alpha`) and its stretches in sequences at least `frames` long, by cumulative
-    /// frames (a family with none of them draws from every such stretch).
-    pub(super) fn family_draw(&self, alpha: f64, frames: usize) -> FamilyDraw {
-        let long_enough = |&&(i, _): &&(usize, usize)| self.sequences[i].frames() >= frames;
-        let cumulative = |stretches: &mut dyn Iterator<Item = &(usize, usize)>| -> Vec<((usize, usize), usize)> {
-            stretches
-                .scan(0, |sum, &(i, k)| {
-                    *sum += self.sequences[i].stretch_frames(k);
-                    Some(((i, k), *sum))
-                })
-                .collect()
-        };
-        let any: Vec<_> = cumulative(&mut self.families.iter().flat_map(|f| f.stretches.iter()).filter(long_enough));
-        let pools = self
-            .families
-            .iter()
-            .map(|family| {
-                let pool = cumulative(&mut family.stretches.iter().filter(long_enough));
-                if pool.is_empty() {
-                    any.clone()
-                } else {
-                    pool
-                }
-            })
-            .collect();
-        let cumulative_weights = self.family_probabilities(alpha).into_iter().scan(0.0, |sum, p| {
-            *sum += p;
-            Some(*sum)
-        });
-        FamilyDraw { cumulative_weights: cumulative_weights.collect(), pools }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use candle_core::{Device, Tensor};
@@ -123,6 +73,7 @@ mod tests {
     use rand::SeedableRng;
 
     use super::super::tests::vocabulary;
+    use super::super::training_set::TrainingSet;
     use super::super::Stretch;
     use super::*;
     use crate::representation::{MeanStd, FEATURE_DIM};
