@@ -12,7 +12,7 @@ use motion_core::pipeline::TaskSettings;
 
 use super::export_formats::ExportFormats;
 use super::flags;
-use crate::paths;
+use agent::paths;
 
 /// A generation method on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

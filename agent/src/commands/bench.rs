@@ -17,7 +17,7 @@ use serde::Serialize;
 
 use crate::cli::load;
 use crate::cli::measure::{median, peak_rss_mib};
-use crate::paths;
+use agent::paths;
 
 #[derive(Debug, Args)]
 pub struct BenchArgs {

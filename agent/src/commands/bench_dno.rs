@@ -9,7 +9,7 @@ use motion_core::generation::method::{GenerationConfig, Method, Task};
 
 use crate::cli::flags;
 use crate::cli::load::{device, load_prior, load_program};
-use crate::paths;
+use agent::paths;
 
 #[derive(Debug, Args)]
 pub struct BenchDnoArgs {

@@ -13,7 +13,7 @@ use serde::Serialize;
 use crate::cli::load;
 use crate::cli::measure::{median, peak_rss_mib};
 use crate::cli::retrieval_task::RetrievalTask;
-use crate::paths;
+use agent::paths;
 
 #[derive(Debug, Args)]
 pub struct BenchRetrievalArgs {

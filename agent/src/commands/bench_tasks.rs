@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::cli::generation_args::{GenerationArgs, MethodArg};
 use crate::cli::load::{device, load_prior, load_program};
 use crate::cli::progress::run_with_progress;
-use crate::paths;
+use agent::paths;
 
 #[derive(Debug, Args)]
 pub struct BenchTasksArgs {

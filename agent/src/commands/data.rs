@@ -11,7 +11,7 @@ use motion_core::database::catalog::Catalog;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
 use motion_core::import::resample;
 
-use crate::paths;
+use agent::paths;
 
 #[derive(Debug, Subcommand)]
 pub enum DataCommand {

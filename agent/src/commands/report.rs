@@ -24,7 +24,7 @@ use motion_core::quality::{
 use motion_core::render::{motion_strip, StripRow};
 use motion_core::text::caption_bank::KEEP_OWN_SIMILARITY;
 
-use crate::paths;
+use agent::paths;
 
 #[derive(Debug, Args)]
 pub struct ReportArgs {

@@ -17,7 +17,7 @@ use motion_core::skeleton::FPS;
 use crate::cli::export_formats::{print_exports, ExportFormats};
 use crate::cli::flags;
 use crate::cli::load::{device, load_prior};
-use crate::paths;
+use agent::paths;
 
 #[derive(Debug, Args)]
 pub struct SampleArgs {

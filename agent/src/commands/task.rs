@@ -15,7 +15,7 @@ use crate::cli::flags;
 use crate::cli::generation_args::{GenerationArgs, MethodArg};
 use crate::cli::load::{device, load_prior};
 use crate::cli::progress::run_with_progress;
-use crate::paths;
+use agent::paths;
 
 /// No `Debug`: the arguments hold the API key.
 #[derive(Args)]

@@ -14,7 +14,7 @@ use motion_core::model::{MdmConfig, Prediction};
 use motion_core::text::{ConditionEncoder, MINILM_NAME};
 use motion_core::training::{saved_model_config, TrainConfig, Trainer, TrainingSet};
 
-use crate::paths;
+use agent::paths;
 
 #[derive(Debug, Args)]
 pub struct TrainArgs {
