@@ -40,8 +40,8 @@ fn config(method: Method, steps: usize) -> GenerationConfig {
     config.guidance = 1.0;
     config.dno.steps = steps;
     // The learning rate ramps up over half of these short runs, as the default ramps over the
-    // first 50 of 500 steps: reaching the full rate at step 2 threw the shipped prior's loss
-    // from 0.14 to 0.46 for a step (session 17), which a 12-step run does not recover from.
+    // first 50 of 500 steps: reaching the full rate at step 2 can throw the loss from 0.14 to
+    // 0.46 for a step, which a 12-step run does not recover from (`fixtures/results/README.md`).
     config.dno.lr_warmup_steps = 6;
     config.direct.steps = steps;
     config
@@ -159,9 +159,9 @@ fn the_foot_clean_up_runs_on_every_output_and_switches_off() {
     for ((c, r), lock) in cleaned.iter().zip(&raw).zip(&on.foot_lock) {
         assert!(lock.enabled && (lock.skate_after - foot_skate_ratio(c)).abs() < 1e-9);
         // Skating never grows by more than one frame pair: grounding a stance that hovers near
-        // GMD's 5 cm contact line can bring a toe-off frame under it (session 33's prior: raw
+        // GMD's 5 cm contact line can bring a toe-off frame under it (on the shipped prior: raw
         // stance toes at 3.9-4.5 cm, cleaned 2.7-3.1 cm; the toe leaving at 0.75 m/s from 3.8 to
-        // 4.5 cm counts as skating, from 4.9 to 5.5 cm it did not).
+        // 4.5 cm counts as skating, from 4.9 to 5.5 cm it does not; `fixtures/results/README.md`).
         let one_pair = 1.0 / (c.len() - 1) as f64;
         let (after, before) = (foot_skate_ratio(c), foot_skate_ratio(r));
         assert!(after <= before + one_pair + 1e-9, "{after} > {before}");

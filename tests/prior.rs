@@ -243,7 +243,8 @@ fn walks_skate_and_move_like_held_out_walks() {
 
 /// A free prompt's verbs that no training caption uses are restated through WordNet before the
 /// caption bank hears it: "ambles and veers" is a walk and a turn, where the sentence encoder
-/// alone heard "a person stays where they are (a take of: Reach_Left002)" (session 36).
+/// alone hears "a person stays where they are (a take of: Reach_Left002)"
+/// (`fixtures/model/MODEL_CARD.md`, "By prompt").
 #[test]
 fn unknown_verbs_are_restated_in_the_captions_verbs_before_the_bank_hears_them() {
     let prior = prior();
@@ -253,8 +254,8 @@ fn unknown_verbs_are_restated_in_the_captions_verbs_before_the_bank_hears_them()
     assert!(nearest.caption.contains("turn") && nearest.caption.contains("left"), "{nearest:?}");
     // A prompt in the captions' words is left as it is.
     assert!(prior.restate(WALK).replaced.is_empty());
-    // Session 39, on WordNet 3.0: only a word's first sense of bodily motion is searched
-    // ("landing" reached "carrying" through bring ashore), a third-person verb after its subject
+    // On WordNet 3.0: only a word's first sense of bodily motion is searched (a later sense,
+    // bring ashore, would take "landing" to "carrying"), a third-person verb after its subject
     // is a verb however often it is a noun ("vaults"), and a word read more often as an
     // adjective is kept ("full").
     assert_eq!(prior.restate("a boy leaps ahead landing on both feet").text, "a boy leaps ahead landing on both feet");

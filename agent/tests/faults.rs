@@ -14,7 +14,7 @@ const PROGRAM: &str = r#"{"text": "a person walks forward", "frames": 40, "const
 ]}"#;
 
 /// The binary under test; `MOGEN_BIN` points the tests at another build (to show that they fail
-/// on one from before the fixes).
+/// on one without the protections they test).
 fn bin() -> String {
     std::env::var("MOGEN_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_mogen").to_owned())
 }

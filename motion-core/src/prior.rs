@@ -92,7 +92,7 @@ pub enum RootDecode {
     /// The root velocity is re-derived from the feet whose contact is on, so they stay where
     /// they were planted ([`root_velocity_from_planted_feet`]); frames without a planted foot
     /// keep the predicted velocity. For priors whose root velocity runs ahead of their legs
-    /// (the incoherent 3,000-step prior shipped until session 9).
+    /// (such as the incoherent 3,000-step prior of `fixtures/model/HISTORY.md`).
     PlantedFeet,
     /// The predicted root velocity as it is (HumanML3D's `recover_from_ric`). The default: the
     /// temporally coherent prior's walks travel and step like the data with it.
@@ -306,7 +306,7 @@ impl Prior {
     /// words it did not ask for (Task 3's "a man walks forwards and raises up hands at the same
     /// time" became "... raising both hands, holding the hands together", and three of four
     /// RG-DNO samples started bent double; on its own vector all four met every constraint,
-    /// session 33, `fixtures/results/`).
+    /// `fixtures/model/training/README.md`).
     pub fn encode_text(&self, prompts: &[&str], device: &Device) -> candle_core::Result<Tensor> {
         self.encoder.encode(prompts, device)
     }

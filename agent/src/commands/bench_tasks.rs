@@ -334,9 +334,9 @@ mod tests {
 
     #[test]
     fn a_stored_row_is_reused_only_with_the_prior_and_settings_it_was_written_with() {
-        // Table 6 of session 34, made before the floor guard existed (read as weight 0) and
-        // before reports named their prior: not a run with today's settings, nor with the same
-        // settings and the guard at 0, since its JSON lacks the setting, nor any prior's.
+        // A stored Table 6 whose JSON has no floor-guard setting (read as weight 0) and names no
+        // prior: not a run with today's settings, nor with the same settings and the guard at 0,
+        // since its JSON lacks the setting, nor any prior's.
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures/results/session34-table6-n4/results.json");
         let rows = StoredRow::read(&std::fs::read_to_string(path).unwrap()).unwrap();
         let old = &rows[0];

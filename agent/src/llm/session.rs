@@ -103,13 +103,13 @@ enum Transport {
     Replay(Recordings),
 }
 
-/// The LLM of a session.
+/// The LLM one command asks.
 pub struct Llm {
     transport: Transport,
     model: String,
     temperature: Option<f64>,
     max_tokens: Option<u32>,
-    /// The current rung of the ladder (it only goes down, for the rest of the session).
+    /// The current rung of the ladder (it only goes down, for the rest of this `Llm`'s life).
     mode: Cell<OutputMode>,
     step_down: bool,
 }
@@ -184,7 +184,7 @@ impl Llm {
 
     /// Asks `question` followed by `turns` (earlier replies and repair feedback). When the server
     /// rejects the output mode (HTTP 400 or 422 about the response format) and the mode was not
-    /// fixed, steps down the ladder for the rest of the session and asks again.
+    /// fixed, steps down the ladder for the rest of this `Llm`'s life and asks again.
     pub async fn ask(&self, question: &Question, turns: &[Message]) -> Result<ChatResponse, LlmError> {
         loop {
             let mode = self.mode.get();

@@ -54,8 +54,8 @@ impl Lock {
 ///
 /// A generated stance foot that slides farther than a foot's length is not planted; holding it
 /// at the mean of the whole slide drags the leg by half the slide (28–66 cm on DNO outputs,
-/// session 10) and makes a stride the network never drew. Its steadiest part is held instead,
-/// and the rest of the contact is left as generated.
+/// `fixtures/results/README.md`) and makes a stride the network never drew. Its steadiest part
+/// is held instead, and the rest of the contact is left as generated.
 pub fn steadiest(track: &[DVec3], frames: Range<usize>, max_offset_m: f64) -> Range<usize> {
     let flat = |t: usize| DVec3::new(track[t].x, 0.0, track[t].z);
     let mean = |r: &Range<usize>| r.clone().map(flat).sum::<DVec3>() / r.len() as f64;

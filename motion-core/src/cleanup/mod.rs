@@ -27,12 +27,13 @@
 //!    reach gives the closest point the leg reaches with the knee a little bent (soft reach,
 //!    [`FootLockConfig::soft_reach_m`]) and is counted. The IK never takes a knee, ankle or toe
 //!    below the floor, nor deeper than it was, with planting on or off
-//!    ([`FootLockConfig::keep_above_floor`]; GEO-2's walks beside a raised beam had a toe pushed
-//!    7 cm under the floor while planting was off): where the full correction would, the leg takes
-//!    the largest fraction of it that does not (`floor_safe_fraction`), and neighbouring frames
-//!    ease into that fraction at most [`FLOOR_FRACTION_STEP`] per frame (each eased fraction is
-//!    checked again). (A lock lowering a stance ankle to its standing height used to push its
-//!    toe, or a crawl's knee, up to 7 cm through the floor.)
+//!    ([`FootLockConfig::keep_above_floor`]; without it, GEO-2's walks beside a raised beam, with
+//!    planting off, get a toe pushed 7 cm under the floor): where the full correction would, the
+//!    leg takes the largest fraction of it that does not (`floor_safe_fraction`), and
+//!    neighbouring frames ease into that fraction at most [`FLOOR_FRACTION_STEP`] per frame (each
+//!    eased fraction is checked again). (Without these checks a lock lowering a stance ankle to
+//!    its standing height pushes its toe, or a crawl's knee, up to 7 cm through the floor; both
+//!    figures are in `fixtures/results/README.md`.)
 //!
 //! Only the knees, ankles and toes move (and the whole body by the floor offset), so a
 //! constraint on any other joint keeps its error exactly unless the body is lowered. A
@@ -122,9 +123,10 @@ pub struct FootLockConfig {
     /// a held foot the hip pulls out of reach then follows it smoothly instead of snapping
     /// the knee straight. With 2 cm, generated walks keep their knees as bent as the shipped
     /// walks do (5 % of leg-frames under 9.1° against the clips' 5.7–9.8°, none under 4.5°
-    /// against their 1.9–4.2°); 1 cm straightened them beyond the data (4.0°, 1.0°), and a
-    /// held stance foot was then let go with a jolt as its leg reached full length (0.078 → 0.072
-    /// m/frame² on Task-3's RG-DNO samples, the clean-up's added acceleration 11 % lower).
+    /// against their 1.9–4.2°); 1 cm straightens them beyond the data (4.0°, 1.0°), and a held
+    /// stance foot is then let go with a jolt as its leg reaches full length (0.078 → 0.072
+    /// m/frame² on Task-3's RG-DNO samples, the clean-up's added acceleration 11 % lower;
+    /// `fixtures/results/README.md`).
     pub soft_reach_m: f64,
     /// Plant contacts on the floor y = 0: lower a floating body, raise sinking frames, and bring
     /// locked joints within `height_tolerance_m` of their standing heights (default true).

@@ -435,7 +435,8 @@ fn off_the_floor_a_raised_walk_keeps_its_height() {
 
 /// Planting off (the program's scene holds a raised beam) still keeps the leg IK out of the
 /// ground: sliding walks on the floor y = 0 end with no joint lower than the floor or than it was
-/// (GEO-2's walks had a toe pushed 7 cm under the floor).
+/// (without the check, GEO-2's walks get a toe pushed 7 cm under the floor;
+/// `fixtures/results/README.md`).
 #[test]
 fn with_planting_off_the_leg_ik_still_keeps_out_of_the_ground() {
     let config = FootLockConfig { plant_on_floor: false, ..FootLockConfig::default() };

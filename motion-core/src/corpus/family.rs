@@ -117,7 +117,7 @@ impl Family {
 
     /// The prompts its samples are drawn for: a caption-like one and a paraphrase whose verbs
     /// and direction words the caption rules (`caption.rs`) never use ("someone strolls ahead"
-    /// and "someone stands on one foot" are captions since session 33).
+    /// and "someone stands on one foot" are training captions).
     pub fn prompts(self) -> [&'static str; 2] {
         match self {
             Family::Walk => ["a person walks forward", "a woman ambles along at an easy pace"],

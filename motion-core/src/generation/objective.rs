@@ -41,7 +41,8 @@ pub const FLIGHT_LIMIT_FRAMES: usize = (FLOATING_FLIGHT_S * FPS + 0.5) as usize;
 /// gradient pulls the lowest joint of the window's lowest frame down. The hinge is not squared,
 /// so the pull stays whole up to the bound: an exact penalty, which a weight above the bound's
 /// Lagrange multiplier meets exactly, where a squared hinge leaves the flight a frame too long
-/// (0.75 s in every foot-to-1.8 m sample of session 34's first run). 0 for `T ≤ limit`.
+/// (0.75 s in every RG-DNO sample of Table 6's foot to 1.8 m, `fixtures/results/README.md`). 0 for
+/// `T ≤ limit`.
 pub fn flight_penalty(joints: &Tensor, limit: usize) -> candle_core::Result<Tensor> {
     let (batch, frames, _, _) = joints.dims4()?;
     let window = limit + 1;
@@ -67,8 +68,8 @@ fn joint_heights(joints: &Tensor) -> candle_core::Result<Tensor> {
 /// own samples dip 3–9 cm under it (`fixtures/model/report.md`) and the foot clean-up lifts them
 /// out afterwards; without the guard the optimiser may meet a one-sided bound such as "feet
 /// below 5 cm on the last frame" with a foot 9 cm under the floor, which the clean-up's lift
-/// then undoes (session 34's foot-to-1.8 m RG-DNO samples). Like the flight guard an L1 hinge,
-/// an exact penalty.
+/// then undoes (two of four RG-DNO samples of Table 6's foot to 1.8 m without the guard,
+/// `fixtures/results/README.md`). Like the flight guard an L1 hinge, an exact penalty.
 pub fn floor_penalty(joints: &Tensor) -> candle_core::Result<Tensor> {
     let batch = joints.dim(0)?;
     joint_heights(joints)?.neg()?.relu()?.reshape((batch, ()))?.sum(D::Minus1)
@@ -114,18 +115,18 @@ pub struct Guards {
     pub jitter: f64,
     /// λ of the flight guard `λ·`[`flight_penalty`] at [`FLIGHT_LIMIT_FRAMES`]: without it, DNO
     /// raises a foot to 1.8 m or clears a 0.6 m hurdle with leaps that hang 1.4–1.55 s in the
-    /// air (Table 6 on the session-33 prior). 0 switches it off.
+    /// air (Table 6 without the guards, `fixtures/results/README.md`). 0 switches it off.
     pub flight: f64,
     /// λ of the ballistic guard `λ·`[`ballistic_penalty`]: with the flight guard alone, DNO
     /// clears a 0.6 m hurdle with the pelvis rising 0.9 m in 0.7 s (falling at up to 4 g). 0
     /// switches it off.
     pub ballistic: f64,
-    /// λ of the floor guard `λ·`[`floor_penalty`]: without it, RG-DNO met "feet on the ground
-    /// on the last frame" with one foot 9 cm under the floor, and the clean-up's lift left the
-    /// other 14 cm up (two of four foot-to-1.8 m samples, session 34). Default 0.1: on Table 6
-    /// (session 35) it holds every network motion within 3 mm of the floor, as 1 does, and at 1
-    /// the hurdle lost a sample in each method to leaps that land on the hurdle. 0 switches it
-    /// off. Settings written before it existed read as 0 (no floor guard ran).
+    /// λ of the floor guard `λ·`[`floor_penalty`]: without it, RG-DNO meets "feet on the ground
+    /// on the last frame" with one foot 9 cm under the floor, and the clean-up's lift leaves the
+    /// other 14 cm up (two of four foot-to-1.8 m samples of Table 6). Default 0.1: on Table 6 it
+    /// holds every network motion within 3 mm of the floor, as 1 does, and at 1 the hurdle loses
+    /// a sample in each method to leaps that land on the hurdle (`fixtures/results/README.md`).
+    /// 0 switches it off. Settings written before it existed read as 0 (no floor guard ran).
     #[serde(default)]
     pub floor: f64,
 }

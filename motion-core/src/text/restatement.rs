@@ -5,8 +5,9 @@
 //! Why: the sentence encoder ranks such verbs by their company, not their meaning.
 //! "someone ambles and veers off to their left" lies nearer "a person stays where they are (a
 //! take of: Reach_Left002)" (cosine 0.59) than any walking-and-turning caption, so the caption
-//! bank ([`super::caption_bank`]) heard a reach and the prior's samples turned left in 6 %
-//! (the report before session 38). WordNet says an amble is a walk and a veer a turn.
+//! bank ([`super::caption_bank`]) without the restatement hears a reach and the prior's samples
+//! turn left in 6 % (`fixtures/model/MODEL_CARD.md`, "By prompt"). WordNet says an amble is a
+//! walk and a veer a turn.
 //!
 //! The rule, word by word (maximal runs of ASCII letters; everything else is kept as it is):
 //! 1. a word some caption uses, or one WordNet does not know as a verb, is kept;
@@ -25,17 +26,15 @@
 //!    "cock") replaces the word, inflected as the word was ("ambles" → "walks", "veering" →
 //!    "turning", "sprinted" → "ran"), in the captions' own spelling where they have it.
 //!
-//! The rule was written on the report's paraphrases and a dozen of session 35's, then frozen
-//! before `fixtures/model/held_out_paraphrases.tsv` was read. The first-sense condition was
-//! added after, on a list of about 120 motion verbs read through the rule ("gallop" → "sit",
-//! "strut" → "cock", "roam" → "roll", "twist" → "wrestle" before it); it changes no restatement
-//! of the report's or the held-out paraphrases. Session 39 searched only the first sense of
-//! bodily motion ("landing" had become "carrying" through a later sense of "land", bring
-//! ashore), read a third-person verb after its subject as a verb ("strides", "springs" were
-//! kept as nouns) and spelt irregular pasts ("bent", not "bended"), on the errors the first
-//! held-out paraphrases showed; it was measured on 33 more written before these changes. Then,
-//! on an error those 33 showed ("at full speed" had become "at strike rush"), a word read
-//! more often as an adjective or adverb is kept too.
+//! What each condition prevents: without the caption verb's own first sense, "gallop" → "sit",
+//! "strut" → "cock", "roam" → "roll" and "twist" → "wrestle"; without the first sense of bodily
+//! motion, "landing" → "carrying" (a later sense of "land", bring ashore); without the subject
+//! condition "strides" and "springs" are kept as nouns; without the adjective and adverb
+//! condition "at full speed" → "at strike rush". Irregular pasts are spelt from WordNet
+//! ("bent", not "bended"). Which paraphrases each condition was written on, which held-out
+//! paraphrases (`fixtures/model/held_out_paraphrases.tsv`) were written before it, and what it
+//! changed on them are in `fixtures/model/MODEL_CARD.md` ("Held-out paraphrases") and
+//! `fixtures/model/training/README.md`.
 
 use std::collections::{HashSet, VecDeque};
 use std::sync::Arc;

@@ -13,9 +13,10 @@
 //! A crop takes the captions of the window centred nearest its middle frame: each window's
 //! captioned stretch is the frames nearer its centre than any other window's (windows of 6 s
 //! every 2 s: the 2 s around its centre), so the caption describes the crop's central seconds.
-//! (Until session 30 the stretch began at the window's first frame, so a crop's caption
-//! described a window starting 1–3 s after the crop did, and a turn in a crop's first seconds
-//! could sit under "walks forward".)
+//! (A stretch beginning at the window's first frame would caption a crop by a window starting
+//! 1–3 s after the crop does, and a turn in a crop's first seconds could sit under "walks
+//! forward": 34.5 % of the train split's crops captioned as a straight walk turn by 45° or
+//! more that way, 11.5 % this way; `fixtures/model/training/README.md`.)
 
 mod family_balance;
 mod sequence;
