@@ -20,7 +20,7 @@ mod tests {
     #[test]
     fn the_mean_is_the_sum_over_the_count_and_zero_for_none() {
         let values = [0.1, 0.2, 0.7, 1e-9];
-        assert_eq!(mean(&values).to_bits(), (values.iter().sum::<f64>() / 4.0).to_bits());
+        assert_eq!(mean(values).to_bits(), (values.iter().sum::<f64>() / 4.0).to_bits());
         assert_eq!(mean(std::iter::empty::<f64>()), 0.0);
     }
 }

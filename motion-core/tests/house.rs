@@ -7,21 +7,14 @@
 // Test helpers may unwrap: a failure is the test failing.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod source;
+
 use std::path::{Path, PathBuf};
+
+use source::{non_test_code, rust_files};
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
 }
 
 fn files_under(dirs: &[&str]) -> Vec<PathBuf> {
@@ -37,35 +30,14 @@ fn relative(file: &Path) -> String {
     file.strip_prefix(root()).unwrap().to_string_lossy().replace('\\', "/")
 }
 
-/// The lines of `text` outside inline test modules (`#[cfg(test)] mod .. {`), numbered from 1.
-fn library_lines(text: &str) -> Vec<(usize, &str)> {
-    let lines: Vec<&str> = text.lines().collect();
-    let mut kept = Vec::new();
-    let mut in_test: Option<isize> = None;
-    for (n, line) in lines.iter().enumerate() {
-        let trimmed = line.trim();
-        let next = lines.get(n + 1).map_or("", |l| l.trim());
-        if in_test.is_none() && trimmed == "#[cfg(test)]" && next.contains("mod ") && next.ends_with('{') {
-            in_test = Some(0);
-        } else if let Some(depth) = in_test {
-            let depth = depth + trimmed.matches('{').count() as isize - trimmed.matches('}').count() as isize;
-            in_test = (depth > 0).then_some(depth);
-        } else {
-            kept.push((n + 1, *line));
-        }
-    }
-    kept
-}
-
 #[test]
 fn no_command_module_imports_another() {
     let mut arrows = Vec::new();
     for file in files_under(&["agent/src/commands"]) {
-        let text = std::fs::read_to_string(&file).unwrap();
-        for (n, line) in library_lines(&text) {
-            let code = line.split("//").next().unwrap_or("");
-            if code.contains("super::") || code.contains("crate::commands::") {
-                arrows.push(format!("{}:{n}: {}", relative(&file), line.trim()));
+        let code = non_test_code(&std::fs::read_to_string(&file).unwrap());
+        for (n, line) in code.lines().enumerate() {
+            if line.contains("super::") || line.contains("crate::commands::") {
+                arrows.push(format!("{}:{}: {}", relative(&file), n + 1, line.trim()));
             }
         }
     }

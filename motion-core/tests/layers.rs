@@ -7,8 +7,12 @@
 // Test helpers may unwrap: a failure is the test failing.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod source;
+
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+
+use source::{library_code, non_test_code, rust_files};
 
 /// The layers, top to bottom (the README's layout table in the same order).
 const LAYERS: &[&[&str]] = &[
@@ -38,17 +42,6 @@ const LAYERS: &[&[&str]] = &[
 /// The layer of `module`, counted from 1 at the top as in the README.
 fn layer_of(module: &str) -> Option<usize> {
     LAYERS.iter().position(|layer| layer.contains(&module)).map(|i| i + 1)
-}
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
 }
 
 /// The crate modules named by the `crate::` paths in `code`, a `use` group's members included,
@@ -89,30 +82,6 @@ fn crate_modules(code: &str) -> Vec<(usize, String)> {
         }
     }
     found
-}
-
-/// The library code of a source file, comments and inline test modules blanked out so that
-/// offsets keep their lines.
-fn library_code(text: &str) -> String {
-    let lines: Vec<&str> = text.lines().collect();
-    let mut kept = Vec::with_capacity(lines.len());
-    // Inside an inline `#[cfg(test)] mod .. {`: its brace depth so far.
-    let mut in_test: Option<isize> = None;
-    for (n, line) in lines.iter().enumerate() {
-        let trimmed = line.trim();
-        let next = lines.get(n + 1).map_or("", |l| l.trim());
-        if in_test.is_none() && trimmed == "#[cfg(test)]" && next.contains("mod ") && next.ends_with('{') {
-            in_test = Some(0);
-        } else if let Some(depth) = in_test {
-            let depth = depth + trimmed.matches('{').count() as isize - trimmed.matches('}').count() as isize;
-            in_test = (depth > 0).then_some(depth);
-        } else if !trimmed.starts_with("//") {
-            kept.push(*line);
-            continue;
-        }
-        kept.push("");
-    }
-    kept.join("\n")
 }
 
 #[test]
@@ -208,41 +177,6 @@ fn no_source_file_is_over_700_lines() {
         })
         .collect();
     assert!(long.is_empty(), "files over {MAX_LINES} lines:\n{}", long.join("\n"));
-}
-
-/// The code of a source file that the library builds: `library_code`, and also each other
-/// `#[cfg(test)]` item (a `use ..;` line, a `fn .. { }`) and each `//` comment at a line's end
-/// blanked, so that offsets keep their lines.
-fn non_test_code(text: &str) -> String {
-    let code = library_code(text);
-    let mut kept = Vec::new();
-    // Inside a `#[cfg(test)]` item: its brace depth so far, `None` before its first `{`.
-    let mut in_test: Option<Option<isize>> = None;
-    for line in code.lines() {
-        let trimmed = line.trim();
-        match in_test {
-            None if trimmed == "#[cfg(test)]" => {
-                in_test = Some(None);
-                kept.push(String::new());
-            }
-            None => {
-                // A `//` outside a string literal: an even number of quotes before it.
-                let cut = line
-                    .match_indices("//")
-                    .find(|(at, _)| line[..*at].matches('"').count() % 2 == 0)
-                    .map_or(line.len(), |(at, _)| at);
-                kept.push(line[..cut].to_owned());
-            }
-            Some(depth) => {
-                let opened = depth.unwrap_or(0) + trimmed.matches('{').count() as isize;
-                let depth = opened - trimmed.matches('}').count() as isize;
-                let ended = if depth > 0 || opened > 0 { depth <= 0 } else { trimmed.ends_with(';') };
-                in_test = (!ended).then_some((opened > 0).then_some(depth));
-                kept.push(String::new());
-            }
-        }
-    }
-    kept.join("\n")
 }
 
 fn is_ident_char(c: char) -> bool {
