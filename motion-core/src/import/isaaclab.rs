@@ -28,8 +28,10 @@ use std::path::Path;
 use candle_core::Tensor;
 use glam::{DQuat, DVec3};
 
+use super::clip::MocapClip;
 use super::deepmimic::{self, DM_JOINTS};
-use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
+use super::error::{ImportError, ImportWarning};
+use super::values::{check_clip_length, in_reach, short_number, MAX_POSITION_M};
 use crate::files::FileError;
 use crate::limits::MOCAP_FILE_BYTES;
 use crate::skeleton::Pose;
