@@ -553,7 +553,7 @@ pub fn run_loss(args: LossArgs) -> anyhow::Result<()> {
         .map(|i| {
             let lo = i.saturating_sub(window - 1);
             let s = &raw[lo..=i];
-            (raw[i].0, s.iter().map(|p| p.1).sum::<f64>() / s.len() as f64)
+            (raw[i].0, motion_core::numeric::mean(s.iter().map(|p| p.1)))
         })
         .collect();
     motion_core::render::line_plot(
@@ -630,7 +630,7 @@ fn paraphrase_section(
     }
     let shares: Vec<f64> = outcomes.iter().filter_map(|o| o.detected).collect();
     if !shares.is_empty() {
-        let mean = shares.iter().sum::<f64>() / shares.len() as f64;
+        let mean = motion_core::numeric::mean(shares.iter().copied());
         lines.push(String::new());
         lines.push(format!(
             "Mean share passing over the {} paraphrases with a detector: {:.0} %.",

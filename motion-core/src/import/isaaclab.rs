@@ -391,7 +391,7 @@ mod tests {
                 })
                 .collect();
             let lowest = toes.iter().copied().fold(f64::MAX, f64::min);
-            let mean = toes.iter().sum::<f64>() / toes.len() as f64;
+            let mean = crate::numeric::mean(toes.iter().copied());
             println!("{name}: toes reach {mean:.3} m forward on average, {lowest:.3} m at least");
             assert!(lowest > -0.03 && mean > reach, "{name}: toes reach {mean} m, {lowest} m at least");
         }
