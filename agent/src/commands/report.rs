@@ -260,8 +260,8 @@ fn inversion_lines(
     Ok(())
 }
 
-/// samples.png: two cleaned unconstrained samples (seeds 1000 + 10·i and one more) of each of
-/// a few labels.
+/// samples.png: two unconstrained samples of each of a few labels (the i-th label's seeds
+/// 1000 + 10·i and 1001 + 10·i), after the foot clean-up.
 fn sample_strip(
     args: &ReportArgs,
     prior: &motion_core::prior::Prior,
@@ -434,7 +434,7 @@ fn family_row(r: &FamilyQuality) -> String {
     )
 }
 
-/// `strips/<family>.png`: the first two cleaned samples of each prompt, labelled with the
+/// `<family>.png` in `strips`: the first two cleaned samples of each prompt, labelled with the
 /// prompt they were drawn for; a failure to draw is a warning.
 fn family_strip(r: &FamilyQuality, cleaned: &[Vec<Pose>], strips: &Path) {
     let shown: Vec<StripRow<'_>> = (0..r.prompts.len())
