@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use candle_core::Device;
 use clap::Args;
 use motion_core::cleanup::{foot_lock, FootLockConfig};
 use motion_core::corpus::family::Family;
@@ -11,7 +12,7 @@ use motion_core::corpus::file as corpus_file;
 use motion_core::database::MotionDatabase;
 use motion_core::inversion::InversionConfig;
 use motion_core::metrics::MetricMeans;
-use motion_core::prior::{RootDecode, Sampling};
+use motion_core::prior::{Prior, RootDecode, Sampling};
 use motion_core::quality::families::{family_report, FamilyConfig, FamilyQuality};
 use motion_core::quality::held_out_ratio::{ratios, Ratio, RATIO_FIGURES};
 use motion_core::quality::paraphrases::{paraphrase_report, read_paraphrases, Paraphrase, ParaphraseOutcome};
@@ -161,9 +162,9 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
 /// network made them, then after the foot clean-up, each cell beside the training data's.
 fn label_tables(
     args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
+    prior: &Prior,
     db: &MotionDatabase,
-    device: &candle_core::Device,
+    device: &Device,
 ) -> anyhow::Result<(Vec<String>, Vec<LabelQuality>)> {
     let config = QualityConfig { sampling: args.sampling(), labels: args.labels.clone() };
     let metric_columns = METRIC_COLUMNS.join(" | ");
@@ -207,10 +208,10 @@ fn label_tables(
 /// one-step denoising fidelity at several noise levels, printed and added to `lines`.
 fn inversion_lines(
     args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
+    prior: &Prior,
     db: &MotionDatabase,
     walk: &str,
-    device: &candle_core::Device,
+    device: &Device,
     lines: &mut Vec<String>,
 ) -> anyhow::Result<()> {
     let polished = InversionConfig {
@@ -262,11 +263,7 @@ fn inversion_lines(
 
 /// samples.png: two unconstrained samples of each of a few labels (the i-th label's seeds
 /// 1000 + 10·i and 1001 + 10·i), after the foot clean-up.
-fn sample_strip(
-    args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
-    device: &candle_core::Device,
-) -> anyhow::Result<()> {
+fn sample_strip(args: &ReportArgs, prior: &Prior, device: &Device) -> anyhow::Result<()> {
     let strip_labels = [
         "a person walks forward",
         "a person walks and turns left",
@@ -344,11 +341,7 @@ fn ratio_section(rows: &[FamilyQuality], lines: &mut Vec<String>) -> Vec<serde_j
 
 /// The per-family report against the corpus's held-out capture: report.md, report.json and one
 /// strip per family (2 cleaned samples of each prompt in world coordinates) under `families/`.
-fn run_families(
-    args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
-    device: &candle_core::Device,
-) -> anyhow::Result<()> {
+fn run_families(args: &ReportArgs, prior: &Prior, device: &Device) -> anyhow::Result<()> {
     let corpus =
         corpus_file::load(&args.corpus).with_context(|| format!("reading the corpus {}", args.corpus.display()))?;
     // Read before the families are sampled, so that a bad file fails at once.
@@ -451,11 +444,7 @@ fn family_strip(r: &FamilyQuality, cleaned: &[Vec<Pose>], strips: &Path) {
 
 /// The training caption nearest each prompt, as restated in the captions' verbs, and whether
 /// the prompt is conditioned on it, as a table in `lines`.
-fn nearest_caption_section(
-    prior: &motion_core::prior::Prior,
-    rows: &[FamilyQuality],
-    lines: &mut Vec<String>,
-) -> anyhow::Result<()> {
+fn nearest_caption_section(prior: &Prior, rows: &[FamilyQuality], lines: &mut Vec<String>) -> anyhow::Result<()> {
     lines.extend([
         String::new(),
         format!(
@@ -597,7 +586,7 @@ fn held_out_paraphrases(args: &ReportArgs) -> anyhow::Result<HeldOut> {
 /// The held-out paraphrases' table ([`paraphrase_report`]); `None` when left out.
 fn paraphrase_section(
     args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
+    prior: &Prior,
     paraphrases: HeldOut,
     lines: &mut Vec<String>,
 ) -> anyhow::Result<Option<Vec<ParaphraseOutcome>>> {
@@ -643,9 +632,9 @@ fn paraphrase_section(
 
 fn text_motion_section(
     args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
+    prior: &Prior,
     corpus: &motion_core::corpus::Corpus,
-    device: &candle_core::Device,
+    device: &Device,
     lines: &mut Vec<String>,
 ) -> anyhow::Result<Option<TextMotionReport>> {
     use motion_core::evaluator::Evaluator;
