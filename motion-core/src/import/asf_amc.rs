@@ -22,11 +22,13 @@
 
 mod amc;
 mod asf;
+mod bone;
 mod clip;
 mod lines;
 
 pub use amc::AmcMotion;
-pub use asf::{Asf, AsfBone, Dof};
+pub use asf::Asf;
+pub use bone::{AsfBone, Dof};
 pub use clip::{AsfAmcClip, AsfAmcOptions};
 
 #[cfg(test)]

@@ -6,7 +6,8 @@ use std::str::SplitWhitespace;
 
 use glam::{DQuat, DVec3};
 
-use super::asf::{axis_rotation, euler, Asf, Dof};
+use super::asf::Asf;
+use super::bone::{axis_rotation, euler, Dof};
 use super::lines::{invalid, numbered_lines};
 use crate::import::error::ImportError;
 use crate::import::frames::bracket;
