@@ -58,41 +58,7 @@ impl Bvh {
             return Err(invalid(path, hierarchy_end, None, "file ends without a MOTION section"));
         };
         let mut rest = numbered().skip(motion_at + 1).filter(|(_, l)| !l.trim().is_empty());
-        let (frames_line, frames_text) =
-            rest.next().ok_or_else(|| invalid(path, motion_at + 1, None, "MOTION is not followed by `Frames:`"))?;
-        let declared = header_value(frames_text, "Frames:").and_then(|v| v.parse::<usize>().ok()).ok_or_else(|| {
-            invalid(path, frames_line, None, format!("expected `Frames: <count>`, found `{}`", frames_text.trim()))
-        })?;
-        if declared == 0 {
-            return Err(ImportError::Empty { path: path.into() });
-        }
-        let (time_line, time_text) = rest
-            .next()
-            .ok_or_else(|| invalid(path, frames_line, None, "`Frames:` is not followed by `Frame Time:`"))?;
-        let frame_time_s = header_value(time_text, "Frame Time:").and_then(parse_finite).ok_or_else(|| {
-            invalid(path, time_line, None, format!("expected `Frame Time: <seconds>`, found `{}`", time_text.trim()))
-        })?;
-        if !(FRAME_TIME_S.0..=FRAME_TIME_S.1).contains(&frame_time_s) {
-            return Err(invalid(
-                path,
-                time_line,
-                None,
-                format!(
-                    "Frame Time {} s is outside {} to {} s (1 to 10000 frames per second)",
-                    short_number(frame_time_s),
-                    short_number(FRAME_TIME_S.0),
-                    short_number(FRAME_TIME_S.1)
-                ),
-            ));
-        }
-        check_clip_length(
-            (declared - 1) as f64 * frame_time_s,
-            format_args!(
-                "{}: lines {frames_line}-{time_line}: {declared} frames of {} s",
-                path.display(),
-                short_number(frame_time_s)
-            ),
-        )?;
+        let (declared, frames_line, frame_time_s) = read_motion_header(&mut rest, motion_at, path)?;
         let owners: Vec<(usize, Channel)> =
             joints.iter().enumerate().flat_map(|(j, joint)| joint.channels.iter().map(move |c| (j, *c))).collect();
         // Every value takes at least two bytes of text, so the file's size bounds the table.
@@ -100,31 +66,11 @@ impl Bvh {
         let mut frame_lines = Vec::with_capacity(declared.min(text.len() / 2));
         let mut extra_lines = 0;
         for (line, text) in rest {
-            let frames = frame_lines.len();
-            if frames == declared {
+            if frame_lines.len() == declared {
                 extra_lines += 1;
                 continue;
             }
-            let found = text.split_whitespace().count();
-            if found != channel_count {
-                return Err(invalid(
-                    path,
-                    line,
-                    None,
-                    format!("frame {frames}: expected {channel_count} values, found {found}"),
-                ));
-            }
-            for (tok, (j, channel)) in text.split_whitespace().zip(&owners) {
-                let v = parse_finite(tok).ok_or_else(|| {
-                    invalid(
-                        path,
-                        line,
-                        Some(&joints[*j].name),
-                        format!("frame {frames}, {}: `{tok}` is not a finite number", channel.name()),
-                    )
-                })?;
-                motion.push(v);
-            }
+            read_frame(text, line, frame_lines.len(), &owners, &joints, path, &mut motion)?;
             frame_lines.push(line);
         }
         let frames = frame_lines.len();
@@ -201,6 +147,85 @@ impl Bvh {
         }
         hi - lo
     }
+}
+
+/// The `Frames:` and `Frame Time:` lines after `MOTION` (on line `motion_at`, 0-based):
+/// `(frames, 1-based line of Frames:, frame time s)`. The frame time must be within
+/// [`FRAME_TIME_S`] and the clip's length at 20 fps within [`check_clip_length`]'s limit.
+fn read_motion_header<'a>(
+    rest: &mut impl Iterator<Item = (usize, &'a str)>,
+    motion_at: usize,
+    path: &Path,
+) -> Result<(usize, usize, f64), ImportError> {
+    let (frames_line, frames_text) =
+        rest.next().ok_or_else(|| invalid(path, motion_at + 1, None, "MOTION is not followed by `Frames:`"))?;
+    let declared = header_value(frames_text, "Frames:").and_then(|v| v.parse::<usize>().ok()).ok_or_else(|| {
+        invalid(path, frames_line, None, format!("expected `Frames: <count>`, found `{}`", frames_text.trim()))
+    })?;
+    if declared == 0 {
+        return Err(ImportError::Empty { path: path.into() });
+    }
+    let (time_line, time_text) =
+        rest.next().ok_or_else(|| invalid(path, frames_line, None, "`Frames:` is not followed by `Frame Time:`"))?;
+    let frame_time_s = header_value(time_text, "Frame Time:").and_then(parse_finite).ok_or_else(|| {
+        invalid(path, time_line, None, format!("expected `Frame Time: <seconds>`, found `{}`", time_text.trim()))
+    })?;
+    if !(FRAME_TIME_S.0..=FRAME_TIME_S.1).contains(&frame_time_s) {
+        return Err(invalid(
+            path,
+            time_line,
+            None,
+            format!(
+                "Frame Time {} s is outside {} to {} s (1 to 10000 frames per second)",
+                short_number(frame_time_s),
+                short_number(FRAME_TIME_S.0),
+                short_number(FRAME_TIME_S.1)
+            ),
+        ));
+    }
+    check_clip_length(
+        (declared - 1) as f64 * frame_time_s,
+        format_args!(
+            "{}: lines {frames_line}-{time_line}: {declared} frames of {} s",
+            path.display(),
+            short_number(frame_time_s)
+        ),
+    )?;
+    Ok((declared, frames_line, frame_time_s))
+}
+
+/// Frame `frame`'s values (`text`, on `line`) onto `motion`: one finite number per channel,
+/// `owners` naming each channel's joint and kind for messages.
+fn read_frame(
+    text: &str,
+    line: usize,
+    frame: usize,
+    owners: &[(usize, Channel)],
+    joints: &[BvhJoint],
+    path: &Path,
+    motion: &mut Vec<f64>,
+) -> Result<(), ImportError> {
+    let found = text.split_whitespace().count();
+    if found != owners.len() {
+        return Err(invalid(
+            path,
+            line,
+            None,
+            format!("frame {frame}: expected {} values, found {found}", owners.len()),
+        ));
+    }
+    for (tok, (j, channel)) in text.split_whitespace().zip(owners) {
+        let v = parse_finite(tok).ok_or_else(|| {
+            invalid(
+                path,
+                line,
+                Some(&joints[*j].name),
+                format!("frame {frame}, {}: `{tok}` is not a finite number", channel.name()),
+            )
+        })?;
+        motion.push(v);
+    }
+    Ok(())
 }
 
 /// `Frames: 12` / `Frame Time: 0.05` (any spacing, ASCII case-insensitive key): the value token.
