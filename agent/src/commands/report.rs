@@ -1,9 +1,10 @@
 //! `mogen report prior`: the prior quality report, per skill family against the corpus's
 //! held-out capture, or per label against a database of labelled clips.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use candle_core::Device;
 use clap::Args;
 use motion_core::cleanup::{foot_lock, FootLockConfig};
 use motion_core::corpus::family::Family;
@@ -11,7 +12,7 @@ use motion_core::corpus::file as corpus_file;
 use motion_core::database::MotionDatabase;
 use motion_core::generation::inversion::InversionConfig;
 use motion_core::metrics::MetricMeans;
-use motion_core::prior::{RootDecode, Sampling};
+use motion_core::prior::{Prior, RootDecode, Sampling};
 use motion_core::quality::families::{family_report, FamilyConfig, FamilyQuality};
 use motion_core::quality::held_out_ratio::{ratios, Ratio, RATIO_FIGURES};
 use motion_core::quality::paraphrases::{paraphrase_report, read_paraphrases, Paraphrase, ParaphraseOutcome};
@@ -19,9 +20,10 @@ use motion_core::quality::text_motion::{
     text_motion_report, TextMotionConfig, TextMotionReport, CLEANED, HELD_OUT, SAMPLES, TRAIN,
 };
 use motion_core::quality::{
-    denoising_fidelity, inversion_round_trip, quality_report, Denoising, QualityConfig, ReportSampling,
+    denoising_fidelity, inversion_round_trip, quality_report, Denoising, LabelQuality, QualityConfig, ReportSampling,
 };
 use motion_core::render::{motion_strip, StripRow};
+use motion_core::skeleton::Pose;
 use motion_core::text::caption_bank::KEEP_OWN_SIMILARITY;
 
 use agent::paths;
@@ -142,7 +144,29 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     };
     let db = MotionDatabase::load(database)
         .with_context(|| format!("reading {} (build it with `mogen data build`)", database.display()))?;
-    let config = QualityConfig { sampling: args.sampling(), labels: args.labels };
+    let (mut lines, rows) = label_tables(&args, &prior, &db, &device)?;
+    lines.push(String::new());
+    let walk = "a person walks forward";
+    if db.labels().iter().any(|l| l == walk) {
+        inversion_lines(&args, &prior, &db, walk, &device, &mut lines)?;
+    }
+    std::fs::create_dir_all(&args.out)?;
+    std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
+    std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&rows)?)?;
+    sample_strip(&args, &prior, &device)?;
+    println!("wrote {}/{{report.md,report.json,samples.png}}", args.out.display());
+    Ok(())
+}
+
+/// The per-label tables against the database (printed as they come): the samples as the
+/// network made them, then after the foot clean-up, each cell beside the training data's.
+fn label_tables(
+    args: &ReportArgs,
+    prior: &Prior,
+    db: &MotionDatabase,
+    device: &Device,
+) -> anyhow::Result<(Vec<String>, Vec<LabelQuality>)> {
+    let config = QualityConfig { sampling: args.sampling(), labels: args.labels.clone() };
     let metric_columns = METRIC_COLUMNS.join(" | ");
     let header = format!("| label | {metric_columns} | nearest train (m) | data spacing (m) | diversity (m) |");
     let decode = format!(
@@ -153,7 +177,7 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let mut lines =
         vec![decode, String::new(), header.clone(), format!("|{}", "---|".repeat(4 + METRIC_COLUMNS.len()))];
     println!("{header}");
-    let rows = quality_report(&prior, &db, &config, &device, |r| {
+    let rows = quality_report(prior, db, &config, device, |r| {
         let line = format!(
             "| {} | {} | {:.3} | {:.3} | {:.3} |",
             r.label,
@@ -177,57 +201,69 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         lines.push(format!("| {} | {} |", r.label, metric_cells(&r.cleaned, &r.training)));
     }
     println!("{}", lines[lines.len() - rows.len() - 4..].join("\n"));
-    lines.push(String::new());
-    let walk = "a person walks forward";
-    if db.labels().iter().any(|l| l == walk) {
-        let polished = InversionConfig {
-            ddim_steps: args.invert_steps,
-            fixed_point_iterations: args.invert_iterations,
-            feature_polish_steps: args.feature_polish_steps,
-            polish_steps: args.polish_steps,
-            ..InversionConfig::default()
-        };
-        let round_trips = [
-            InversionConfig::unpolished(args.invert_steps, 0),
-            InversionConfig::unpolished(args.invert_steps, args.invert_iterations),
-            polished,
-        ];
-        for config in &round_trips {
-            let r = inversion_round_trip(&prior, &db, walk, (8, 120), config, &device)?;
-            let line = format!(
-                "DDIM-{} inversion ({} fixed-point iterations{}) then sampling of {} `{walk}` windows ({} frames): mean joint error {:.4} m, pelvis-relative {:.4} m",
-                r.ddim_steps,
-                r.fixed_point_iterations,
-                if r.feature_polish_steps + r.polish_steps > 0 {
-                    format!(
-                        "; rescaled to unit RMS, {} feature-polish and {} joint-polish steps",
-                        r.feature_polish_steps, r.polish_steps
-                    )
-                } else {
-                    String::new()
-                },
-                r.windows,
-                r.frames,
-                r.mean_joint_error_m,
-                r.pelvis_relative_error_m
-            );
-            println!("{line}");
-            lines.push(line + "  ");
-        }
-        for f in denoising_fidelity(&prior, &db, walk, (16, 120), &[50, 200, 400, 600, 800, 900, 950], &device)? {
-            let m = &f.metrics;
-            let line = format!(
-                "One-step x̂0 of {} `{walk}` windows noised to t = {}: MSE {:.4} (copying x_t/√ᾱ: {:.4}; frames shuffled: {:.4}), skate {:.3}, foot acc {:.4} m/frame², travel {:.2} m, {:.2} steps/s",
-                m.count,
-                f.timestep, f.mse, f.identity_mse, f.shuffled_mse, m.foot_skate_ratio, m.foot_acceleration, m.travel_m, m.pace_steps_per_s
-            );
-            println!("{line}");
-            lines.push(line + "  ");
-        }
+    Ok((lines, rows))
+}
+
+/// The `walk` windows' DDIM inversion round trips (classic, fixed-point, polished) and their
+/// one-step denoising fidelity at several noise levels, printed and added to `lines`.
+fn inversion_lines(
+    args: &ReportArgs,
+    prior: &Prior,
+    db: &MotionDatabase,
+    walk: &str,
+    device: &Device,
+    lines: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    let polished = InversionConfig {
+        ddim_steps: args.invert_steps,
+        fixed_point_iterations: args.invert_iterations,
+        feature_polish_steps: args.feature_polish_steps,
+        polish_steps: args.polish_steps,
+        ..InversionConfig::default()
+    };
+    let round_trips = [
+        InversionConfig::unpolished(args.invert_steps, 0),
+        InversionConfig::unpolished(args.invert_steps, args.invert_iterations),
+        polished,
+    ];
+    for config in &round_trips {
+        let r = inversion_round_trip(prior, db, walk, (8, 120), config, device)?;
+        let line = format!(
+            "DDIM-{} inversion ({} fixed-point iterations{}) then sampling of {} `{walk}` windows ({} frames): mean joint error {:.4} m, pelvis-relative {:.4} m",
+            r.ddim_steps,
+            r.fixed_point_iterations,
+            if r.feature_polish_steps + r.polish_steps > 0 {
+                format!(
+                    "; rescaled to unit RMS, {} feature-polish and {} joint-polish steps",
+                    r.feature_polish_steps, r.polish_steps
+                )
+            } else {
+                String::new()
+            },
+            r.windows,
+            r.frames,
+            r.mean_joint_error_m,
+            r.pelvis_relative_error_m
+        );
+        println!("{line}");
+        lines.push(line + "  ");
     }
-    std::fs::create_dir_all(&args.out)?;
-    std::fs::write(args.out.join("report.md"), lines.join("\n") + "\n")?;
-    std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&rows)?)?;
+    for f in denoising_fidelity(prior, db, walk, (16, 120), &[50, 200, 400, 600, 800, 900, 950], device)? {
+        let m = &f.metrics;
+        let line = format!(
+            "One-step x̂0 of {} `{walk}` windows noised to t = {}: MSE {:.4} (copying x_t/√ᾱ: {:.4}; frames shuffled: {:.4}), skate {:.3}, foot acc {:.4} m/frame², travel {:.2} m, {:.2} steps/s",
+            m.count,
+            f.timestep, f.mse, f.identity_mse, f.shuffled_mse, m.foot_skate_ratio, m.foot_acceleration, m.travel_m, m.pace_steps_per_s
+        );
+        println!("{line}");
+        lines.push(line + "  ");
+    }
+    Ok(())
+}
+
+/// samples.png: two unconstrained samples of each of a few labels (the i-th label's seeds
+/// 1000 + 10·i and 1001 + 10·i), after the foot clean-up.
+fn sample_strip(args: &ReportArgs, prior: &Prior, device: &Device) -> anyhow::Result<()> {
     let strip_labels = [
         "a person walks forward",
         "a person walks and turns left",
@@ -248,8 +284,8 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
                 steps: args.steps,
                 guidance: motion_core::diffusion::Guidance { scale: args.guidance },
             };
-            let x = prior.sample(&request, &device)?;
-            let poses = motion_core::quality::joints_of(&prior, &x)?.remove(0);
+            let x = prior.sample(&request, device)?;
+            let poses = motion_core::quality::joints_of(prior, &x)?.remove(0);
             let cleaned = foot_lock(&poses, None, &FootLockConfig::default())?.poses;
             motions.push((format!("{label} (seed {})", 1000 + 10 * i as u64 + seed), cleaned));
         }
@@ -263,7 +299,6 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         "unconstrained samples of the shipped prior, after the foot clean-up",
         &args.out.join("samples.png"),
     )?;
-    println!("wrote {}/{{report.md,report.json,samples.png}}", args.out.display());
     Ok(())
 }
 
@@ -306,11 +341,7 @@ fn ratio_section(rows: &[FamilyQuality], lines: &mut Vec<String>) -> Vec<serde_j
 
 /// The per-family report against the corpus's held-out capture: report.md, report.json and one
 /// strip per family (2 cleaned samples of each prompt in world coordinates) under `families/`.
-fn run_families(
-    args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
-    device: &candle_core::Device,
-) -> anyhow::Result<()> {
+fn run_families(args: &ReportArgs, prior: &Prior, device: &Device) -> anyhow::Result<()> {
     let corpus =
         corpus_file::load(&args.corpus).with_context(|| format!("reading the corpus {}", args.corpus.display()))?;
     // Read before the families are sampled, so that a bad file fails at once.
@@ -336,40 +367,11 @@ fn run_families(
     let mut lines =
         vec![intro.clone(), String::new(), header.clone(), format!("|{}", "---|".repeat(7 + METRIC_COLUMNS.len()))];
     println!("{intro}\n\n{header}");
-    let share = |s: Option<f64>| s.map_or("–".to_owned(), |v| format!("{:.0} %", 100.0 * v));
     let rows = family_report(prior, &corpus, &config, device, |r, cleaned| {
-        let [samples, cleaned_share, held_out] = r.detected;
-        let line = format!(
-            "| {} | {} | {} | {} / {} / {} | {} | {:.3} / {} | {:.3} | {} |",
-            r.family.name(),
-            r.held_out.count,
-            r.family.detector().unwrap_or("none"),
-            share(samples),
-            share(cleaned_share),
-            share(held_out),
-            r.detected_per_prompt.iter().map(|s| share(*s)).collect::<Vec<_>>().join(" / "),
-            r.nearest_training_m,
-            if r.held_out_nearest_training_m.is_finite() {
-                format!("{:.3}", r.held_out_nearest_training_m)
-            } else {
-                "–".to_owned()
-            },
-            r.sample_diversity_m,
-            metric_cells(&r.samples, &r.held_out)
-        );
+        let line = family_row(r);
         println!("{line}");
         lines.push(line);
-        // The first two samples of each prompt, labelled with the prompt they were drawn for.
-        let shown: Vec<StripRow<'_>> = (0..r.prompts.len())
-            .flat_map(|k| cleaned.iter().zip(&r.sample_prompts).enumerate().filter(move |(_, (_, &p))| p == k).take(2))
-            .map(|(i, (poses, &k))| StripRow { label: format!("{} ({i})", r.prompts[k]), poses })
-            .collect();
-        let file = strips.join(format!("{}.png", r.family.name().replace([' ', '/'], "_")));
-        if let Err(e) =
-            motion_strip(&shown, 8, &[], &[], &format!("{}: samples after the foot clean-up", r.family.name()), &file)
-        {
-            eprintln!("warning: {}: {e}", file.display());
-        }
+        family_strip(r, cleaned, &strips);
     })?;
     lines.extend([
         String::new(),
@@ -383,33 +385,7 @@ fn run_families(
     }
     let ratios = ratio_section(&rows, &mut lines);
     if prior.captions.is_some() {
-        lines.extend([
-            String::new(),
-            format!(
-                "The training caption nearest each prompt as restated in the captions' verbs (WordNet; cosine similarity of the sentence vectors); a prompt under {KEEP_OWN_SIMILARITY} is conditioned on the caption's vector, the others on their own:"
-            ),
-            String::new(),
-            "| family | prompt | restated | conditioned on | cosine |".to_owned(),
-            "|---|---|---|---|---|".to_owned(),
-        ]);
-        for r in &rows {
-            for prompt in &r.prompts {
-                if let Some(n) = prior.nearest_caption(prompt)? {
-                    let caption = if n.replaces_prompt() {
-                        n.caption
-                    } else {
-                        format!("(its own vector; nearest: {})", n.caption)
-                    };
-                    let restated = prior.restate(prompt);
-                    let restated = if restated.replaced.is_empty() { "–".to_owned() } else { restated.text };
-                    lines.push(format!(
-                        "| {} | {prompt} | {restated} | {caption} | {:.2} |",
-                        r.family.name(),
-                        n.similarity
-                    ));
-                }
-            }
-        }
+        nearest_caption_section(prior, &rows, &mut lines)?;
     }
     let paraphrases = paraphrase_section(args, prior, paraphrases, &mut lines)?;
     let text_motion = text_motion_section(args, prior, &corpus, device, &mut lines)?;
@@ -423,6 +399,76 @@ fn run_families(
     });
     std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&json)?)?;
     println!("wrote {}/{{report.md,report.json,families/*.png}}", args.out.display());
+    Ok(())
+}
+
+/// A family's row of the first table: held-out windows, detector and shares passing it,
+/// nearest training distances, diversity and the metric cells.
+fn family_row(r: &FamilyQuality) -> String {
+    let share = |s: Option<f64>| s.map_or("–".to_owned(), |v| format!("{:.0} %", 100.0 * v));
+    let [samples, cleaned_share, held_out] = r.detected;
+    format!(
+        "| {} | {} | {} | {} / {} / {} | {} | {:.3} / {} | {:.3} | {} |",
+        r.family.name(),
+        r.held_out.count,
+        r.family.detector().unwrap_or("none"),
+        share(samples),
+        share(cleaned_share),
+        share(held_out),
+        r.detected_per_prompt.iter().map(|s| share(*s)).collect::<Vec<_>>().join(" / "),
+        r.nearest_training_m,
+        if r.held_out_nearest_training_m.is_finite() {
+            format!("{:.3}", r.held_out_nearest_training_m)
+        } else {
+            "–".to_owned()
+        },
+        r.sample_diversity_m,
+        metric_cells(&r.samples, &r.held_out)
+    )
+}
+
+/// `<family>.png` in `strips`: the first two cleaned samples of each prompt, labelled with the
+/// prompt they were drawn for; a failure to draw is a warning.
+fn family_strip(r: &FamilyQuality, cleaned: &[Vec<Pose>], strips: &Path) {
+    let shown: Vec<StripRow<'_>> = (0..r.prompts.len())
+        .flat_map(|k| cleaned.iter().zip(&r.sample_prompts).enumerate().filter(move |(_, (_, &p))| p == k).take(2))
+        .map(|(i, (poses, &k))| StripRow { label: format!("{} ({i})", r.prompts[k]), poses })
+        .collect();
+    let file = strips.join(format!("{}.png", r.family.name().replace([' ', '/'], "_")));
+    if let Err(e) =
+        motion_strip(&shown, 8, &[], &[], &format!("{}: samples after the foot clean-up", r.family.name()), &file)
+    {
+        eprintln!("warning: {}: {e}", file.display());
+    }
+}
+
+/// The training caption nearest each prompt, as restated in the captions' verbs, and whether
+/// the prompt is conditioned on it, as a table in `lines`.
+fn nearest_caption_section(prior: &Prior, rows: &[FamilyQuality], lines: &mut Vec<String>) -> anyhow::Result<()> {
+    lines.extend([
+        String::new(),
+        format!(
+            "The training caption nearest each prompt as restated in the captions' verbs (WordNet; cosine similarity of the sentence vectors); a prompt under {KEEP_OWN_SIMILARITY} is conditioned on the caption's vector, the others on their own:"
+        ),
+        String::new(),
+        "| family | prompt | restated | conditioned on | cosine |".to_owned(),
+        "|---|---|---|---|---|".to_owned(),
+    ]);
+    for r in rows {
+        for prompt in &r.prompts {
+            if let Some(n) = prior.nearest_caption(prompt)? {
+                let caption =
+                    if n.replaces_prompt() { n.caption } else { format!("(its own vector; nearest: {})", n.caption) };
+                let restated = prior.restate(prompt);
+                let restated = if restated.replaced.is_empty() { "–".to_owned() } else { restated.text };
+                lines.push(format!(
+                    "| {} | {prompt} | {restated} | {caption} | {:.2} |",
+                    r.family.name(),
+                    n.similarity
+                ));
+            }
+        }
+    }
     Ok(())
 }
 
@@ -496,7 +542,7 @@ pub fn run_loss(args: LossArgs) -> anyhow::Result<()> {
         .map(|i| {
             let lo = i.saturating_sub(window - 1);
             let s = &raw[lo..=i];
-            (raw[i].0, s.iter().map(|p| p.1).sum::<f64>() / s.len() as f64)
+            (raw[i].0, motion_core::numeric::mean(s.iter().map(|p| p.1)))
         })
         .collect();
     motion_core::render::line_plot(
@@ -540,7 +586,7 @@ fn held_out_paraphrases(args: &ReportArgs) -> anyhow::Result<HeldOut> {
 /// The held-out paraphrases' table ([`paraphrase_report`]); `None` when left out.
 fn paraphrase_section(
     args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
+    prior: &Prior,
     paraphrases: HeldOut,
     lines: &mut Vec<String>,
 ) -> anyhow::Result<Option<Vec<ParaphraseOutcome>>> {
@@ -573,7 +619,7 @@ fn paraphrase_section(
     }
     let shares: Vec<f64> = outcomes.iter().filter_map(|o| o.detected).collect();
     if !shares.is_empty() {
-        let mean = shares.iter().sum::<f64>() / shares.len() as f64;
+        let mean = motion_core::numeric::mean(shares.iter().copied());
         lines.push(String::new());
         lines.push(format!(
             "Mean share passing over the {} paraphrases with a detector: {:.0} %.",
@@ -586,9 +632,9 @@ fn paraphrase_section(
 
 fn text_motion_section(
     args: &ReportArgs,
-    prior: &motion_core::prior::Prior,
+    prior: &Prior,
     corpus: &motion_core::corpus::Corpus,
-    device: &candle_core::Device,
+    device: &Device,
     lines: &mut Vec<String>,
 ) -> anyhow::Result<Option<TextMotionReport>> {
     use motion_core::evaluator::Evaluator;

@@ -2,7 +2,8 @@
 //! sentence encoder, a validation loss on its validation split) or on a database of a user's
 //! own labelled clips.
 
-use std::path::PathBuf;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -12,7 +13,7 @@ use motion_core::corpus::{file as corpus_file, Split};
 use motion_core::database::MotionDatabase;
 use motion_core::model::{MdmConfig, Prediction};
 use motion_core::text::{ConditionEncoder, MINILM_NAME};
-use motion_core::training::{saved_model_config, TrainConfig, Trainer, TrainingSet};
+use motion_core::training::{saved_model_config, StepReport, TrainConfig, Trainer, TrainingSet};
 
 use agent::paths;
 
@@ -144,67 +145,119 @@ pub struct TrainArgs {
     loss_csv: Option<PathBuf>,
 }
 
-pub fn run(args: TrainArgs) -> anyhow::Result<()> {
-    // Each shard runs on a core of rayon's pool. Candle's own element-wise worker pool
-    // (CANDLE_NUM_THREADS − 1 spinning threads, created on first use) would compete with the
-    // shards for the same cores: 0.64 s per step against 0.28 s without it (2 cores, d = 128).
-    // Nothing has touched a tensor yet (only the command's idle rayon workers exist), so the
-    // variable is read in time and by no other thread meanwhile.
-    if args.shards > 1 && std::env::var_os("CANDLE_NUM_THREADS").is_none() {
-        std::env::set_var("CANDLE_NUM_THREADS", "1");
+impl TrainArgs {
+    /// The training configuration the flags give (TrainConfig's defaults for the rest).
+    fn train_config(&self) -> TrainConfig {
+        TrainConfig {
+            steps: self.steps,
+            batch_size: self.batch_size,
+            lr: self.lr,
+            max_frames: self.max_frames,
+            family_balance: self.family_balance,
+            ema_decay: self.ema_decay,
+            checkpoint_every: self.checkpoint_every,
+            root_weight: self.root_weight,
+            ric_weight: self.ric_weight,
+            snr_gamma: self.snr_gamma,
+            high_noise_fraction: self.high_noise_fraction,
+            frame_corruption: self.frame_corruption,
+            text_noise: self.text_noise,
+            velocity_weight: self.velocity_weight,
+            foot_contact_weight: self.foot_contact_weight,
+            seed: self.seed,
+            shards: self.shards,
+            ..TrainConfig::default()
+        }
     }
+
+    /// The model's sizes: those the flags give, else those written in the checkpoint the run
+    /// continues or the --init prior it starts from (flags given beside them must agree with
+    /// them: resume and init_from_prior check), else the small model's.
+    fn model_config(&self) -> anyhow::Result<MdmConfig> {
+        let base = match (&self.init, self.checkpoint.exists()) {
+            (_, true) => saved_model_config(&self.checkpoint).context("reading the checkpoint's model sizes")?,
+            (Some(init), false) => {
+                saved_model_config(init).with_context(|| format!("reading the model sizes of {}", init.display()))?
+            }
+            (None, false) => MdmConfig::small(),
+        };
+        Ok(MdmConfig {
+            latent_dim: self.latent_dim.unwrap_or(base.latent_dim),
+            ff_size: self.ff_size.unwrap_or(base.ff_size),
+            num_layers: self.layers.unwrap_or(base.num_layers),
+            prediction: self.prediction.unwrap_or(base.prediction),
+            dropout: self.dropout.unwrap_or(base.dropout),
+            ..base
+        })
+    }
+
+    /// Whether step `r` is one with a validation loss: every --validate-every steps, the last,
+    /// and the --stop-after step.
+    fn validation_due(&self, r: &StepReport) -> bool {
+        r.step % self.validate_every.max(1) == 0 || r.step == r.steps || Some(r.step) == self.stop_after
+    }
+}
+
+pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    one_candle_thread_per_shard(args.shards);
     let device = crate::cli::load::device()?;
     let (data, held_out) = match &args.database {
-        Some(path) => {
-            let db = MotionDatabase::load(path)
-                .with_context(|| format!("reading {} (build it with `mogen data build`)", path.display()))?;
-            let defaults = TrainConfig::default();
-            (TrainingSet::from_database(&db, defaults.min_frames, defaults.balance_labels, &device)?, None)
-        }
+        Some(path) => (database_set(path, &device)?, None),
         None => corpus_sets(&args, &device)?,
     };
     if let Some(out) = &args.evaluator {
         let held_out = held_out.context("the evaluator is trained on the corpus")?;
         return train_evaluator(&args, out, &data, &held_out, &device);
     }
-    // The model the run continues (a checkpoint) or starts from (--init) is written in that file;
-    // flags given beside it must agree with it (resume and init_from_prior check).
-    let base = match (&args.init, args.checkpoint.exists()) {
-        (_, true) => saved_model_config(&args.checkpoint).context("reading the checkpoint's model sizes")?,
-        (Some(init), false) => {
-            saved_model_config(init).with_context(|| format!("reading the model sizes of {}", init.display()))?
-        }
-        (None, false) => MdmConfig::small(),
-    };
-    let model = MdmConfig {
-        latent_dim: args.latent_dim.unwrap_or(base.latent_dim),
-        ff_size: args.ff_size.unwrap_or(base.ff_size),
-        num_layers: args.layers.unwrap_or(base.num_layers),
-        prediction: args.prediction.unwrap_or(base.prediction),
-        dropout: args.dropout.unwrap_or(base.dropout),
-        ..base
-    };
-    let config = TrainConfig {
-        steps: args.steps,
-        batch_size: args.batch_size,
-        lr: args.lr,
-        max_frames: args.max_frames,
-        family_balance: args.family_balance,
-        ema_decay: args.ema_decay,
-        checkpoint_every: args.checkpoint_every,
-        root_weight: args.root_weight,
-        ric_weight: args.ric_weight,
-        snr_gamma: args.snr_gamma,
-        high_noise_fraction: args.high_noise_fraction,
-        frame_corruption: args.frame_corruption,
-        text_noise: args.text_noise,
-        velocity_weight: args.velocity_weight,
-        foot_contact_weight: args.foot_contact_weight,
-        seed: args.seed,
-        shards: args.shards,
-        ..TrainConfig::default()
-    };
+    let model = args.model_config()?;
+    let config = args.train_config();
     let mut trainer = Trainer::new(data, model, config.clone(), &device).context("setting up training")?;
+    resume_or_init(&args, &mut trainer)?;
+    print_plan(&trainer, &config);
+    let mut log = StepLog::new(config.steps, trainer.step(), args.loss_csv.as_deref())?;
+    trainer
+        .run(args.stop_after, Some(&args.checkpoint), |r, trainer| {
+            log.show_progress(r);
+            let validation = match &held_out {
+                Some(set) if args.validation_due(r) => {
+                    let loss = trainer.validation_loss(set, args.validation_batches, VALIDATION_SEED)?;
+                    log.println(format!("step {}: validation loss {loss:.4}", r.step));
+                    Some(loss)
+                }
+                _ => None,
+            };
+            log.write_row(r, validation);
+            Ok(())
+        })
+        .with_context(|| format!("training (checkpoints to {})", args.checkpoint.display()))?;
+    log.bar.finish();
+    trainer.save_prior(&args.out).context("writing the prior")?;
+    println!("wrote {} after {:.0} s", args.out.display(), log.start.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// Each shard runs on a core of rayon's pool. Candle's own element-wise worker pool
+/// (CANDLE_NUM_THREADS − 1 spinning threads, created on first use) would compete with the
+/// shards for the same cores: 0.64 s per step against 0.28 s without it (2 cores, d = 128).
+/// Called before anything has touched a tensor (only the command's idle rayon workers exist),
+/// so the variable is read in time and by no other thread meanwhile.
+fn one_candle_thread_per_shard(shards: usize) {
+    if shards > 1 && std::env::var_os("CANDLE_NUM_THREADS").is_none() {
+        std::env::set_var("CANDLE_NUM_THREADS", "1");
+    }
+}
+
+/// The clips of a database built by `mogen data build`, labels as conditions.
+fn database_set(path: &Path, device: &candle_core::Device) -> anyhow::Result<TrainingSet> {
+    let db = MotionDatabase::load(path)
+        .with_context(|| format!("reading {} (build it with `mogen data build`)", path.display()))?;
+    let defaults = TrainConfig::default();
+    Ok(TrainingSet::from_database(&db, defaults.min_frames, defaults.balance_labels, device)?)
+}
+
+/// Resumes from an existing --checkpoint (refusing --init beside it, and trimming the loss CSV
+/// to the checkpoint's step), or starts from the --init prior when given.
+fn resume_or_init(args: &TrainArgs, trainer: &mut Trainer) -> anyhow::Result<()> {
     if args.checkpoint.exists() {
         if let Some(init) = &args.init {
             anyhow::bail!(
@@ -222,6 +275,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         trainer.init_from_prior(init).with_context(|| format!("starting from the prior {}", init.display()))?;
         eprintln!("fine-tuning {} from step 0", init.display());
     }
+    Ok(())
+}
+
+/// Prints what is trained on what, and with --family-balance each skill family's share of the
+/// data and of the crops drawn.
+fn print_plan(trainer: &Trainer, config: &TrainConfig) {
     eprintln!(
         "training {} parameters on {:.2} h of motion ({} sequences, {} captions), {} steps of batch {}",
         trainer.model_config().parameter_count(),
@@ -243,86 +302,93 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             .collect();
         eprintln!("crops by skill family (frames of the data -> crops drawn): {}", shares.join(", "));
     }
-    let bar = ProgressBar::new(config.steps as u64).with_position(trainer.step() as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    let mut csv = match &args.loss_csv {
-        Some(p) => {
-            let exists = p.exists();
-            let mut f = std::fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(p)
-                .with_context(|| format!("opening {}", p.display()))?;
-            if !exists {
-                use std::io::Write;
-                writeln!(f, "step,loss,velocity,foot_contact,lr,frames,seconds,validation")?;
-            }
-            Some(f)
-        }
-        None => None,
-    };
-    let start = Instant::now();
-    let mut smoothed: Option<f64> = None;
-    trainer
-        .run(args.stop_after, Some(&args.checkpoint), |r, trainer| {
-            let s = smoothed.map_or(r.loss, |s| 0.98 * s + 0.02 * r.loss);
-            smoothed = Some(s);
-            bar.set_position(r.step as u64);
-            bar.set_message(format!("loss {s:.4} lr {:.1e} T={}", r.lr, r.frames));
-            // Not a terminal: a plain line every 100 steps instead of the bar.
-            if bar.is_hidden() && r.step % 100 == 0 {
-                eprintln!(
-                    "step {}/{} loss {s:.4} velocity {:.4} foot contact {:.4} lr {:.1e} ({:.0} s)",
-                    r.step,
-                    r.steps,
-                    r.velocity,
-                    r.foot_contact,
-                    r.lr,
-                    start.elapsed().as_secs_f64()
-                );
-            }
-            let validation = match &held_out {
-                Some(set)
-                    if r.step % args.validate_every.max(1) == 0
-                        || r.step == r.steps
-                        || Some(r.step) == args.stop_after =>
-                {
-                    let loss = trainer.validation_loss(set, args.validation_batches, VALIDATION_SEED)?;
-                    let line = format!("step {}: validation loss {loss:.4}", r.step);
-                    if bar.is_hidden() {
-                        eprintln!("{line}");
-                    } else {
-                        bar.println(line);
-                    }
-                    Some(loss)
+}
+
+/// What a training run shows and records per step: a progress bar (off a terminal, a plain
+/// line every 100 steps instead), the smoothed loss, and the rows of the loss CSV.
+struct StepLog {
+    bar: ProgressBar,
+    /// The --loss-csv file, appended to.
+    csv: Option<std::fs::File>,
+    /// When the steps began.
+    start: Instant,
+    /// Exponential moving average of the loss (weight 0.02 on each new step).
+    smoothed: Option<f64>,
+}
+
+impl StepLog {
+    /// A bar of `steps` at `position`, and the loss CSV opened for appending (its header written
+    /// when the file is new).
+    fn new(steps: usize, position: usize, loss_csv: Option<&Path>) -> anyhow::Result<Self> {
+        let bar = ProgressBar::new(steps as u64).with_position(position as u64);
+        bar.set_style(
+            ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        let csv = match loss_csv {
+            Some(p) => {
+                let exists = p.exists();
+                let mut f = std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(p)
+                    .with_context(|| format!("opening {}", p.display()))?;
+                if !exists {
+                    writeln!(f, "step,loss,velocity,foot_contact,lr,frames,seconds,validation")?;
                 }
-                _ => None,
-            };
-            if let Some(f) = csv.as_mut() {
-                use std::io::Write;
-                let _ = writeln!(
-                    f,
-                    "{},{},{},{},{},{},{:.2},{}",
-                    r.step,
-                    r.loss,
-                    r.velocity,
-                    r.foot_contact,
-                    r.lr,
-                    r.frames,
-                    start.elapsed().as_secs_f64(),
-                    validation.map(|v| v.to_string()).unwrap_or_default()
-                );
+                Some(f)
             }
-            Ok(())
-        })
-        .with_context(|| format!("training (checkpoints to {})", args.checkpoint.display()))?;
-    bar.finish();
-    trainer.save_prior(&args.out).context("writing the prior")?;
-    println!("wrote {} after {:.0} s", args.out.display(), start.elapsed().as_secs_f64());
-    Ok(())
+            None => None,
+        };
+        Ok(StepLog { bar, csv, start: Instant::now(), smoothed: None })
+    }
+
+    /// Moves the bar to step `r` with the smoothed loss.
+    fn show_progress(&mut self, r: &StepReport) {
+        let s = self.smoothed.map_or(r.loss, |s| 0.98 * s + 0.02 * r.loss);
+        self.smoothed = Some(s);
+        self.bar.set_position(r.step as u64);
+        self.bar.set_message(format!("loss {s:.4} lr {:.1e} T={}", r.lr, r.frames));
+        // Not a terminal: a plain line every 100 steps instead of the bar.
+        if self.bar.is_hidden() && r.step % 100 == 0 {
+            eprintln!(
+                "step {}/{} loss {s:.4} velocity {:.4} foot contact {:.4} lr {:.1e} ({:.0} s)",
+                r.step,
+                r.steps,
+                r.velocity,
+                r.foot_contact,
+                r.lr,
+                self.start.elapsed().as_secs_f64()
+            );
+        }
+    }
+
+    /// A line above the bar (on standard error when there is no bar).
+    fn println(&self, line: String) {
+        if self.bar.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            self.bar.println(line);
+        }
+    }
+
+    /// Step `r`'s row of the loss CSV, when one is written.
+    fn write_row(&mut self, r: &StepReport, validation: Option<f64>) {
+        if let Some(f) = self.csv.as_mut() {
+            let _ = writeln!(
+                f,
+                "{},{},{},{},{},{},{:.2},{}",
+                r.step,
+                r.loss,
+                r.velocity,
+                r.foot_contact,
+                r.lr,
+                r.frames,
+                self.start.elapsed().as_secs_f64(),
+                validation.map(|v| v.to_string()).unwrap_or_default()
+            );
+        }
+    }
 }
 
 /// Seed of the validation batches: the same crops, timesteps and noise at every step and in

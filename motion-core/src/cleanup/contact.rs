@@ -48,12 +48,7 @@ pub fn sinking_lift(poses: &[Pose], radius: usize) -> Vec<f64> {
         poses.iter().map(|p| p.iter().map(|v| -v.y).filter(|d| d.is_finite()).fold(0.0, f64::max)).collect();
     let window = |t: usize| t.saturating_sub(radius)..(t + radius + 1).min(depth.len());
     let dilated: Vec<f64> = (0..depth.len()).map(|t| depth[window(t)].iter().copied().fold(0.0, f64::max)).collect();
-    (0..depth.len())
-        .map(|t| {
-            let w = window(t);
-            dilated[w.clone()].iter().sum::<f64>() / w.len() as f64
-        })
-        .collect()
+    (0..depth.len()).map(|t| crate::numeric::mean(dilated[window(t)].iter().copied())).collect()
 }
 
 /// Speed of a joint per frame, m/s: central differences, one-sided at the ends (0 for one frame).

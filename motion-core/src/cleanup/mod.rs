@@ -459,7 +459,7 @@ fn report(
         unreachable: counts.unreachable,
         held_above_floor: counts.held_above_floor,
         max_displacement_m: displacements.iter().copied().fold(0.0, f64::max),
-        mean_displacement_m: displacements.iter().sum::<f64>() / displacements.len().max(1) as f64,
+        mean_displacement_m: crate::numeric::mean(displacements.iter().copied()),
         skate_before: foot_skate_ratio(before),
         skate_after: foot_skate_ratio(after),
         max_bone_length_change_m,

@@ -261,6 +261,7 @@ impl Compiler<'_> {
         })
     }
 
+    /// The node of an expression of constraint `id`, its frames resolved in the clip.
     fn expr(&self, id: &str, expr: &Expr) -> Result<Node> {
         Ok(match expr {
             Expr::Equal(Equal { quantity, target, metric, frames, when, reduce }) => self.compare(
@@ -279,18 +280,7 @@ impl Compiler<'_> {
             Expr::And(args) => Node::And(args.args.iter().map(|a| self.expr(id, a)).collect::<Result<_>>()?),
             Expr::Or(args) => Node::Or(args.args.iter().map(|a| self.expr(id, a)).collect::<Result<_>>()?),
             Expr::Not(not) => Node::Not { arg: Box::new(self.expr(id, &not.arg)?), margin: not.margin },
-            Expr::Count(Count { signals, extremum, threshold, target_count, sharpness, smoothing_frames, frames }) => {
-                let n = signals.iter().map(|s| self.length(s)).min().unwrap_or(0);
-                Node::Count {
-                    signals: signals.to_vec(),
-                    extremum: *extremum,
-                    threshold: *threshold,
-                    target: f64::from(*target_count),
-                    sharpness: *sharpness,
-                    smoothing: *smoothing_frames as usize,
-                    frames: self.select(frames, n)?.kept().to_vec(),
-                }
-            }
+            Expr::Count(count) => self.count(count)?,
             Expr::Steps(Steps { target_count }) => Node::Steps { target: f64::from(*target_count) },
             Expr::Events(events @ Events { signal, event, target_count, frames, .. }) => Node::Events {
                 signal: signal.clone(),
@@ -299,20 +289,7 @@ impl Compiler<'_> {
                 target: f64::from(*target_count),
                 frames: self.select(frames, self.length(signal))?,
             },
-            Expr::Airborne(Airborne { clearance_m, min_frames, frames, when }) => {
-                let length = *min_frames as usize;
-                let starts = flight::window_starts(self.select(frames, self.frames)?.kept(), length);
-                if starts.is_empty() {
-                    candle_core::bail!("constraint {id}: no {length} consecutive frames in its frames");
-                }
-                let n = starts.len();
-                Node::Airborne {
-                    clearance: *clearance_m,
-                    length,
-                    starts: Tensor::from_vec(starts.into_iter().map(|f| f as u32).collect::<Vec<_>>(), n, self.device)?,
-                    when: when.clone(),
-                }
-            }
+            Expr::Airborne(airborne) => self.airborne(id, airborne)?,
             Expr::Carry(Carry { hands, diameter_m, clearance_m, frames, reduce }) => Node::Carry {
                 hands: *hands,
                 diameter: *diameter_m,
@@ -320,20 +297,7 @@ impl Compiler<'_> {
                 frames: self.select(frames, self.frames)?,
                 reduce: *reduce,
             },
-            Expr::Scene(SceneConstraint { body, primitive, frames, when, reduce }) => {
-                let joints = match &body.joints {
-                    JointSet::All => None,
-                    JointSet::Only(list) => Some(self.joint_index(list)?),
-                };
-                Node::Scene {
-                    joints,
-                    surface: body.surface,
-                    primitive: primitive.clone(),
-                    frames: self.select(frames, self.frames)?,
-                    when: when.clone(),
-                    reduce: *reduce,
-                }
-            }
+            Expr::Scene(scene) => self.scene(scene)?,
             Expr::BoneDirection(BoneDirection { joint, direction, frames, reduce }) => Node::BoneDirection {
                 joint: *joint,
                 parent: joint.parent().ok_or_else(|| candle_core::Error::Msg("the pelvis has no bone".into()))?,
@@ -341,25 +305,7 @@ impl Compiler<'_> {
                 frames: self.select(frames, self.frames)?,
                 reduce: *reduce,
             },
-            Expr::FootContact(FootContact { feet, at, during, max_height_m, max_speed_m_per_s }) => {
-                let resolve = |f: &FrameRef| {
-                    f.resolve(self.frames as u32).map(|f| f as usize).ok_or_else(|| {
-                        candle_core::Error::Msg(format!("frame {f:?} is outside the clip of {} frames", self.frames))
-                    })
-                };
-                let mut kept: Vec<usize> = at.iter().map(resolve).collect::<Result<_>>()?;
-                if let Some(range) = during {
-                    kept.extend(resolve(&range.from)?..=resolve(&range.to)?);
-                }
-                kept.sort_unstable();
-                kept.dedup();
-                Node::FootContact {
-                    feet: feet.to_vec(),
-                    at: kept,
-                    max_height: *max_height_m,
-                    max_speed: *max_speed_m_per_s,
-                }
-            }
+            Expr::FootContact(contact) => self.foot_contact(contact)?,
             Expr::SelfCollision(SelfCollision { limbs, torso, min_distance_m, axes, frames, reduce }) => {
                 Node::SelfCollision {
                     limbs: self.joint_index(limbs)?,
@@ -385,6 +331,78 @@ impl Compiler<'_> {
                     frames: self.select(frames, n)?,
                 }
             }
+        })
+    }
+
+    /// A soft count: its frames are those of the shortest signal.
+    fn count(&self, count: &Count) -> Result<Node> {
+        let Count { signals, extremum, threshold, target_count, sharpness, smoothing_frames, frames } = count;
+        let n = signals.iter().map(|s| self.length(s)).min().unwrap_or(0);
+        Ok(Node::Count {
+            signals: signals.to_vec(),
+            extremum: *extremum,
+            threshold: *threshold,
+            target: f64::from(*target_count),
+            sharpness: *sharpness,
+            smoothing: *smoothing_frames as usize,
+            frames: self.select(frames, n)?.kept().to_vec(),
+        })
+    }
+
+    /// A flight: the start frames of every window of `min_frames` consecutive selected frames;
+    /// none is an error of constraint `id`.
+    fn airborne(&self, id: &str, airborne: &Airborne) -> Result<Node> {
+        let Airborne { clearance_m, min_frames, frames, when } = airborne;
+        let length = *min_frames as usize;
+        let starts = flight::window_starts(self.select(frames, self.frames)?.kept(), length);
+        if starts.is_empty() {
+            candle_core::bail!("constraint {id}: no {length} consecutive frames in its frames");
+        }
+        let n = starts.len();
+        Ok(Node::Airborne {
+            clearance: *clearance_m,
+            length,
+            starts: Tensor::from_vec(starts.into_iter().map(|f| f as u32).collect::<Vec<_>>(), n, self.device)?,
+            when: when.clone(),
+        })
+    }
+
+    /// A scene constraint on the listed joints (all when none are listed).
+    fn scene(&self, scene: &SceneConstraint) -> Result<Node> {
+        let SceneConstraint { body, primitive, frames, when, reduce } = scene;
+        let joints = match &body.joints {
+            JointSet::All => None,
+            JointSet::Only(list) => Some(self.joint_index(list)?),
+        };
+        Ok(Node::Scene {
+            joints,
+            surface: body.surface,
+            primitive: primitive.clone(),
+            frames: self.select(frames, self.frames)?,
+            when: when.clone(),
+            reduce: *reduce,
+        })
+    }
+
+    /// A foot contact at the frames `at` and `during`, resolved in the clip, sorted, each once.
+    fn foot_contact(&self, contact: &FootContact) -> Result<Node> {
+        let FootContact { feet, at, during, max_height_m, max_speed_m_per_s } = contact;
+        let resolve = |f: &FrameRef| {
+            f.resolve(self.frames as u32).map(|f| f as usize).ok_or_else(|| {
+                candle_core::Error::Msg(format!("frame {f:?} is outside the clip of {} frames", self.frames))
+            })
+        };
+        let mut kept: Vec<usize> = at.iter().map(resolve).collect::<Result<_>>()?;
+        if let Some(range) = during {
+            kept.extend(resolve(&range.from)?..=resolve(&range.to)?);
+        }
+        kept.sort_unstable();
+        kept.dedup();
+        Ok(Node::FootContact {
+            feet: feet.to_vec(),
+            at: kept,
+            max_height: *max_height_m,
+            max_speed: *max_speed_m_per_s,
         })
     }
 }

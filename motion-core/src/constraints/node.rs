@@ -196,7 +196,8 @@ impl Node {
         }
     }
 
-    /// The node's error `[B]`.
+    /// The node's error `[B]`: each leaf's error, summed over `and`, the least over `or`, and
+    /// the margin's shortfall for `not`.
     pub(super) fn eval(
         &self,
         joints: &Tensor,
@@ -204,25 +205,7 @@ impl Node {
     ) -> std::result::Result<Tensor, ConstraintError> {
         Ok(match self {
             Node::Compare { quantity, comparison, frames, when, reduce: how } => {
-                let q = signal(joints, quantity)?; // [B, n, C]
-                let n = q.dim(1)?;
-                // The comparison is per frame: selecting the frames first spares the others.
-                let q = frames.select(&q)?;
-                let per_frame = match comparison {
-                    Comparison::Equal { target, metric } => {
-                        let target = constant(target, q.dtype(), q.device())?;
-                        let diff = q.broadcast_sub(&target)?;
-                        match metric {
-                            Metric::Squared => diff.sqr()?,
-                            Metric::Absolute => diff.abs()?,
-                        }
-                    }
-                    Comparison::LessThan(max) => (q - *max)?.relu()?,
-                    Comparison::GreaterThan(min) => (*min - q)?.relu()?,
-                }
-                .sum(D::Minus1)?; // [B, F]
-                let mask = frames.condition_mask(joints, when, n)?;
-                reduce(&per_frame, mask.as_ref(), *how)?
+                compare_error(joints, quantity, comparison, frames, when, *how)?
             }
             Node::And(args) => {
                 let mut sum = args[0].eval(joints, initial)?;
@@ -256,18 +239,7 @@ impl Node {
                 (count::soft_event_count(&s, *region, *hysteresis)? - *target)?.sqr()?
             }
             Node::Airborne { clearance, length, starts, when } => {
-                let deficit = flight::flight_deficit(joints, *clearance)?.sqr()?;
-                let means = flight::window_means(&deficit, starts, *length)?; // [B, W]
-                match flight::windows_meeting(joints, when, starts, *length)? {
-                    None => means.min(D::Minus1)?,
-                    Some(valid) => {
-                        // Windows that do not meet `when` are pushed far up; a sample with none
-                        // that meets it has no flight where it must: clearance².
-                        let best = (means + ((1.0 - &valid)? * 1e9)?)?.min(D::Minus1)?;
-                        let any = valid.max(D::Minus1)?;
-                        ((best * &any)? + ((1.0 - any)? * clearance.powi(2))?)?
-                    }
-                }
+                flight_error(joints, *clearance, *length, starts, when)?
             }
             Node::Carry { hands, diameter, clearance, frames, reduce: how } => {
                 let (gap, intrusion) = carry::carry_errors(joints, *hands, *diameter, *clearance)?;
@@ -287,23 +259,7 @@ impl Node {
                 reduce(&u.broadcast_sub(&target)?.sqr()?.sum(D::Minus1)?, None, *how)?
             }
             Node::FootContact { feet, at, max_height, max_speed } => {
-                let frames = joints.dim(1)?;
-                let mut terms = Vec::new();
-                for &foot in feet {
-                    let p = joint(joints, foot)?; // [B, T, 3]
-                    for &t in at {
-                        let y = p.narrow(1, t, 1)?.narrow(D::Minus1, 1, 1)?.squeeze(D::Minus1)?.squeeze(1)?;
-                        let mut term = (y - *max_height)?.relu()?.sqr()?;
-                        if let (Some(limit), true) = (max_speed, frames >= 2) {
-                            let from = t.min(frames - 2);
-                            let v = ((p.narrow(1, from + 1, 1)? - p.narrow(1, from, 1)?)? * FPS)?;
-                            let speed = norm(&v)?.squeeze(1)?;
-                            term = (term + (speed - *limit)?.relu()?.sqr()?)?;
-                        }
-                        terms.push(term);
-                    }
-                }
-                Tensor::stack(&terms, 1)?.mean(1)?
+                foot_contact_error(joints, feet, at, *max_height, *max_speed)?
             }
             Node::SelfCollision { limbs, torso, min_distance, axes, frames, reduce: how } => {
                 let a = frames.select(&joints.index_select(limbs, 2)?)?.unsqueeze(3)?; // [B, F, L, 1, 3]
@@ -317,24 +273,118 @@ impl Node {
             }
             Node::StayNearInitial { id, quantities, frames } => {
                 let initial = initial.ok_or_else(|| ConstraintError::NoInitialMotion(id.clone()))?;
-                let batch = joints.dim(0)?;
-                let initial = initial.detach().broadcast_as(joints.shape())?;
-                let mut sum: Option<Tensor> = None;
-                for q in quantities {
-                    let n = frames.kept().len();
-                    let now = frames.select(&signal(joints, q)?)?;
-                    let then = frames.select(&signal(&initial, q)?)?;
-                    let per_frame = (now - then)?.sqr()?.sum(D::Minus1)?.narrow(1, 0, n)?;
-                    sum = Some(match sum {
-                        None => per_frame,
-                        Some(s) => (s + per_frame)?,
-                    });
-                }
-                match sum {
-                    Some(s) => s.mean(D::Minus1)?,
-                    None => Tensor::zeros(batch, joints.dtype(), joints.device())?,
-                }
+                stay_near_initial_error(joints, initial, quantities, frames)?
             }
         })
+    }
+}
+
+/// A comparison's error `[B]`: per selected frame, the target's squared (or absolute) miss or
+/// the bound's excess summed over the quantity's components, then `how` over the frames that
+/// meet `when`.
+fn compare_error(
+    joints: &Tensor,
+    quantity: &Quantity,
+    comparison: &Comparison,
+    frames: &Frames,
+    when: &Option<Condition>,
+    how: Reduce,
+) -> Result<Tensor> {
+    let q = signal(joints, quantity)?; // [B, n, C]
+    let n = q.dim(1)?;
+    // The comparison is per frame: selecting the frames first spares the others.
+    let q = frames.select(&q)?;
+    let per_frame = match comparison {
+        Comparison::Equal { target, metric } => {
+            let target = constant(target, q.dtype(), q.device())?;
+            let diff = q.broadcast_sub(&target)?;
+            match metric {
+                Metric::Squared => diff.sqr()?,
+                Metric::Absolute => diff.abs()?,
+            }
+        }
+        Comparison::LessThan(max) => (q - *max)?.relu()?,
+        Comparison::GreaterThan(min) => (*min - q)?.relu()?,
+    }
+    .sum(D::Minus1)?; // [B, F]
+    let mask = frames.condition_mask(joints, when, n)?;
+    reduce(&per_frame, mask.as_ref(), how)
+}
+
+/// A flight's error `[B]`: the smallest mean squared clearance deficit (m²) over the windows
+/// of `length` frames starting at `starts` that meet `when`; clearance² where none meets it.
+fn flight_error(
+    joints: &Tensor,
+    clearance: f64,
+    length: usize,
+    starts: &Tensor,
+    when: &Option<Condition>,
+) -> Result<Tensor> {
+    let deficit = flight::flight_deficit(joints, clearance)?.sqr()?;
+    let means = flight::window_means(&deficit, starts, length)?; // [B, W]
+    Ok(match flight::windows_meeting(joints, when, starts, length)? {
+        None => means.min(D::Minus1)?,
+        Some(valid) => {
+            // Windows that do not meet `when` are pushed far up; a sample with none
+            // that meets it has no flight where it must: clearance².
+            let best = (means + ((1.0 - &valid)? * 1e9)?)?.min(D::Minus1)?;
+            let any = valid.max(D::Minus1)?;
+            ((best * &any)? + ((1.0 - any)? * clearance.powi(2))?)?
+        }
+    })
+}
+
+/// A foot contact's error `[B]`: per foot and contact frame `at`, the squared height above
+/// `max_height` (m) plus, when `max_speed` is given, the squared speed over it (m/s), averaged.
+fn foot_contact_error(
+    joints: &Tensor,
+    feet: &[Joint],
+    at: &[usize],
+    max_height: f64,
+    max_speed: Option<f64>,
+) -> Result<Tensor> {
+    let frames = joints.dim(1)?;
+    let mut terms = Vec::new();
+    for &foot in feet {
+        let p = joint(joints, foot)?; // [B, T, 3]
+        for &t in at {
+            let y = p.narrow(1, t, 1)?.narrow(D::Minus1, 1, 1)?.squeeze(D::Minus1)?.squeeze(1)?;
+            let mut term = (y - max_height)?.relu()?.sqr()?;
+            if let (Some(limit), true) = (max_speed, frames >= 2) {
+                let from = t.min(frames - 2);
+                let v = ((p.narrow(1, from + 1, 1)? - p.narrow(1, from, 1)?)? * FPS)?;
+                let speed = norm(&v)?.squeeze(1)?;
+                term = (term + (speed - limit)?.relu()?.sqr()?)?;
+            }
+            terms.push(term);
+        }
+    }
+    Tensor::stack(&terms, 1)?.mean(1)
+}
+
+/// Staying near the initial motion: the squared change of each quantity on the selected frames,
+/// summed over the quantities and averaged over the frames, `[B]` (0 for no quantities).
+fn stay_near_initial_error(
+    joints: &Tensor,
+    initial: &Tensor,
+    quantities: &[Quantity],
+    frames: &Frames,
+) -> Result<Tensor> {
+    let batch = joints.dim(0)?;
+    let initial = initial.detach().broadcast_as(joints.shape())?;
+    let mut sum: Option<Tensor> = None;
+    for q in quantities {
+        let n = frames.kept().len();
+        let now = frames.select(&signal(joints, q)?)?;
+        let then = frames.select(&signal(&initial, q)?)?;
+        let per_frame = (now - then)?.sqr()?.sum(D::Minus1)?.narrow(1, 0, n)?;
+        sum = Some(match sum {
+            None => per_frame,
+            Some(s) => (s + per_frame)?,
+        });
+    }
+    match sum {
+        Some(s) => s.mean(D::Minus1),
+        None => Tensor::zeros(batch, joints.dtype(), joints.device()),
     }
 }

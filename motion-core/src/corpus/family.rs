@@ -222,7 +222,7 @@ impl Family {
 
 /// Mean pelvis height over the frames, m (0 for none).
 fn mean_pelvis_height(poses: &[Pose]) -> f64 {
-    poses.iter().map(|p| p[Joint::Pelvis.index()].y).sum::<f64>() / poses.len().max(1) as f64
+    crate::numeric::mean(poses.iter().map(|p| p[Joint::Pelvis.index()].y))
 }
 
 fn sideways(tags: &MotionTags) -> bool {

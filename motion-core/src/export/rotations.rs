@@ -266,7 +266,7 @@ fn rig_skeleton(poses: &[Pose]) -> RigSkeleton {
     let mut offsets = [DVec3::ZERO; NUM_JOINTS];
     for j in Joint::ALL.into_iter().skip(1) {
         let parent = j.parent().map_or(0, Joint::index);
-        let length = poses.iter().map(|p| p[j.index()].distance(p[parent])).sum::<f64>() / poses.len() as f64;
+        let length = crate::numeric::mean(poses.iter().map(|p| p[j.index()].distance(p[parent])));
         let direction = (rest[j.index()] - rest[parent]).try_normalize().unwrap_or(j.raw_offset());
         offsets[j.index()] = direction * length;
     }
@@ -399,7 +399,7 @@ pub(super) mod tests {
                 ANIMATED_OFFSETS.iter().zip(frame).map(|(j, o)| o.distance(track.skeleton.offsets_m[j.index()]))
             })
             .collect();
-        (distances.iter().copied().fold(0.0, f64::max), distances.iter().sum::<f64>() / distances.len() as f64)
+        (distances.iter().copied().fold(0.0, f64::max), crate::numeric::mean(distances.iter().copied()))
     }
 
     /// A pose on a rigid skeleton: the rest pose with the left elbow bent by `elbow` about +x,

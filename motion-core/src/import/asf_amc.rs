@@ -22,42 +22,23 @@
 
 mod amc;
 mod asf;
+mod bone;
 mod clip;
-
-use std::path::Path;
+mod lines;
 
 pub use amc::AmcMotion;
-pub use asf::{Asf, AsfBone, Dof};
+pub use asf::Asf;
+pub use bone::{AsfBone, Dof};
 pub use clip::{AsfAmcClip, AsfAmcOptions};
-
-use super::ImportError;
-
-/// An error at `line` of `path`, about `bone` when given.
-fn invalid(path: &Path, line: usize, bone: Option<&str>, message: impl Into<String>) -> ImportError {
-    let location = match bone {
-        Some(b) => format!("line {line}, bone {b}"),
-        None => format!("line {line}"),
-    };
-    ImportError::Invalid { path: path.into(), location, message: message.into() }
-}
-
-/// A finite number, or `None`.
-fn parse_finite(tok: &str) -> Option<f64> {
-    tok.parse::<f64>().ok().filter(|v| v.is_finite())
-}
-
-/// Lines of `text` numbered from 1, comments (`#` to the end of the line) cut off.
-fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    text.lines().enumerate().map(|(i, l)| (i + 1, l.split('#').next().unwrap_or_default()))
-}
 
 #[cfg(test)]
 pub(super) mod tests {
     use glam::DVec3;
 
+    use std::path::Path;
+
     use super::*;
-    use crate::import::ImportWarning;
+    use crate::import::{ImportError, ImportWarning};
 
     /// A root and a two-bone chain, lengths in units of 1/0.5 inch (0.0508 m); the tests refer to
     /// its 1-based line numbers.

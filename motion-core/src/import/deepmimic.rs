@@ -11,17 +11,17 @@ mod file;
 
 use std::path::Path;
 
-use file::ClipFile;
+use file::{ClipFile, FRAME_WIDTH};
 use glam::{DQuat, DVec3};
 
-use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
+use super::clip::MocapClip;
+use super::error::{ImportError, ImportWarning};
+use super::values::{check_clip_length, in_reach, short_number, MAX_POSITION_M};
 use crate::files::read_text;
 use crate::limits::MOCAP_FILE_BYTES;
 
 use crate::skeleton::{smoothstep, Pose, NUM_JOINTS};
 
-/// Values per frame.
-const FRAME_WIDTH: usize = 44;
 /// DeepMimic joints.
 pub(crate) const DM_JOINTS: usize = 15;
 

@@ -18,6 +18,7 @@
 //! allocation. [`HumanMl3dClip`] poses a clip's features for the motion database.
 
 mod clip;
+mod error;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -27,11 +28,13 @@ use candle_core::{Device, Tensor};
 use crate::npy::read_float_npy;
 pub use clip::HumanMl3dClip;
 
-use super::{check_clip_length, ImportError};
+use super::error::ImportError;
+use super::values::check_clip_length;
 use crate::files::{read_text, FileError};
 use crate::limits::MOCAP_FILE_BYTES;
 use crate::representation::{FeatureFrame, MeanStd, FEATURE_DIM};
 use crate::skeleton::FPS;
+use error::invalid;
 
 /// Which clips (and sub-clips) a training set keeps, by length in feature frames.
 ///
@@ -234,10 +237,6 @@ impl HumanMl3dFolder {
         }
         Ok(out)
     }
-}
-
-fn invalid(path: &Path, location: impl Into<String>, message: impl Into<String>) -> ImportError {
-    ImportError::Invalid { path: path.to_path_buf(), location: location.into(), message: message.into() }
 }
 
 /// Reads `new_joint_vecs/<id>.npy`: shape `[frames, 263]` with at most [`CLIP_FRAMES`]

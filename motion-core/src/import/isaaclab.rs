@@ -28,8 +28,10 @@ use std::path::Path;
 use candle_core::Tensor;
 use glam::{DQuat, DVec3};
 
+use super::clip::MocapClip;
 use super::deepmimic::{self, DM_JOINTS};
-use super::{check_clip_length, in_reach, short_number, ImportError, ImportWarning, MocapClip, MAX_POSITION_M};
+use super::error::{ImportError, ImportWarning};
+use super::values::{check_clip_length, in_reach, short_number, MAX_POSITION_M};
 use crate::files::FileError;
 use crate::limits::MOCAP_FILE_BYTES;
 use crate::skeleton::Pose;
@@ -389,7 +391,7 @@ mod tests {
                 })
                 .collect();
             let lowest = toes.iter().copied().fold(f64::MAX, f64::min);
-            let mean = toes.iter().sum::<f64>() / toes.len() as f64;
+            let mean = crate::numeric::mean(toes.iter().copied());
             println!("{name}: toes reach {mean:.3} m forward on average, {lowest:.3} m at least");
             assert!(lowest > -0.03 && mean > reach, "{name}: toes reach {mean} m, {lowest} m at least");
         }

@@ -120,7 +120,7 @@ pub fn pace(poses: &[Pose]) -> (f64, Option<f64>) {
         return (rate, None);
     }
     let intervals: Vec<f64> = steps.windows(2).map(|w| (w[1] - w[0]) as f64).collect();
-    let mean = intervals.iter().sum::<f64>() / intervals.len() as f64;
+    let mean = crate::numeric::mean(intervals.iter().copied());
     let var = intervals.iter().map(|i| (i - mean).powi(2)).sum::<f64>() / intervals.len() as f64;
     (rate, (mean > 0.0).then(|| var.sqrt() / mean))
 }
@@ -169,13 +169,9 @@ pub fn toe_flicker(poses: &[Pose]) -> f64 {
 
 /// Mean norm of the second time difference over every joint and interior frame, m/frame².
 pub fn mean_acceleration(poses: &[Pose]) -> f64 {
-    let n = poses.len().saturating_sub(2) * NUM_JOINTS;
-    if n == 0 {
-        return 0.0;
-    }
-    let total: f64 =
-        poses.windows(3).flat_map(|w| (0..NUM_JOINTS).map(move |j| (w[2][j] - 2.0 * w[1][j] + w[0][j]).length())).sum();
-    total / n as f64
+    crate::numeric::mean(
+        poses.windows(3).flat_map(|w| (0..NUM_JOINTS).map(move |j| (w[2][j] - 2.0 * w[1][j] + w[0][j]).length())),
+    )
 }
 
 /// Frames (interior) at which some joint spikes: its second difference exceeds

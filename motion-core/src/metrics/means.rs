@@ -12,6 +12,7 @@ use super::gait::{
     airborne_frames, heading_change_rad, longest_flight_s, mean_acceleration, pace, spike_frames, stance_toe_height,
     toe_flicker, FLOATING_FLIGHT_S,
 };
+use crate::numeric;
 use crate::skeleton::{Joint, Pose};
 
 /// Means of the metrics over a set of motions (worst cases where the name says so). Every
@@ -78,7 +79,7 @@ impl MetricMeans {
     /// Means over motions.
     pub fn of(motions: &[Vec<Pose>]) -> Self {
         let n = motions.len().max(1) as f64;
-        let mean = |f: &dyn Fn(&[Pose]) -> f64| motions.iter().map(|m| f(m)).sum::<f64>() / n;
+        let mean = |f: &dyn Fn(&[Pose]) -> f64| numeric::mean(motions.iter().map(|m| f(m)));
         let worst = |f: &dyn Fn(&[Pose]) -> f64| motions.iter().map(|m| f(m)).fold(0.0, f64::max);
         let share = |f: &dyn Fn(&[Pose]) -> bool| motions.iter().filter(|m| f(m)).count() as f64 / n;
         let turn = |m: &[Pose]| heading_change_rad(m).to_degrees();
@@ -87,8 +88,8 @@ impl MetricMeans {
         let (bad, checked) =
             motions.iter().map(|m| head_neck_incorrect(m)).fold((0, 0), |(b, c), (b1, c1)| (b + b1, c + c1));
         Self {
-            pace_steps_per_s: paces.iter().map(|p| p.0).sum::<f64>() / n,
-            pace_interval_cv: (!cvs.is_empty()).then(|| cvs.iter().sum::<f64>() / cvs.len() as f64),
+            pace_steps_per_s: numeric::mean(paces.iter().map(|p| p.0)),
+            pace_interval_cv: (!cvs.is_empty()).then(|| numeric::mean(cvs.iter().copied())),
             toe_flicker: mean(&toe_flicker),
             mean_acceleration: mean(&mean_acceleration),
             max_acceleration: mean(&max_acceleration),
@@ -104,9 +105,7 @@ impl MetricMeans {
             turn_left_share: share(&|m: &[Pose]| turn(m) > TURN_DEG),
             turn_right_share: share(&|m: &[Pose]| turn(m) < -TURN_DEG),
             spikes: mean(&|m: &[Pose]| spike_frames(m) as f64),
-            head_height_m: mean(&|m: &[Pose]| {
-                m.iter().map(|p| p[Joint::Head.index()].y).sum::<f64>() / m.len().max(1) as f64
-            }),
+            head_height_m: mean(&|m: &[Pose]| numeric::mean(m.iter().map(|p| p[Joint::Head.index()].y))),
             travel_m: mean(&root_travel),
             hands_raised_rate: share(&hands_raised),
             head_neck_incorrect_ratio: bad as f64 / checked.max(1) as f64,

@@ -75,7 +75,7 @@ impl MeanStd {
         for block in
             [ROOT_ROT_VEL..ROOT_ROT_VEL + 1, ROOT_LIN_VEL, ROOT_Y..ROOT_Y + 1, RIC, ROT, LOCAL_VEL, FOOT_CONTACT]
         {
-            let avg = std[block.clone()].iter().sum::<f64>() / block.len() as f64;
+            let avg = crate::numeric::mean(std[block.clone()].iter().copied());
             std[block].iter_mut().for_each(|s| *s = avg.max(MIN_STD));
         }
         Self::from_vecs(mean.iter().map(|v| *v as f32).collect(), std.iter().map(|v| *v as f32).collect(), &Device::Cpu)

@@ -2,12 +2,16 @@
 //! Acclaim forward kinematics.
 
 use std::path::Path;
+use std::str::SplitWhitespace;
 
 use glam::{DQuat, DVec3};
 
-use super::asf::{axis_rotation, euler};
-use super::{invalid, numbered_lines, parse_finite, Asf, Dof};
-use crate::import::{check_clip_length, in_reach, short_number, ImportError, MAX_POSITION_M};
+use super::asf::Asf;
+use super::bone::{axis_rotation, euler, Dof};
+use super::lines::{invalid, numbered_lines};
+use crate::import::error::ImportError;
+use crate::import::frames::bracket;
+use crate::import::values::{check_clip_length, in_reach, parse_finite, short_number, MAX_POSITION_M};
 
 /// Largest accepted rotation value, degrees (HDM05 writes unwrapped angles past 1000°; beyond
 /// this an angle has lost its precision).
@@ -39,18 +43,7 @@ impl AmcMotion {
         metres_per_unit: f64,
         frame_time_s: f64,
     ) -> Result<Self, ImportError> {
-        let bones = asf.bones();
-        let mut first_value = Vec::with_capacity(bones.len());
-        let mut dof_count = 0;
-        for bone in bones {
-            first_value.push(dof_count);
-            dof_count += bone.dofs.len();
-        }
-        let lone_number = |l: &str| {
-            let mut t = l.split_whitespace();
-            matches!((t.next().map(str::parse::<u64>), t.next()), (Some(Ok(_)), None))
-        };
-        let declared = numbered_lines(text).filter(|(_, l)| lone_number(l)).count();
+        let declared = numbered_lines(text).filter(|(_, l)| is_frame_number(l)).count();
         let last_line = numbered_lines(text).count().max(1);
         if declared == 0 {
             return Err(invalid(path, last_line, None, "the motion has no frames"));
@@ -59,118 +52,12 @@ impl AmcMotion {
             (declared - 1) as f64 * frame_time_s,
             format_args!("{}: {declared} frames of {} s", path.display(), short_number(frame_time_s)),
         )?;
-        let mut degrees = asf.degrees();
-        let mut values: Vec<f64> = Vec::with_capacity(declared.saturating_mul(dof_count).min(text.len()));
-        // The frame being read: its number, the line of that number, which bones it has had.
-        let mut frame: Option<(u64, usize)> = None;
-        let mut seen = vec![false; bones.len()];
-        let mut frames = 0;
-        let finish = |frame: Option<(u64, usize)>, seen: &[bool]| match frame {
-            Some((number, line)) => {
-                let missing: Vec<&str> = bones
-                    .iter()
-                    .zip(seen)
-                    .filter(|(b, s)| !b.dofs.is_empty() && !**s)
-                    .map(|(b, _)| b.name.as_str())
-                    .collect();
-                if missing.is_empty() {
-                    Ok(())
-                } else {
-                    Err(invalid(path, line, None, format!("frame {number} lacks bones: {}", missing.join(", "))))
-                }
-            }
-            None => Ok(()),
-        };
+        let mut reader = AmcReader::new(path, asf, metres_per_unit, declared, text.len());
         for (line, content) in numbered_lines(text) {
-            let mut tokens = content.split_whitespace();
-            let Some(first) = tokens.next() else { continue };
-            if let Some(keyword) = first.strip_prefix(':') {
-                if frame.is_some() {
-                    return Err(invalid(path, line, None, format!("`{first}` after the first frame")));
-                }
-                match keyword.to_ascii_uppercase().as_str() {
-                    "FULLY-SPECIFIED" => {}
-                    "DEGREES" => degrees = true,
-                    "RADIANS" => degrees = false,
-                    _ => return Err(invalid(path, line, None, format!("unknown keyword `{first}`"))),
-                }
-                continue;
-            }
-            if lone_number(content) {
-                let number = first.parse::<u64>().unwrap_or_default();
-                finish(frame, &seen)?;
-                if let Some((previous, _)) = frame {
-                    if Some(number) != previous.checked_add(1) {
-                        return Err(invalid(
-                            path,
-                            line,
-                            None,
-                            format!("frame number {number} out of sequence: expected {}", previous.saturating_add(1)),
-                        ));
-                    }
-                }
-                frame = Some((number, line));
-                seen.iter_mut().for_each(|s| *s = false);
-                values.resize(values.len() + dof_count, 0.0);
-                frames += 1;
-                continue;
-            }
-            let Some((number, _)) = frame else {
-                return Err(invalid(path, line, None, format!("expected a frame number, found `{first}`")));
-            };
-            let Some(b) = asf.bone_index(first) else {
-                return Err(invalid(path, line, Some(first), "not defined in the ASF"));
-            };
-            if std::mem::replace(&mut seen[b], true) {
-                return Err(invalid(path, line, Some(first), format!("a second line in frame {number}")));
-            }
-            let bone = &bones[b];
-            let found = content.split_whitespace().count() - 1;
-            if found != bone.dofs.len() {
-                let names: Vec<&str> = bone.dofs.iter().map(|d| d.name()).collect();
-                return Err(invalid(
-                    path,
-                    line,
-                    Some(first),
-                    format!("frame {number}: expected {} values ({}), found {found}", bone.dofs.len(), names.join(" ")),
-                ));
-            }
-            let row = (frames - 1) * dof_count + first_value[b];
-            for (k, (tok, dof)) in tokens.zip(&bone.dofs).enumerate() {
-                let at =
-                    |what: String| invalid(path, line, Some(first), format!("frame {number}, {}: {what}", dof.name()));
-                let v = parse_finite(tok).ok_or_else(|| at(format!("`{tok}` is not a finite number")))?;
-                let converted = match dof {
-                    Dof::Rotation(_) => {
-                        let deg = if degrees { v } else { v.to_degrees() };
-                        if deg.abs() > MAX_ROTATION_DEG {
-                            return Err(at(format!(
-                                "{} degrees is out of range (beyond ±{} degrees)",
-                                short_number(deg),
-                                short_number(MAX_ROTATION_DEG)
-                            )));
-                        }
-                        deg.to_radians()
-                    }
-                    Dof::Translation(_) | Dof::Length => {
-                        let m = v * metres_per_unit;
-                        if !in_reach(m) {
-                            return Err(at(format!(
-                                "{} ({} m) is out of range (more than {} m from the origin)",
-                                short_number(v),
-                                short_number(m),
-                                short_number(MAX_POSITION_M)
-                            )));
-                        }
-                        m
-                    }
-                };
-                if let Some(slot) = values.get_mut(row + k) {
-                    *slot = converted;
-                }
-            }
+            reader.read_line(line, content)?;
         }
-        finish(frame, &seen)?;
+        reader.check_frame_complete()?;
+        let AmcReader { frames, first_value, values, dof_count, .. } = reader;
         Ok(Self { asf: asf.clone(), metres_per_unit, frame_time_s, frames, first_value, values, dof_count })
     }
 
@@ -204,12 +91,7 @@ impl AmcMotion {
     /// translation lerped between the two nearest frames; times outside the clip hold its end
     /// frames.
     pub fn positions_at(&self, t_s: f64) -> Vec<(DVec3, DVec3)> {
-        let last = self.frames.saturating_sub(1);
-        let x = (t_s / self.frame_time_s).clamp(0.0, last as f64);
-        let x = if x.is_nan() { 0.0 } else { x };
-        let k = (x.floor() as usize).min(last);
-        let k1 = (k + 1).min(last);
-        let a = x - k as f64;
+        let (k, k1, a) = bracket(t_s, self.frames, self.frame_time_s);
         let locals: Vec<(DQuat, DVec3)> = (0..self.asf.bones().len())
             .map(|b| {
                 let ((r0, t0), (r1, t1)) = (self.local(k, b), self.local(k1, b));
@@ -275,6 +157,197 @@ impl AmcMotion {
             }
         }
         out
+    }
+}
+
+/// Whether a line holds a frame number alone.
+fn is_frame_number(line: &str) -> bool {
+    let mut t = line.split_whitespace();
+    matches!((t.next().map(str::parse::<u64>), t.next()), (Some(Ok(_)), None))
+}
+
+/// An AMC file while it is read line by line: the values so far and the frame being read.
+struct AmcReader<'a> {
+    /// The file, for messages.
+    path: &'a Path,
+    asf: &'a Asf,
+    /// Metres per ASF length unit.
+    metres_per_unit: f64,
+    /// Whether angles are in degrees (the ASF's unit, or `:DEGREES`/`:RADIANS`).
+    degrees: bool,
+    /// Per bone, the index of its first value in a frame row.
+    first_value: Vec<usize>,
+    dof_count: usize,
+    /// `[frames, dof_count]`, row-major, as in [`AmcMotion`].
+    values: Vec<f64>,
+    /// The frame being read: its number and the line of that number.
+    frame: Option<(u64, usize)>,
+    /// Which bones the frame being read has had.
+    seen: Vec<bool>,
+    frames: usize,
+}
+
+impl<'a> AmcReader<'a> {
+    /// Nothing read yet; room for `declared` frames, bounded by the text's `text_len` bytes.
+    fn new(path: &'a Path, asf: &'a Asf, metres_per_unit: f64, declared: usize, text_len: usize) -> Self {
+        let bones = asf.bones();
+        let mut first_value = Vec::with_capacity(bones.len());
+        let mut dof_count = 0;
+        for bone in bones {
+            first_value.push(dof_count);
+            dof_count += bone.dofs.len();
+        }
+        AmcReader {
+            path,
+            asf,
+            metres_per_unit,
+            degrees: asf.degrees(),
+            first_value,
+            dof_count,
+            values: Vec::with_capacity(declared.saturating_mul(dof_count).min(text_len)),
+            frame: None,
+            seen: vec![false; bones.len()],
+            frames: 0,
+        }
+    }
+
+    /// One line (comment already cut off): a `:` keyword before the first frame, a frame
+    /// number, or a bone's values.
+    fn read_line(&mut self, line: usize, content: &str) -> Result<(), ImportError> {
+        let mut tokens = content.split_whitespace();
+        let Some(first) = tokens.next() else { return Ok(()) };
+        if let Some(keyword) = first.strip_prefix(':') {
+            return self.read_keyword(line, first, keyword);
+        }
+        if is_frame_number(content) {
+            return self.start_frame(line, first.parse::<u64>().unwrap_or_default());
+        }
+        let Some((number, _)) = self.frame else {
+            return Err(invalid(self.path, line, None, format!("expected a frame number, found `{first}`")));
+        };
+        self.read_bone_values(line, number, first, content, tokens)
+    }
+
+    /// `:FULLY-SPECIFIED`, `:DEGREES` or `:RADIANS` (`first` as written), before the first frame.
+    fn read_keyword(&mut self, line: usize, first: &str, keyword: &str) -> Result<(), ImportError> {
+        if self.frame.is_some() {
+            return Err(invalid(self.path, line, None, format!("`{first}` after the first frame")));
+        }
+        match keyword.to_ascii_uppercase().as_str() {
+            "FULLY-SPECIFIED" => {}
+            "DEGREES" => self.degrees = true,
+            "RADIANS" => self.degrees = false,
+            _ => return Err(invalid(self.path, line, None, format!("unknown keyword `{first}`"))),
+        }
+        Ok(())
+    }
+
+    /// A frame number: the frame before it must be complete and numbered one less.
+    fn start_frame(&mut self, line: usize, number: u64) -> Result<(), ImportError> {
+        self.check_frame_complete()?;
+        if let Some((previous, _)) = self.frame {
+            if Some(number) != previous.checked_add(1) {
+                return Err(invalid(
+                    self.path,
+                    line,
+                    None,
+                    format!("frame number {number} out of sequence: expected {}", previous.saturating_add(1)),
+                ));
+            }
+        }
+        self.frame = Some((number, line));
+        self.seen.iter_mut().for_each(|s| *s = false);
+        self.values.resize(self.values.len() + self.dof_count, 0.0);
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// `bone v1 v2 …` (`content`; `first` is the bone, `tokens` the values): one value per dof
+    /// of a bone of the ASF, once per frame.
+    fn read_bone_values(
+        &mut self,
+        line: usize,
+        number: u64,
+        first: &str,
+        content: &str,
+        tokens: SplitWhitespace<'_>,
+    ) -> Result<(), ImportError> {
+        let path = self.path;
+        let Some(b) = self.asf.bone_index(first) else {
+            return Err(invalid(path, line, Some(first), "not defined in the ASF"));
+        };
+        if std::mem::replace(&mut self.seen[b], true) {
+            return Err(invalid(path, line, Some(first), format!("a second line in frame {number}")));
+        }
+        let bone = &self.asf.bones()[b];
+        let found = content.split_whitespace().count() - 1;
+        if found != bone.dofs.len() {
+            let names: Vec<&str> = bone.dofs.iter().map(|d| d.name()).collect();
+            return Err(invalid(
+                path,
+                line,
+                Some(first),
+                format!("frame {number}: expected {} values ({}), found {found}", bone.dofs.len(), names.join(" ")),
+            ));
+        }
+        let row = (self.frames - 1) * self.dof_count + self.first_value[b];
+        for (k, (tok, dof)) in tokens.zip(&bone.dofs).enumerate() {
+            let at = |what: String| invalid(path, line, Some(first), format!("frame {number}, {}: {what}", dof.name()));
+            let v = parse_finite(tok).ok_or_else(|| at(format!("`{tok}` is not a finite number")))?;
+            let converted = self.convert(*dof, v, &at)?;
+            if let Some(slot) = self.values.get_mut(row + k) {
+                *slot = converted;
+            }
+        }
+        Ok(())
+    }
+
+    /// A dof's value as written → radians (a rotation, within [`MAX_ROTATION_DEG`]) or metres
+    /// (a translation or length, within [`MAX_POSITION_M`] of the origin).
+    fn convert(&self, dof: Dof, v: f64, at: &dyn Fn(String) -> ImportError) -> Result<f64, ImportError> {
+        match dof {
+            Dof::Rotation(_) => {
+                let deg = if self.degrees { v } else { v.to_degrees() };
+                if deg.abs() > MAX_ROTATION_DEG {
+                    return Err(at(format!(
+                        "{} degrees is out of range (beyond ±{} degrees)",
+                        short_number(deg),
+                        short_number(MAX_ROTATION_DEG)
+                    )));
+                }
+                Ok(deg.to_radians())
+            }
+            Dof::Translation(_) | Dof::Length => {
+                let m = v * self.metres_per_unit;
+                if !in_reach(m) {
+                    return Err(at(format!(
+                        "{} ({} m) is out of range (more than {} m from the origin)",
+                        short_number(v),
+                        short_number(m),
+                        short_number(MAX_POSITION_M)
+                    )));
+                }
+                Ok(m)
+            }
+        }
+    }
+
+    /// The frame being read, if any, must have had every bone with dofs.
+    fn check_frame_complete(&self) -> Result<(), ImportError> {
+        let Some((number, line)) = self.frame else { return Ok(()) };
+        let missing: Vec<&str> = self
+            .asf
+            .bones()
+            .iter()
+            .zip(&self.seen)
+            .filter(|(b, s)| !b.dofs.is_empty() && !**s)
+            .map(|(b, _)| b.name.as_str())
+            .collect();
+        if missing.is_empty() {
+            Ok(())
+        } else {
+            Err(invalid(self.path, line, None, format!("frame {number} lacks bones: {}", missing.join(", "))))
+        }
     }
 }
 

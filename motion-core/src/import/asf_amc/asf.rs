@@ -3,81 +3,20 @@
 
 use std::collections::HashMap;
 use std::path::Path;
+use std::str::SplitWhitespace;
 
-use glam::{DQuat, DVec3};
+use glam::DVec3;
 
-use super::{invalid, numbered_lines, parse_finite};
+use super::bone::{euler, rotation_order, AsfBone, Dof};
+use super::lines::{invalid, numbered_lines};
 use crate::files::read_bytes;
 use crate::import::bvh::Axis;
-use crate::import::{short_number, ImportError, ImportWarning};
+use crate::import::error::{ImportError, ImportWarning};
+use crate::import::values::{parse_finite, short_number};
 use crate::limits::{MOCAP_FILE_BYTES, RIG_JOINTS};
 
 /// Metres per inch: an ASF length unit is `0.0254 / length` m.
 const METRES_PER_INCH: f64 = 0.0254;
-
-/// A degree of freedom of a bone (its AMC values come in the order of the bone's `dof` line).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Dof {
-    /// `rx`, `ry`, `rz`: a rotation about an axis of the bone's local frame, degrees or radians.
-    Rotation(Axis),
-    /// `tx`, `ty`, `tz`: a translation along an axis of the bone's local frame (the root's is in
-    /// world axes), ASF length units.
-    Translation(Axis),
-    /// `l`: a change of the bone's length, ASF length units.
-    Length,
-}
-
-impl Dof {
-    /// Parses a dof name (`rx`, `TX`, `l`, …; ASCII case-insensitive).
-    fn from_name(s: &str) -> Option<Dof> {
-        let lower = s.to_ascii_lowercase();
-        let axis = |c: u8| match c {
-            b'x' => Some(Axis::X),
-            b'y' => Some(Axis::Y),
-            b'z' => Some(Axis::Z),
-            _ => None,
-        };
-        match lower.as_bytes() {
-            [b'l'] => Some(Dof::Length),
-            [b'r', c] => axis(*c).map(Dof::Rotation),
-            [b't', c] => axis(*c).map(Dof::Translation),
-            _ => None,
-        }
-    }
-
-    /// The name as written in ASF files.
-    pub fn name(self) -> &'static str {
-        match self {
-            Dof::Rotation(Axis::X) => "rx",
-            Dof::Rotation(Axis::Y) => "ry",
-            Dof::Rotation(Axis::Z) => "rz",
-            Dof::Translation(Axis::X) => "tx",
-            Dof::Translation(Axis::Y) => "ty",
-            Dof::Translation(Axis::Z) => "tz",
-            Dof::Length => "l",
-        }
-    }
-}
-
-/// A bone of an [`Asf`]; bone 0 is the root (no direction or length; its dofs are the root's
-/// `order`, its axis the root's `orientation`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct AsfBone {
-    /// The name as written (`lfemur`; `root` for the root).
-    pub name: String,
-    /// Index of the parent bone; `None` for the root.
-    pub parent: Option<usize>,
-    /// Unit direction from the bone's start to its end at rest, world axes.
-    pub direction: DVec3,
-    /// Length, ASF units.
-    pub length: f64,
-    /// The bone's local frame `C` in world axes (from its `axis` line).
-    pub axis: DQuat,
-    /// Dofs in the order of their AMC values.
-    pub dofs: Vec<Dof>,
-    /// 1-based line of its `begin` (of `:root` for the root).
-    pub line: usize,
-}
 
 /// A parsed ASF file: lengths in file units, rotations as quaternions.
 #[derive(Debug, Clone)]
@@ -128,38 +67,6 @@ enum Section {
     Hierarchy,
 }
 
-/// A rotation order such as `XYZ`.
-fn rotation_order(tok: &str) -> Option<[Axis; 3]> {
-    let axes: Vec<Axis> = tok
-        .bytes()
-        .map(|c| match c.to_ascii_uppercase() {
-            b'X' => Some(Axis::X),
-            b'Y' => Some(Axis::Y),
-            b'Z' => Some(Axis::Z),
-            _ => None,
-        })
-        .collect::<Option<_>>()?;
-    match axes[..] {
-        [a, b, c] if a != b && b != c && a != c => Some([a, b, c]),
-        _ => None,
-    }
-}
-
-/// The rotation of Euler angles (radians, indexed by axis x, y, z) applied about fixed axes in
-/// `order`, the first first: `XYZ` is `R_z · R_y · R_x`.
-pub(super) fn euler(order: &[Axis], angles: [f64; 3]) -> DQuat {
-    order.iter().fold(DQuat::IDENTITY, |q, axis| axis_rotation(*axis, angles[*axis as usize]) * q)
-}
-
-/// A rotation of `radians` about a coordinate axis.
-pub(super) fn axis_rotation(axis: Axis, radians: f64) -> DQuat {
-    match axis {
-        Axis::X => DQuat::from_rotation_x(radians),
-        Axis::Y => DQuat::from_rotation_y(radians),
-        Axis::Z => DQuat::from_rotation_z(radians),
-    }
-}
-
 /// `n` finite numbers from `tokens`, or an error naming `what` and the offending token.
 fn numbers<const N: usize>(
     tokens: &mut std::str::SplitWhitespace<'_>,
@@ -188,256 +95,12 @@ impl Asf {
     /// Parses ASF text; `path` is only used in messages. Bones are refused past [`RIG_JOINTS`].
     /// Warns about an ASF without `:units length` (inches are assumed).
     pub fn parse(text: &str, path: &Path) -> Result<(Self, Vec<ImportWarning>), ImportError> {
-        let mut section = Section::Preamble;
-        let mut seen: Vec<Section> = Vec::new();
-        let mut length_scale: Option<f64> = None;
-        let mut degrees = true;
-        let mut root = RootDraft {
-            line: 1,
-            order: ["tx", "ty", "tz", "rx", "ry", "rz"].into_iter().filter_map(Dof::from_name).collect(),
-            rotation_order: [Axis::X, Axis::Y, Axis::Z],
-            position: DVec3::ZERO,
-            orientation: [0.0; 3],
-        };
-        let mut drafts: Vec<Draft> = Vec::new();
-        let mut open: Option<Draft> = None;
-        // Hierarchy lines (line, parent, children), resolved once every bone is known.
-        let mut links: Vec<(usize, Vec<&str>)> = Vec::new();
-        let mut hierarchy_state = 0; // 0: before `begin`, 1: inside, 2: after `end`
-        let mut last_line = 1;
+        let mut reader = AsfReader::new(path);
         for (line, content) in numbered_lines(text) {
-            last_line = line;
-            let mut tokens = content.split_whitespace();
-            let Some(first) = tokens.next() else { continue };
-            let bone = open.as_ref().and_then(|d| d.name.clone());
-            let at = |message: String| invalid(path, line, bone.as_deref(), message);
-            if let Some(keyword) = first.strip_prefix(':') {
-                let next = match keyword.to_ascii_lowercase().as_str() {
-                    "version" => Section::Version,
-                    "name" => Section::Name,
-                    "units" => Section::Units,
-                    "documentation" => Section::Documentation,
-                    "root" => Section::Root,
-                    "bonedata" => Section::Bonedata,
-                    "hierarchy" => Section::Hierarchy,
-                    _ => return Err(at(format!("unknown keyword `{first}`"))),
-                };
-                if let Some(d) = &open {
-                    return Err(invalid(path, d.line, d.name.as_deref(), "`begin` without `end`"));
-                }
-                if seen.contains(&next) {
-                    return Err(at(format!("a second `{first}`")));
-                }
-                if next == Section::Root {
-                    root.line = line;
-                }
-                if next != Section::Version && next != Section::Name && tokens.next().is_some() {
-                    return Err(at(format!("`{first}` takes no values on its line")));
-                }
-                seen.push(next);
-                section = next;
-                continue;
-            }
-            match section {
-                Section::Preamble => return Err(at(format!("expected a `:` keyword, found `{first}`"))),
-                Section::Version | Section::Name => {
-                    return Err(at(format!("unexpected `{first}` after {}", section_name(section))))
-                }
-                Section::Documentation => {}
-                Section::Units => match first.to_ascii_lowercase().as_str() {
-                    "mass" => {
-                        numbers::<1>(&mut tokens, "mass", &at)?;
-                    }
-                    "length" => {
-                        let [v] = numbers::<1>(&mut tokens, "length", &at)?;
-                        if v <= 0.0 {
-                            return Err(at(format!("length scale {} is not positive", short_number(v))));
-                        }
-                        length_scale = Some(v);
-                    }
-                    "angle" => {
-                        degrees = match tokens.next().map(str::to_ascii_lowercase).as_deref() {
-                            Some("deg") | Some("degree") | Some("degrees") => true,
-                            Some("rad") | Some("radian") | Some("radians") => false,
-                            other => {
-                                return Err(at(format!(
-                                    "angle unit must be deg or rad, found `{}`",
-                                    other.unwrap_or("nothing")
-                                )))
-                            }
-                        };
-                    }
-                    other => return Err(at(format!("unknown unit `{other}` (expected mass, length or angle)"))),
-                },
-                Section::Root => match first.to_ascii_lowercase().as_str() {
-                    "order" => {
-                        let mut order = Vec::new();
-                        for tok in tokens {
-                            match Dof::from_name(tok) {
-                                Some(d) if d != Dof::Length && !order.contains(&d) => order.push(d),
-                                _ => {
-                                    return Err(at(format!(
-                                        "root order: `{tok}` is not one of TX TY TZ RX RY RZ (each once)"
-                                    )))
-                                }
-                            }
-                        }
-                        root.order = order;
-                    }
-                    "axis" => {
-                        let tok = tokens.next().unwrap_or("nothing");
-                        root.rotation_order = rotation_order(tok)
-                            .ok_or_else(|| at(format!("unknown rotation order `{tok}` (expected e.g. XYZ)")))?;
-                    }
-                    "position" => root.position = DVec3::from_array(numbers(&mut tokens, "position", at)?),
-                    "orientation" => root.orientation = numbers(&mut tokens, "orientation", at)?,
-                    other => return Err(at(format!("unknown root field `{other}`"))),
-                },
-                Section::Bonedata => {
-                    let key = first.to_ascii_lowercase();
-                    let Some(draft) = open.as_mut() else {
-                        if key != "begin" {
-                            return Err(at(format!("expected `begin`, found `{first}`")));
-                        }
-                        RIG_JOINTS.check(
-                            drafts.len() as u64 + 2,
-                            format_args!("{}: line {line}: the skeleton", path.display()),
-                        )?;
-                        open = Some(Draft {
-                            line,
-                            name: None,
-                            direction: None,
-                            length: None,
-                            axis: ([0.0; 3], [Axis::X, Axis::Y, Axis::Z]),
-                            dofs: Vec::new(),
-                        });
-                        continue;
-                    };
-                    match key.as_str() {
-                        "begin" => return Err(at("`begin` inside a bone; is an `end` missing?".into())),
-                        "end" => {
-                            let Some(d) = open.take() else { continue };
-                            let name =
-                                d.name.clone().ok_or_else(|| invalid(path, d.line, None, "bone without `name`"))?;
-                            let need = |what: &str| invalid(path, d.line, Some(&name), format!("no `{what}`"));
-                            if d.direction.is_none() {
-                                return Err(need("direction"));
-                            }
-                            if d.length.is_none() {
-                                return Err(need("length"));
-                            }
-                            if name == "root" || drafts.iter().any(|o| o.name.as_deref() == Some(name.as_str())) {
-                                return Err(invalid(path, d.line, Some(&name), "a second bone of this name"));
-                            }
-                            drafts.push(d);
-                        }
-                        "id" | "bodymass" | "cofmass" | "limits" => {}
-                        _ if first.starts_with('(') => {}
-                        "name" => {
-                            let name = tokens.next().ok_or_else(|| at("`name` without a name".into()))?;
-                            draft.name = Some(name.to_owned());
-                        }
-                        "direction" => {
-                            let d = DVec3::from_array(numbers(&mut tokens, "direction", at)?);
-                            let unit = d.try_normalize().ok_or_else(|| at("direction is zero".into()))?;
-                            draft.direction = Some(unit);
-                        }
-                        "length" => {
-                            let [v] = numbers::<1>(&mut tokens, "length", &at)?;
-                            if v < 0.0 {
-                                return Err(at(format!("length {} is negative", short_number(v))));
-                            }
-                            draft.length = Some(v);
-                        }
-                        "axis" => {
-                            let mut angles = [0.0; 3];
-                            for (k, slot) in angles.iter_mut().enumerate() {
-                                let tok = tokens.next().unwrap_or("end of line");
-                                *slot = parse_finite(tok)
-                                    .ok_or_else(|| at(format!("axis value {k}: `{tok}` is not a finite number")))?;
-                            }
-                            let tok = tokens.next().unwrap_or("nothing");
-                            let order = rotation_order(tok)
-                                .ok_or_else(|| at(format!("unknown rotation order `{tok}` (expected e.g. XYZ)")))?;
-                            draft.axis = (angles, order);
-                        }
-                        "dof" => {
-                            let mut dofs = Vec::new();
-                            for tok in tokens {
-                                match Dof::from_name(tok) {
-                                    Some(d) if !dofs.contains(&d) => dofs.push(d),
-                                    Some(_) => return Err(at(format!("dof `{tok}` listed twice"))),
-                                    None => {
-                                        return Err(at(format!("unknown dof `{tok}` (expected rx ry rz tx ty tz l)")))
-                                    }
-                                }
-                            }
-                            draft.dofs = dofs;
-                        }
-                        _ => return Err(at(format!("unknown bone field `{first}`"))),
-                    }
-                }
-                Section::Hierarchy => match (hierarchy_state, first.to_ascii_lowercase().as_str()) {
-                    (0, "begin") => hierarchy_state = 1,
-                    (1, "end") => hierarchy_state = 2,
-                    (1, _) => links.push((line, content.split_whitespace().collect())),
-                    (0, _) => return Err(at(format!("expected `begin`, found `{first}`"))),
-                    _ => return Err(at(format!("unexpected `{first}` after the hierarchy's `end`"))),
-                },
-            }
+            reader.last_line = line;
+            reader.read_line(line, content)?;
         }
-        if let Some(d) = &open {
-            return Err(invalid(path, d.line, d.name.as_deref(), "`begin` without `end`"));
-        }
-        if !seen.contains(&Section::Bonedata) {
-            return Err(invalid(path, last_line, None, "missing `:bonedata`"));
-        }
-        if !seen.contains(&Section::Hierarchy) {
-            return Err(invalid(path, last_line, None, "missing `:hierarchy`"));
-        }
-        if hierarchy_state != 2 {
-            return Err(invalid(path, last_line, None, "the `:hierarchy` has no `begin` … `end`"));
-        }
-        let mut warnings = Vec::new();
-        let length_scale = length_scale.unwrap_or_else(|| {
-            warnings.push(ImportWarning {
-                path: path.into(),
-                message: "no `:units length`; lengths are taken as inches".into(),
-            });
-            1.0
-        });
-        let to_radians = |a: [f64; 3]| if degrees { a.map(f64::to_radians) } else { a };
-        let mut bones = Vec::with_capacity(drafts.len() + 1);
-        bones.push(AsfBone {
-            name: "root".into(),
-            parent: None,
-            direction: DVec3::ZERO,
-            length: 0.0,
-            axis: euler(&root.rotation_order, to_radians(root.orientation)),
-            dofs: root.order,
-            line: root.line,
-        });
-        for d in drafts {
-            bones.push(AsfBone {
-                name: d.name.unwrap_or_default(),
-                parent: None,
-                direction: d.direction.unwrap_or_default(),
-                length: d.length.unwrap_or_default(),
-                axis: euler(&d.axis.1, to_radians(d.axis.0)),
-                dofs: d.dofs,
-                line: d.line,
-            });
-        }
-        let order = resolve_hierarchy(&mut bones, &links, path)?;
-        let asf = Asf {
-            bones,
-            order,
-            root_rotation_order: root.rotation_order,
-            root_position: root.position,
-            metres_per_unit: METRES_PER_INCH / length_scale,
-            degrees,
-        };
-        Ok((asf, warnings))
+        reader.finish()
     }
 
     /// Every bone, the root first, in `:bonedata` order.
@@ -486,6 +149,369 @@ impl Asf {
             }
         }
         out
+    }
+}
+
+/// The error maker of one line: the message at that line, about the bone being read.
+type At<'f> = &'f dyn Fn(String) -> ImportError;
+
+/// An ASF file while it is read line by line.
+struct AsfReader<'a> {
+    /// The file, for messages.
+    path: &'a Path,
+    section: Section,
+    seen: Vec<Section>,
+    /// `:units length`, when given.
+    length_scale: Option<f64>,
+    /// Whether `:units angle` is `deg` (the default).
+    degrees: bool,
+    root: RootDraft,
+    /// The bones whose `begin` … `end` blocks are closed.
+    drafts: Vec<Draft>,
+    /// The bone whose block is open.
+    open: Option<Draft>,
+    /// Hierarchy lines (line, parent, children), resolved once every bone is known.
+    links: Vec<(usize, Vec<&'a str>)>,
+    /// 0: before the hierarchy's `begin`, 1: inside, 2: after its `end`.
+    hierarchy_state: u8,
+    /// The last line read, for messages about what is missing at the end.
+    last_line: usize,
+}
+
+impl<'a> AsfReader<'a> {
+    /// Nothing read yet: degrees, and the root's default `order` and `axis`.
+    fn new(path: &'a Path) -> Self {
+        let root = RootDraft {
+            line: 1,
+            order: ["tx", "ty", "tz", "rx", "ry", "rz"].into_iter().filter_map(Dof::from_name).collect(),
+            rotation_order: [Axis::X, Axis::Y, Axis::Z],
+            position: DVec3::ZERO,
+            orientation: [0.0; 3],
+        };
+        AsfReader {
+            path,
+            section: Section::Preamble,
+            seen: Vec::new(),
+            length_scale: None,
+            degrees: true,
+            root,
+            drafts: Vec::new(),
+            open: None,
+            links: Vec::new(),
+            hierarchy_state: 0,
+            last_line: 1,
+        }
+    }
+
+    /// One line (comment already cut off): a `:keyword` or a line of the current section.
+    fn read_line(&mut self, line: usize, content: &'a str) -> Result<(), ImportError> {
+        let mut tokens = content.split_whitespace();
+        let Some(first) = tokens.next() else { return Ok(()) };
+        let path = self.path;
+        let bone = self.open.as_ref().and_then(|d| d.name.clone());
+        let at = |message: String| invalid(path, line, bone.as_deref(), message);
+        if let Some(keyword) = first.strip_prefix(':') {
+            return self.start_section(keyword, first, line, &mut tokens, &at);
+        }
+        match self.section {
+            Section::Preamble => Err(at(format!("expected a `:` keyword, found `{first}`"))),
+            Section::Version | Section::Name => {
+                Err(at(format!("unexpected `{first}` after {}", section_name(self.section))))
+            }
+            Section::Documentation => Ok(()),
+            Section::Units => self.read_unit(first, &mut tokens, &at),
+            Section::Root => self.root.read_field(first, &mut tokens, &at),
+            Section::Bonedata => self.read_bone_line(first, line, &mut tokens, &at),
+            Section::Hierarchy => self.read_hierarchy_line(first, line, content, &at),
+        }
+    }
+
+    /// `:keyword` (`first` as written): a section starts; each comes once, and only `:version`
+    /// and `:name` have values on their line.
+    fn start_section(
+        &mut self,
+        keyword: &str,
+        first: &str,
+        line: usize,
+        tokens: &mut SplitWhitespace<'_>,
+        at: At<'_>,
+    ) -> Result<(), ImportError> {
+        let next = match keyword.to_ascii_lowercase().as_str() {
+            "version" => Section::Version,
+            "name" => Section::Name,
+            "units" => Section::Units,
+            "documentation" => Section::Documentation,
+            "root" => Section::Root,
+            "bonedata" => Section::Bonedata,
+            "hierarchy" => Section::Hierarchy,
+            _ => return Err(at(format!("unknown keyword `{first}`"))),
+        };
+        if let Some(d) = &self.open {
+            return Err(invalid(self.path, d.line, d.name.as_deref(), "`begin` without `end`"));
+        }
+        if self.seen.contains(&next) {
+            return Err(at(format!("a second `{first}`")));
+        }
+        if next == Section::Root {
+            self.root.line = line;
+        }
+        if next != Section::Version && next != Section::Name && tokens.next().is_some() {
+            return Err(at(format!("`{first}` takes no values on its line")));
+        }
+        self.seen.push(next);
+        self.section = next;
+        Ok(())
+    }
+
+    /// A `:units` line: `mass` (ignored), `length` (a positive scale) or `angle deg|rad`.
+    fn read_unit(&mut self, first: &str, tokens: &mut SplitWhitespace<'_>, at: At<'_>) -> Result<(), ImportError> {
+        match first.to_ascii_lowercase().as_str() {
+            "mass" => {
+                numbers::<1>(tokens, "mass", at)?;
+            }
+            "length" => {
+                let [v] = numbers::<1>(tokens, "length", at)?;
+                if v <= 0.0 {
+                    return Err(at(format!("length scale {} is not positive", short_number(v))));
+                }
+                self.length_scale = Some(v);
+            }
+            "angle" => {
+                self.degrees = match tokens.next().map(str::to_ascii_lowercase).as_deref() {
+                    Some("deg") | Some("degree") | Some("degrees") => true,
+                    Some("rad") | Some("radian") | Some("radians") => false,
+                    other => {
+                        return Err(at(format!(
+                            "angle unit must be deg or rad, found `{}`",
+                            other.unwrap_or("nothing")
+                        )))
+                    }
+                };
+            }
+            other => return Err(at(format!("unknown unit `{other}` (expected mass, length or angle)"))),
+        }
+        Ok(())
+    }
+
+    /// A `:bonedata` line: `begin` opens a bone (refused past [`RIG_JOINTS`]), `end` closes it,
+    /// anything else is a field of the open bone.
+    fn read_bone_line(
+        &mut self,
+        first: &str,
+        line: usize,
+        tokens: &mut SplitWhitespace<'_>,
+        at: At<'_>,
+    ) -> Result<(), ImportError> {
+        let key = first.to_ascii_lowercase();
+        let Some(draft) = self.open.as_mut() else {
+            if key != "begin" {
+                return Err(at(format!("expected `begin`, found `{first}`")));
+            }
+            RIG_JOINTS.check(
+                self.drafts.len() as u64 + 2,
+                format_args!("{}: line {line}: the skeleton", self.path.display()),
+            )?;
+            self.open = Some(Draft {
+                line,
+                name: None,
+                direction: None,
+                length: None,
+                axis: ([0.0; 3], [Axis::X, Axis::Y, Axis::Z]),
+                dofs: Vec::new(),
+            });
+            return Ok(());
+        };
+        match key.as_str() {
+            "begin" => Err(at("`begin` inside a bone; is an `end` missing?".into())),
+            "end" => self.close_bone(),
+            "id" | "bodymass" | "cofmass" | "limits" => Ok(()),
+            _ if first.starts_with('(') => Ok(()),
+            _ => draft.read_field(&key, first, tokens, at),
+        }
+    }
+
+    /// `end`: the open bone is done; it needs a new name, a `direction` and a `length`.
+    fn close_bone(&mut self) -> Result<(), ImportError> {
+        let Some(d) = self.open.take() else { return Ok(()) };
+        let path = self.path;
+        let name = d.name.clone().ok_or_else(|| invalid(path, d.line, None, "bone without `name`"))?;
+        let need = |what: &str| invalid(path, d.line, Some(&name), format!("no `{what}`"));
+        if d.direction.is_none() {
+            return Err(need("direction"));
+        }
+        if d.length.is_none() {
+            return Err(need("length"));
+        }
+        if name == "root" || self.drafts.iter().any(|o| o.name.as_deref() == Some(name.as_str())) {
+            return Err(invalid(path, d.line, Some(&name), "a second bone of this name"));
+        }
+        self.drafts.push(d);
+        Ok(())
+    }
+
+    /// A `:hierarchy` line: `begin`, then `parent child…` lines, then `end`.
+    fn read_hierarchy_line(
+        &mut self,
+        first: &str,
+        line: usize,
+        content: &'a str,
+        at: At<'_>,
+    ) -> Result<(), ImportError> {
+        match (self.hierarchy_state, first.to_ascii_lowercase().as_str()) {
+            (0, "begin") => self.hierarchy_state = 1,
+            (1, "end") => self.hierarchy_state = 2,
+            (1, _) => self.links.push((line, content.split_whitespace().collect())),
+            (0, _) => return Err(at(format!("expected `begin`, found `{first}`"))),
+            _ => return Err(at(format!("unexpected `{first}` after the hierarchy's `end`"))),
+        }
+        Ok(())
+    }
+
+    /// The skeleton, once every section is read: the bones with their axes in radians, linked by
+    /// the hierarchy. Warns when `:units length` is missing (inches are assumed).
+    fn finish(self) -> Result<(Asf, Vec<ImportWarning>), ImportError> {
+        let path = self.path;
+        let last_line = self.last_line;
+        if let Some(d) = &self.open {
+            return Err(invalid(path, d.line, d.name.as_deref(), "`begin` without `end`"));
+        }
+        if !self.seen.contains(&Section::Bonedata) {
+            return Err(invalid(path, last_line, None, "missing `:bonedata`"));
+        }
+        if !self.seen.contains(&Section::Hierarchy) {
+            return Err(invalid(path, last_line, None, "missing `:hierarchy`"));
+        }
+        if self.hierarchy_state != 2 {
+            return Err(invalid(path, last_line, None, "the `:hierarchy` has no `begin` … `end`"));
+        }
+        let mut warnings = Vec::new();
+        let length_scale = self.length_scale.unwrap_or_else(|| {
+            warnings.push(ImportWarning {
+                path: path.into(),
+                message: "no `:units length`; lengths are taken as inches".into(),
+            });
+            1.0
+        });
+        let degrees = self.degrees;
+        let to_radians = |a: [f64; 3]| if degrees { a.map(f64::to_radians) } else { a };
+        let root = self.root;
+        let mut bones = Vec::with_capacity(self.drafts.len() + 1);
+        bones.push(AsfBone {
+            name: "root".into(),
+            parent: None,
+            direction: DVec3::ZERO,
+            length: 0.0,
+            axis: euler(&root.rotation_order, to_radians(root.orientation)),
+            dofs: root.order,
+            line: root.line,
+        });
+        for d in self.drafts {
+            bones.push(AsfBone {
+                name: d.name.unwrap_or_default(),
+                parent: None,
+                direction: d.direction.unwrap_or_default(),
+                length: d.length.unwrap_or_default(),
+                axis: euler(&d.axis.1, to_radians(d.axis.0)),
+                dofs: d.dofs,
+                line: d.line,
+            });
+        }
+        let order = resolve_hierarchy(&mut bones, &self.links, path)?;
+        let asf = Asf {
+            bones,
+            order,
+            root_rotation_order: root.rotation_order,
+            root_position: root.position,
+            metres_per_unit: METRES_PER_INCH / length_scale,
+            degrees,
+        };
+        Ok((asf, warnings))
+    }
+}
+
+impl RootDraft {
+    /// A `:root` line: `order` (the AMC value order), `axis` (the rotation order), `position`
+    /// or `orientation`.
+    fn read_field(&mut self, first: &str, tokens: &mut SplitWhitespace<'_>, at: At<'_>) -> Result<(), ImportError> {
+        match first.to_ascii_lowercase().as_str() {
+            "order" => {
+                let mut order = Vec::new();
+                for tok in tokens {
+                    match Dof::from_name(tok) {
+                        Some(d) if d != Dof::Length && !order.contains(&d) => order.push(d),
+                        _ => {
+                            return Err(at(format!("root order: `{tok}` is not one of TX TY TZ RX RY RZ (each once)")))
+                        }
+                    }
+                }
+                self.order = order;
+            }
+            "axis" => {
+                let tok = tokens.next().unwrap_or("nothing");
+                self.rotation_order = rotation_order(tok)
+                    .ok_or_else(|| at(format!("unknown rotation order `{tok}` (expected e.g. XYZ)")))?;
+            }
+            "position" => self.position = DVec3::from_array(numbers(tokens, "position", at)?),
+            "orientation" => self.orientation = numbers(tokens, "orientation", at)?,
+            other => return Err(at(format!("unknown root field `{other}`"))),
+        }
+        Ok(())
+    }
+}
+
+impl Draft {
+    /// A field line of an open bone (`key` is `first` in lower case): `name`, `direction`,
+    /// `length`, `axis ax ay az ORDER` or `dof`.
+    fn read_field(
+        &mut self,
+        key: &str,
+        first: &str,
+        tokens: &mut SplitWhitespace<'_>,
+        at: At<'_>,
+    ) -> Result<(), ImportError> {
+        match key {
+            "name" => {
+                let name = tokens.next().ok_or_else(|| at("`name` without a name".into()))?;
+                self.name = Some(name.to_owned());
+            }
+            "direction" => {
+                let d = DVec3::from_array(numbers(tokens, "direction", at)?);
+                let unit = d.try_normalize().ok_or_else(|| at("direction is zero".into()))?;
+                self.direction = Some(unit);
+            }
+            "length" => {
+                let [v] = numbers::<1>(tokens, "length", at)?;
+                if v < 0.0 {
+                    return Err(at(format!("length {} is negative", short_number(v))));
+                }
+                self.length = Some(v);
+            }
+            "axis" => {
+                let mut angles = [0.0; 3];
+                for (k, slot) in angles.iter_mut().enumerate() {
+                    let tok = tokens.next().unwrap_or("end of line");
+                    *slot = parse_finite(tok)
+                        .ok_or_else(|| at(format!("axis value {k}: `{tok}` is not a finite number")))?;
+                }
+                let tok = tokens.next().unwrap_or("nothing");
+                let order = rotation_order(tok)
+                    .ok_or_else(|| at(format!("unknown rotation order `{tok}` (expected e.g. XYZ)")))?;
+                self.axis = (angles, order);
+            }
+            "dof" => {
+                let mut dofs = Vec::new();
+                for tok in tokens {
+                    match Dof::from_name(tok) {
+                        Some(d) if !dofs.contains(&d) => dofs.push(d),
+                        Some(_) => return Err(at(format!("dof `{tok}` listed twice"))),
+                        None => return Err(at(format!("unknown dof `{tok}` (expected rx ry rz tx ty tz l)"))),
+                    }
+                }
+                self.dofs = dofs;
+            }
+            _ => return Err(at(format!("unknown bone field `{first}`"))),
+        }
+        Ok(())
     }
 }
 

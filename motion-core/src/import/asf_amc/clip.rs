@@ -4,11 +4,14 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::{invalid, AmcMotion, Asf};
+use super::amc::AmcMotion;
+use super::asf::Asf;
+use super::lines::invalid;
 use crate::files::read_bytes;
-use crate::import::{short_number, ImportError, ImportWarning, MocapClip};
+use crate::import::error::{ImportError, ImportWarning};
+use crate::import::retargeted::{RetargetedClip, SourceSkeleton};
+use crate::import::values::short_number;
 use crate::limits::MOCAP_FILE_BYTES;
-use crate::motion::retarget_pose;
 use crate::skeleton::{Pose, NUM_JOINTS};
 
 /// Rest statures outside this range are reported (m), as for BVH files.
@@ -77,13 +80,41 @@ const SOURCES: [Along; NUM_JOINTS] = [
 /// rotations, lerped root translation), [`SOURCES`] picks the 22 points, and bone lengths are
 /// retargeted to those of [`crate::skeleton::rest_pose`] with [`retarget_bone_lengths`] (bone
 /// directions kept, the root trajectory scaled by the leg-length ratio). Not cyclic.
+///
+/// [`retarget_bone_lengths`]: crate::motion::retarget_bone_lengths
+pub type AsfAmcClip = RetargetedClip<MappedAmc>;
+
+/// An AMC motion with the 22 points [`SOURCES`] picks from its bones.
 #[derive(Debug, Clone)]
-pub struct AsfAmcClip {
-    name: String,
+pub struct MappedAmc {
     motion: AmcMotion,
     /// Per joint: the bone and the fraction of the way along it.
     map: [(usize, f64); NUM_JOINTS],
-    target: [f64; NUM_JOINTS],
+}
+
+impl MappedAmc {
+    /// The 22 points picked from bone starts and ends (source bone lengths).
+    fn map_to_joints(&self, bones: &[(DVec3, DVec3)]) -> Pose {
+        self.map.map(|(b, t)| bones.get(b).map_or(DVec3::ZERO, |(start, end)| start.lerp(*end, t)))
+    }
+}
+
+impl SourceSkeleton for MappedAmc {
+    fn duration_s(&self) -> f64 {
+        self.motion.duration_s()
+    }
+
+    fn frame_time_s(&self) -> f64 {
+        self.motion.frame_time_s()
+    }
+
+    fn mapped_pose_at(&self, t_s: f64) -> Pose {
+        self.map_to_joints(&self.motion.positions_at(t_s))
+    }
+
+    fn mapped_rest_pose(&self) -> Pose {
+        self.map_to_joints(&self.motion.rest_positions())
+    }
 }
 
 impl AsfAmcClip {
@@ -142,7 +173,8 @@ impl AsfAmcClip {
         }
         let metres_per_unit = options.metres_per_unit.unwrap_or(asf.metres_per_unit());
         let motion = AmcMotion::parse(amc_text, amc_path, &asf, metres_per_unit, 1.0 / options.fps)?;
-        let clip = Self { name: name.to_owned(), motion, map, target: crate::skeleton::rest_bone_lengths() };
+        let source = MappedAmc { motion, map };
+        let clip = Self { name: name.to_owned(), source, target: crate::skeleton::rest_bone_lengths() };
         let stature_m = clip.stature_m();
         if !(PLAUSIBLE_STATURE_M.0..=PLAUSIBLE_STATURE_M.1).contains(&stature_m) {
             warnings.push(ImportWarning {
@@ -156,56 +188,17 @@ impl AsfAmcClip {
         Ok((clip, warnings))
     }
 
-    /// The AMC file's stem.
-    pub fn name(&self) -> &str {
-        &self.name
-    }
-
     /// The source motion (frames, frame time, skeleton, every bone's positions).
     pub fn motion(&self) -> &AmcMotion {
-        &self.motion
-    }
-
-    /// Source frame rate, frames per second.
-    pub fn fps(&self) -> f64 {
-        1.0 / self.motion.frame_time_s()
+        &self.source.motion
     }
 
     /// Height of the rest skeleton (all dofs zero), m: from the lowest bone end (the toe tips)
     /// to the highest (the top of the head bone).
     pub fn stature_m(&self) -> f64 {
-        let ys = self.motion.rest_positions().into_iter().flat_map(|(a, b)| [a.y, b.y]);
+        let ys = self.source.motion.rest_positions().into_iter().flat_map(|(a, b)| [a.y, b.y]);
         let (low, high) = ys.fold((f64::MAX, f64::MIN), |(lo, hi), y| (lo.min(y), hi.max(y)));
         (high - low).max(0.0)
-    }
-
-    /// The 22 points picked from bone starts and ends (source bone lengths).
-    fn map_to_joints(&self, bones: &[(DVec3, DVec3)]) -> Pose {
-        self.map.map(|(b, t)| bones.get(b).map_or(DVec3::ZERO, |(start, end)| start.lerp(*end, t)))
-    }
-
-    /// The 22 joints at `t_s` with the source's own bone lengths (metres, our axes).
-    pub fn mapped_pose_at(&self, t_s: f64) -> Pose {
-        self.map_to_joints(&self.motion.positions_at(t_s))
-    }
-
-    /// The source's rest skeleton mapped to the 22 joints.
-    pub fn mapped_rest_pose(&self) -> Pose {
-        self.map_to_joints(&self.motion.rest_positions())
-    }
-}
-
-impl MocapClip for AsfAmcClip {
-    fn duration_s(&self) -> f64 {
-        self.motion.duration_s()
-    }
-
-    fn is_cyclic(&self) -> bool {
-        false
-    }
-
-    fn pose_at(&self, t_s: f64) -> Pose {
-        retarget_pose(self.mapped_pose_at(t_s), &self.target)
     }
 }
 
@@ -216,7 +209,7 @@ mod tests {
 
     use super::*;
     use crate::import::asf_amc::tests::{TINY_AMC, TINY_ASF};
-    use crate::import::resample;
+    use crate::import::{resample, MocapClip};
     use crate::motion::bone_length_spread;
     use crate::skeleton::Joint;
 

@@ -5,8 +5,13 @@ use std::path::Path;
 
 use glam::{DQuat, DVec3};
 
-use super::{invalid, Axis, Bvh, Channel, LengthUnit, UpAxis};
-use crate::import::{in_reach, short_number, ImportError, MAX_POSITION_M};
+use super::error::invalid;
+use super::file::Bvh;
+use super::hierarchy::{Axis, Channel};
+use super::units::{LengthUnit, UpAxis};
+use crate::import::error::ImportError;
+use crate::import::frames::bracket;
+use crate::import::values::{in_reach, short_number, MAX_POSITION_M};
 
 /// Largest accepted rotation channel value, degrees (unwrapped angles of a long spin stay far
 /// below; beyond it an angle has lost its precision and is an export error).
@@ -133,12 +138,7 @@ impl BvhAnimation {
     /// [`Bvh::joints`] order. Rotations are slerped and translations lerped between the two
     /// nearest frames; times outside the clip hold its end frames.
     pub fn positions_at(&self, t_s: f64) -> Vec<DVec3> {
-        let last = self.frames.saturating_sub(1);
-        let x = (t_s / self.frame_time_s).clamp(0.0, last as f64);
-        let x = if x.is_nan() { 0.0 } else { x };
-        let k = (x.floor() as usize).min(last);
-        let k1 = (k + 1).min(last);
-        let a = x - k as f64;
+        let (k, k1, a) = bracket(t_s, self.frames, self.frame_time_s);
         let locals = (0..self.parents.len()).map(|j| {
             let ((r0, t0), (r1, t1)) = (self.local(k, j), self.local(k1, j));
             (r0.slerp(r1, a), t0.lerp(t1, a))

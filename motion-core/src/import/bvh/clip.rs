@@ -4,9 +4,13 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::{invalid, Bvh, BvhAnimation, LengthUnit, Rig, UpAxis, PLAUSIBLE_STATURE_M};
-use crate::import::{ImportError, ImportWarning, MocapClip};
-use crate::motion::retarget_pose;
+use super::animation::BvhAnimation;
+use super::error::invalid;
+use super::file::Bvh;
+use super::rig::Rig;
+use super::units::{LengthUnit, UpAxis, PLAUSIBLE_STATURE_M};
+use crate::import::error::{ImportError, ImportWarning};
+use crate::import::retargeted::{RetargetedClip, SourceSkeleton};
 use crate::skeleton::{Pose, NUM_JOINTS};
 
 /// How to read a BVH file into a [`BvhClip`].
@@ -28,14 +32,47 @@ pub struct BvhOptions {
 /// The project's own exports ([`Rig::Smpl`]) come back as written from
 /// [`BvhClip::mapped_pose_at`] (the file's joints and bone lengths); [`MocapClip::pose_at`]
 /// retargets them like any other rig's, so that a database built from them stays on one skeleton.
+///
+/// [`retarget_bone_lengths`]: crate::motion::retarget_bone_lengths
+/// [`MocapClip::pose_at`]: crate::import::MocapClip::pose_at
+pub type BvhClip = RetargetedClip<MappedBvh>;
+
+/// A BVH animation with its rig and the 22 points the rig map picks from its nodes.
 #[derive(Debug, Clone)]
-pub struct BvhClip {
-    name: String,
+pub struct MappedBvh {
     rig: Rig,
     animation: BvhAnimation,
     /// Per joint: the nodes it lies between and the fraction of the way (0 = at the first).
     map: [(usize, usize, f64); NUM_JOINTS],
-    target: [f64; NUM_JOINTS],
+}
+
+impl MappedBvh {
+    /// The 22 points picked from node positions (source bone lengths).
+    fn map_to_joints(&self, positions: &[DVec3]) -> Pose {
+        self.map.map(|(a, b, t)| match (positions.get(a), positions.get(b)) {
+            (Some(p), Some(q)) => p.lerp(*q, t),
+            _ => DVec3::ZERO,
+        })
+    }
+}
+
+impl SourceSkeleton for MappedBvh {
+    fn duration_s(&self) -> f64 {
+        self.animation.duration_s()
+    }
+
+    fn frame_time_s(&self) -> f64 {
+        self.animation.frame_time_s()
+    }
+
+    fn mapped_pose_at(&self, t_s: f64) -> Pose {
+        self.map_to_joints(&self.animation.positions_at(t_s))
+    }
+
+    /// The source's rest skeleton (OFFSETs only) mapped to the 22 joints.
+    fn mapped_rest_pose(&self) -> Pose {
+        self.map_to_joints(&self.animation.rest_positions())
+    }
 }
 
 impl BvhClip {
@@ -101,59 +138,17 @@ impl BvhClip {
             }
         };
         let target = crate::skeleton::rest_bone_lengths();
-        Ok((Self { name: name.to_owned(), rig, animation, map, target }, warnings))
-    }
-
-    /// The file stem.
-    pub fn name(&self) -> &str {
-        &self.name
+        Ok((Self { name: name.to_owned(), source: MappedBvh { rig, animation, map }, target }, warnings))
     }
 
     /// The rig whose joint map is used.
     pub fn rig(&self) -> Rig {
-        self.rig
+        self.source.rig
     }
 
     /// The source motion (frames, frame time, unit, every node's positions).
     pub fn animation(&self) -> &BvhAnimation {
-        &self.animation
-    }
-
-    /// Source frame rate, frames per second (1 / Frame Time).
-    pub fn fps(&self) -> f64 {
-        1.0 / self.animation.frame_time_s()
-    }
-
-    /// The 22 points picked from node positions (source bone lengths).
-    fn map_to_joints(&self, positions: &[DVec3]) -> Pose {
-        self.map.map(|(a, b, t)| match (positions.get(a), positions.get(b)) {
-            (Some(p), Some(q)) => p.lerp(*q, t),
-            _ => DVec3::ZERO,
-        })
-    }
-
-    /// The 22 joints at `t_s` with the source's own bone lengths (metres, our axes).
-    pub fn mapped_pose_at(&self, t_s: f64) -> Pose {
-        self.map_to_joints(&self.animation.positions_at(t_s))
-    }
-
-    /// The source's rest skeleton (OFFSETs only) mapped to the 22 joints.
-    pub fn mapped_rest_pose(&self) -> Pose {
-        self.map_to_joints(&self.animation.rest_positions())
-    }
-}
-
-impl MocapClip for BvhClip {
-    fn duration_s(&self) -> f64 {
-        self.animation.duration_s()
-    }
-
-    fn is_cyclic(&self) -> bool {
-        false
-    }
-
-    fn pose_at(&self, t_s: f64) -> Pose {
-        retarget_pose(self.mapped_pose_at(t_s), &self.target)
+        &self.source.animation
     }
 }
 
@@ -164,7 +159,7 @@ mod tests {
 
     use super::*;
     use crate::import::bvh::tests::TINY;
-    use crate::import::resample;
+    use crate::import::{resample, MocapClip};
     use crate::motion::bone_length_spread;
     use crate::skeleton::Joint;
 

@@ -1,6 +1,6 @@
 //! Joint maps from common BVH rigs to the 22 joints.
 
-use super::Bvh;
+use super::file::Bvh;
 use crate::skeleton::{Joint, NUM_JOINTS};
 use Source::{At, Between, TowardEnd};
 

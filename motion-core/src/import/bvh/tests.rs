@@ -1,7 +1,11 @@
 //! The BVH reader against hand-written files: hierarchy, channels, units, axes, and every
 //! malformed input an error naming the line.
 
+use std::path::Path;
+
 use super::*;
+use crate::import::{ImportError, ImportWarning};
+use crate::limits::RIG_JOINTS;
 
 /// A root with a one-bone arm along +x; the tests refer to its 1-based line numbers.
 pub(super) const TINY: &str = "HIERARCHY

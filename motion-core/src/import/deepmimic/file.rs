@@ -5,7 +5,8 @@
 use serde::de::{Deserializer, Error as _, IgnoredAny, SeqAccess, Visitor};
 use serde::Deserialize;
 
-use super::FRAME_WIDTH;
+/// Values per frame.
+pub(super) const FRAME_WIDTH: usize = 44;
 
 /// A clip file as read: `Loop` and `Frames`; other keys are skipped.
 #[derive(Deserialize)]

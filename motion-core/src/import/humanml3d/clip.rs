@@ -6,8 +6,10 @@ use std::path::Path;
 use candle_core::{Device, Tensor};
 use glam::{DQuat, DVec3};
 
-use super::invalid;
-use crate::import::{in_reach, short_number, ImportError, MocapClip, MAX_POSITION_M};
+use super::error::invalid;
+use crate::import::clip::MocapClip;
+use crate::import::error::ImportError;
+use crate::import::values::{in_reach, short_number, MAX_POSITION_M};
 use crate::motion::retarget_bone_lengths;
 use crate::representation::{recover_from_ric, FeatureFrame, FEATURE_DIM};
 use crate::skeleton::{Pose, FPS, NUM_JOINTS};
