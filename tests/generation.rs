@@ -10,6 +10,7 @@ use motion_core::constraints::CompiledProgram;
 use motion_core::evaluation::report;
 use motion_core::generation::generate;
 use motion_core::generation::method::{GenerationConfig, Method, Task};
+use motion_core::generation::schedule::{Schedule, CHECK_EVERY};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
 
@@ -223,4 +224,35 @@ fn the_refinement_draws_dno_motions_out_of_the_walls_keeps_bones_rigid_and_switc
     .unwrap()
     .generated;
     assert!(base.refine.iter().all(|r| !r.applied));
+}
+
+/// With the `until_met` schedule, DNO ends a stage as soon as every constraint is met and the
+/// criterion has stalled, and runs its whole budget on a program it cannot meet.
+#[test]
+fn the_until_met_schedule_stops_on_a_met_program_and_runs_the_budget_on_an_unmet_one() {
+    let device = Device::Cpu;
+    let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &device).unwrap();
+    // Met by any upright motion: the head stays above 0.5 m on every frame.
+    let met = r#"{"text": "a man walks forwards", "frames": 40, "constraints": [{"id": "c1", "expr": {
+        "op": "greater_than", "quantity": {"kind": "position", "of": {"joint": "head"}, "axes": "y"},
+        "min": 0.5}}]}"#;
+    // Out of reach: the pelvis 30 m ahead after 2 s.
+    let unmet = r#"{"text": "a man walks forwards", "frames": 40, "constraints": [{"id": "c1", "expr": {
+        "op": "equal", "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "z"},
+        "target": [30.0], "frames": {"keyframes": ["last"]}}}]}"#;
+    let steps_taken = |json: &str| {
+        let program = TaskProgram::from_json_validated(json).unwrap();
+        let compiled = CompiledProgram::compile(&program, &device).unwrap();
+        let mut config = config(Method::Dno, 40);
+        config.samples = 1;
+        config.schedule = Schedule::UntilMet;
+        let mut steps = 0;
+        let task = Task { program: &program, compiled: &compiled };
+        let run = generate(&prior, task, None, &config, &device, |_| steps += 1).unwrap().generated;
+        assert_eq!(run.loss_history[0].len(), steps);
+        steps
+    };
+    let early = steps_taken(met);
+    assert!(early < 40 && early % CHECK_EVERY == 0, "a met program ends early, at a check: {early} steps");
+    assert_eq!(steps_taken(unmet), 40, "an unmet program runs its budget");
 }

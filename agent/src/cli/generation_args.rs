@@ -8,6 +8,7 @@ use motion_core::generation::method::{GenerationConfig, Method};
 use motion_core::generation::objective::Guards;
 use motion_core::generation::rgdno::candidates::RetrievalSource;
 use motion_core::generation::rgdno::config::RgDnoConfig;
+use motion_core::generation::schedule::Schedule;
 use motion_core::pipeline::TaskSettings;
 
 use super::export_formats::ExportFormats;
@@ -43,6 +44,25 @@ impl From<MethodArg> for Method {
     }
 }
 
+/// When DNO's stages end, on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ScheduleArg {
+    /// Every stage runs its whole step budget (the papers' schedule, as the tables were made).
+    Paper,
+    /// A stage ends once every constraint is met at its tolerance and the criterion has
+    /// stopped improving (checked every 10 steps after the warm-up), or at its budget.
+    UntilMet,
+}
+
+impl From<ScheduleArg> for Schedule {
+    fn from(s: ScheduleArg) -> Schedule {
+        match s {
+            ScheduleArg::Paper => Schedule::Paper,
+            ScheduleArg::UntilMet => Schedule::UntilMet,
+        }
+    }
+}
+
 /// Options shared by every command that generates motions.
 #[derive(Debug, Clone, Args)]
 pub struct GenerationArgs {
@@ -59,6 +79,11 @@ pub struct GenerationArgs {
     /// Random restarts N_S of DNO and RG-DNO; the best per sample is kept.
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
+    /// When DNO's optimisation ends: `paper` runs every step of the budget; `until-met` ends
+    /// once every constraint is met at its tolerance and the loss has stopped improving (DNO
+    /// only so far; RG-DNO's stages run their budgets).
+    #[arg(long, value_enum, default_value_t = ScheduleArg::Paper)]
+    pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
     /// again from fresh noise (attempt k + 1 from seed + k·restarts) and keeps its best attempt
     /// (most constraints met, then the lowest error); report.json's `attempt` says which. 0: off
@@ -160,6 +185,7 @@ impl GenerationArgs {
         config.samples = self.samples;
         config.seed = self.seed;
         config.guidance = self.guidance;
+        config.schedule = self.schedule.into();
         config.dno.restarts = self.restarts;
         config.guards = Guards {
             jitter: self.jitter_weight,

@@ -9,7 +9,8 @@
 //! - [`DnoConfig`]: DNO's settings with its defaults and lr schedule;
 //! - [`Solver`] / [`UnrolledDdim`]: the differentiable map z → x;
 //! - [`noise_regularize_1d`]: the noise decorrelation regulariser;
-//! - [`optimize`]: the loop; [`optimize_with_restarts`]: best of N_S random restarts.
+//! - [`optimize`]: the loop; [`optimize_until`]: the loop that may end before its budget;
+//!   [`optimize_with_restarts`]: best of N_S random restarts.
 
 mod config;
 mod optimize;
@@ -21,6 +22,8 @@ mod tests;
 pub use config::DnoConfig;
 pub(crate) use optimize::per_sample_norm;
 pub(crate) use optimize::{beats, take_rows};
-pub use optimize::{optimize, optimize_with_restarts, DnoResult, DnoStep, RestartsResult, SampleHistory};
+pub use optimize::{
+    optimize, optimize_until, optimize_with_restarts, DnoResult, DnoStep, RestartsResult, SampleHistory,
+};
 pub use regularizer::{decorrelation_terms, noise_regularize_1d};
 pub use solver::{Solver, UnrolledDdim};

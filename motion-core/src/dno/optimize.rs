@@ -91,13 +91,28 @@ pub struct RestartsResult {
 /// 4. Adam step on z, then the optional perturbation z += N(0, I)·perturb_scale·lr factor.
 ///
 /// Only z is updated: the solver's weights stay frozen. The loop's noise comes from a stream
-/// derived from `config.seed`, so a run is reproducible.
+/// derived from `config.seed`, so a run is reproducible. Every run takes its whole budget of
+/// `config.steps` (the paper's schedule; [`optimize_until`] may end sooner).
 pub fn optimize<S: Solver + ?Sized>(
     solver: &S,
     criterion: impl Fn(&Tensor) -> Result<Tensor>,
     z0: &Tensor,
     config: &DnoConfig,
+    on_step: impl FnMut(&DnoStep),
+) -> Result<DnoResult> {
+    optimize_until(solver, criterion, z0, config, on_step, |_, _| Ok(false))
+}
+
+/// [`optimize`], asking `done` after every step whether the run is done before its budget:
+/// `done` gets the step's figures and its motion `x` `[batch, frames, 263]` (the forward of that
+/// step, which the result returns when the run ends there).
+pub fn optimize_until<S: Solver + ?Sized>(
+    solver: &S,
+    criterion: impl Fn(&Tensor) -> Result<Tensor>,
+    z0: &Tensor,
+    config: &DnoConfig,
     mut on_step: impl FnMut(&DnoStep),
+    mut done: impl FnMut(&DnoStep, &Tensor) -> Result<bool>,
 ) -> Result<DnoResult> {
     config.validate()?;
     let (batch, _, _) = z0.dims3()?;
@@ -180,7 +195,11 @@ pub fn optimize<S: Solver + ?Sized>(
             h.grad_norm.push(report.grad_norm[b]);
         }
         on_step(&report);
+        let stop = done(&report, &x_out)?;
         last = Some((x_out, report.loss));
+        if stop {
+            break;
+        }
     }
     let (x, loss) = last.ok_or_else(|| candle_core::Error::Msg("DNO ran no steps".into()))?;
     Ok(match best {
@@ -193,8 +212,8 @@ pub fn optimize<S: Solver + ?Sized>(
 /// the run with the lowest final criterion loss (RG-DNO's "N_S random-noise searches").
 ///
 /// Restart r starts from `gaussian(shape, seed + r)` (f32 N(0, I), `shape` = `[batch, frames,
-/// 263]`) and runs [`optimize`] with seed `seed + r`; `on_step` gets the restart index. A NaN
-/// loss never wins over a number.
+/// 263]`) and runs [`optimize_until`] with seed `seed + r`; `on_step` and `done` get the restart
+/// index. A NaN loss never wins over a number.
 pub fn optimize_with_restarts<S: Solver + ?Sized>(
     solver: &S,
     criterion: impl Fn(&Tensor) -> Result<Tensor>,
@@ -202,6 +221,7 @@ pub fn optimize_with_restarts<S: Solver + ?Sized>(
     device: &Device,
     config: &DnoConfig,
     mut on_step: impl FnMut(usize, &DnoStep),
+    mut done: impl FnMut(usize, &DnoStep, &Tensor) -> Result<bool>,
 ) -> Result<RestartsResult> {
     config.validate()?;
     let mut best: Option<DnoResult> = None;
@@ -211,7 +231,7 @@ pub fn optimize_with_restarts<S: Solver + ?Sized>(
         let seed = config.seed.wrapping_add(r as u64);
         let run_config = DnoConfig { seed, ..config.clone() };
         let z0 = gaussian(shape, seed, device)?;
-        let run = optimize(solver, &criterion, &z0, &run_config, |s| on_step(r, s))?;
+        let run = optimize_until(solver, &criterion, &z0, &run_config, |s| on_step(r, s), |s, x| done(r, s, x))?;
         final_loss.push(run.loss.clone());
         best = Some(match best {
             None => run,

@@ -113,9 +113,15 @@ fn restarts_keep_the_best_run_per_sample() {
     let criterion = reach(&[1.0, -1.0], &[1.0, 1.0]);
     let config = DnoConfig { steps: 5, lr_warmup_steps: 0, restarts: 3, seed: 11, ..DnoConfig::default() };
     let mut calls = vec![0; 3];
-    let out = optimize_with_restarts(&identity, &criterion, (2, FRAMES, FEATURE_DIM), &dev, &config, |r, _| {
-        calls[r] += 1;
-    })
+    let out = optimize_with_restarts(
+        &identity,
+        &criterion,
+        (2, FRAMES, FEATURE_DIM),
+        &dev,
+        &config,
+        |r, _| calls[r] += 1,
+        |_, _, _| Ok(false),
+    )
     .unwrap();
     assert_eq!(calls, [5, 5, 5]);
     for b in 0..2 {
@@ -231,4 +237,31 @@ fn keep_best_returns_each_samples_lowest_iterate_and_its_noise() {
     for (a, l) in again.iter().zip(&best.loss) {
         assert!((a - l).abs() <= 1e-6 * l.max(1.0), "{a} against {l}");
     }
+}
+
+#[test]
+fn a_run_ends_where_done_says_with_that_steps_motion() {
+    let dev = Device::Cpu;
+    let z0 = gaussian((1, FRAMES, FEATURE_DIM), 3, &dev).unwrap();
+    let config = DnoConfig { steps: 20, lr_warmup_steps: 0, ..DnoConfig::default() };
+    let mut motions = Vec::new();
+    let run = optimize_until(
+        &identity,
+        reach(&[2.0], &[1.0]),
+        &z0,
+        &config,
+        |_| {},
+        |s, x| {
+            motions.push(x.clone());
+            Ok(s.step == 3)
+        },
+    )
+    .unwrap();
+    assert_eq!(motions.len(), 4, "asked after steps 0 to 3, then ended");
+    assert_eq!(run.history[0].loss.len(), 4);
+    assert_eq!(run.loss[0], run.history[0].loss[3]);
+    let same = (&run.x - &motions[3]).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+    assert_eq!(same, 0.0, "the result is the motion of the step it ended on");
+    let full = optimize_until(&identity, reach(&[2.0], &[1.0]), &z0, &config, |_| {}, |_, _| Ok(false)).unwrap();
+    assert_eq!(full.history[0].loss.len(), 20, "never done: the whole budget");
 }

@@ -13,6 +13,7 @@ use crate::diffusion::Guidance;
 use crate::dno::DnoConfig;
 use crate::generation::objective::Guards;
 use crate::generation::refine::{RefineConfig, RefineReport};
+use crate::generation::schedule::Schedule;
 use crate::limits;
 use crate::program::TaskProgram;
 
@@ -88,6 +89,10 @@ pub struct GenerationConfig {
     /// constraints ([`crate::generation::refine`]; on by default), before the foot clean-up.
     #[serde(default)]
     pub refine: RefineConfig,
+    /// When DNO's stages end ([`Schedule`]; default: the papers' fixed budget). Reports made
+    /// with the papers' schedule leave it out.
+    #[serde(default, skip_serializing_if = "Schedule::is_paper")]
+    pub schedule: Schedule,
 }
 
 impl GenerationConfig {
@@ -147,6 +152,7 @@ impl GenerationConfig {
             guards: Guards::DEFAULT,
             foot_lock: FootLockConfig::default(),
             refine: RefineConfig::default(),
+            schedule: Schedule::Paper,
         }
     }
 }

@@ -29,6 +29,7 @@ pub mod objective;
 pub mod postprocess;
 pub mod refine;
 pub mod rgdno;
+pub mod schedule;
 
 use std::time::Instant;
 
@@ -37,6 +38,7 @@ use candle_core::{Device, Tensor};
 use crate::diffusion::noise::gaussian;
 use crate::diffusion::Guidance;
 use crate::dno::{optimize_with_restarts, DnoConfig, Solver, UnrolledDdim};
+use crate::numeric::mean;
 use crate::prior::Prior;
 use crate::representation::FEATURE_DIM;
 use method::{Generated, GenerationConfig, GenerationError, Method, Task};
@@ -47,6 +49,7 @@ use rgdno::config::RgDnoConfig;
 use rgdno::error::{RetrievalError, RgDnoError};
 use rgdno::report::RgDnoReport;
 use rgdno::{generate_rg_dno, RgDnoTask};
+use schedule::{Schedule, UntilMet};
 
 /// What RG-DNO retrieves from and how it runs its stages.
 #[derive(Debug, Clone, Copy)]
@@ -205,10 +208,19 @@ fn from_sample(
         FromSample::Dno => {
             let dno = DnoConfig { seed: config.seed, ..config.dno.clone() };
             let guarded = program_objective(prior, compiled, &initial_joints, config.guards);
-            let run = optimize_with_restarts(&solver as &dyn Solver, guarded, shape, device, &dno, |round, s| {
-                let loss = s.loss.iter().sum::<f64>() / s.loss.len().max(1) as f64;
-                progress(round, s.step, s.steps, loss)
-            })?;
+            let mut until_met = UntilMet::new(prior, compiled, &initial_joints, dno.lr_warmup_steps);
+            let run = optimize_with_restarts(
+                &solver as &dyn Solver,
+                guarded,
+                shape,
+                device,
+                &dno,
+                |round, s| progress(round, s.step, s.steps, mean(&s.loss)),
+                |round, s, x| match config.schedule {
+                    Schedule::Paper => Ok(false),
+                    Schedule::UntilMet => until_met.done(round, s, x),
+                },
+            )?;
             let history = run.best.history.into_iter().map(|h| h.loss).collect();
             (run.best.x, history)
         }

@@ -1,0 +1,86 @@
+//! When an optimisation stage ends: at its step budget (the paper's schedule), or as soon as
+//! the work is done (issue 59): every constraint met at its tolerance (the judgement of
+//! `report.json`) and the criterion no longer improving.
+//!
+//! The criterion holds the program's error and the guards (no one-frame jitter, no long flight,
+//! free fall in flight, no joint under the floor), so a stage that stops because it has stopped
+//! improving has also stopped improving its guards; the stop is only asked after the learning
+//! rate's warm-up, and only every [`CHECK_EVERY`] steps, when the judgement's cost (the
+//! motion's joints and the program's checks, no denoiser pass) is small beside a step's.
+
+use candle_core::Tensor;
+use serde::{Deserialize, Serialize};
+
+use crate::constraints::CompiledProgram;
+use crate::dno::DnoStep;
+use crate::numeric::mean;
+use crate::prior::Prior;
+
+/// When a stage of DNO ends.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Schedule {
+    /// Every stage runs its whole step budget (the papers' fixed schedule; the tables').
+    #[default]
+    Paper,
+    /// A stage ends when every constraint is met at its tolerance and the criterion has
+    /// improved by less than [`STALL_FRACTION`] over the last [`CHECK_EVERY`] steps, or at its
+    /// budget.
+    UntilMet,
+}
+
+impl Schedule {
+    /// Whether this is the papers' schedule (written reports leave it out).
+    pub fn is_paper(&self) -> bool {
+        *self == Schedule::Paper
+    }
+}
+
+/// Steps between two judgements of the motion.
+pub const CHECK_EVERY: usize = 10;
+/// The criterion has stopped improving when it fell by less than this fraction over the last
+/// [`CHECK_EVERY`] steps.
+pub const STALL_FRACTION: f64 = 0.01;
+
+/// The stopping rule of [`Schedule::UntilMet`] for one DNO stage: asked after every step with
+/// the step's motion (normalised features `[B, T, 263]`), it answers whether the stage is done.
+pub struct UntilMet<'a> {
+    prior: &'a Prior,
+    compiled: &'a CompiledProgram,
+    /// The unoptimised motion `[B, T, 22, 3]` that `stay_near_initial` terms compare with.
+    initial: &'a Tensor,
+    /// Steps of the learning rate's warm-up: no stop before them.
+    warmup: usize,
+    /// The mean criterion of the current restart, per step.
+    losses: Vec<f64>,
+    round: usize,
+}
+
+impl<'a> UntilMet<'a> {
+    /// The rule for a stage on `compiled`, whose motions the prior decodes; no stop within the
+    /// first `warmup` steps.
+    pub fn new(prior: &'a Prior, compiled: &'a CompiledProgram, initial: &'a Tensor, warmup: usize) -> Self {
+        UntilMet { prior, compiled, initial, warmup, losses: Vec::new(), round: 0 }
+    }
+
+    /// Whether restart `round`'s stage is done after `step` with motion `x`: every sample meets
+    /// every constraint, and the mean criterion stalled over the last [`CHECK_EVERY`] steps.
+    pub fn done(&mut self, round: usize, step: &DnoStep, x: &Tensor) -> candle_core::Result<bool> {
+        if round != self.round {
+            self.round = round;
+            self.losses.clear();
+        }
+        self.losses.push(mean(&step.loss));
+        let taken = self.losses.len();
+        if taken <= self.warmup.max(CHECK_EVERY) || taken % CHECK_EVERY != 0 {
+            return Ok(false);
+        }
+        let (before, now) = (self.losses[taken - 1 - CHECK_EVERY], self.losses[taken - 1]);
+        if before - now > STALL_FRACTION * before.abs() {
+            return Ok(false);
+        }
+        let joints = self.prior.to_joints(x)?;
+        let judged = self.compiled.satisfaction(&joints, Some(self.initial)).map_err(candle_core::Error::wrap)?;
+        Ok(judged.iter().all(|c| c.pass.iter().all(|&p| p)))
+    }
+}
