@@ -80,8 +80,9 @@ pub struct GenerationArgs {
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
     /// When DNO's optimisation ends: `paper` runs every step of the budget; `until-met` ends
-    /// once every constraint is met at its tolerance and the loss has stopped improving (DNO
-    /// only so far; RG-DNO's stages run their budgets).
+    /// once every constraint is met at its tolerance and the loss has stopped improving (DNO,
+    /// and RG-DNO's branches and final round; RG-DNO's inversion, mask search and soft blend
+    /// still run their budgets).
     #[arg(long, value_enum, default_value_t = ScheduleArg::Paper)]
     pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated

@@ -8,6 +8,8 @@
 //! rate's warm-up, and only every [`CHECK_EVERY`] steps, when the judgement's cost (the
 //! motion's joints and the program's checks, no denoiser pass) is small beside a step's.
 
+use std::ops::Range;
+
 use candle_core::Tensor;
 use serde::{Deserialize, Serialize};
 
@@ -25,7 +27,8 @@ pub enum Schedule {
     Paper,
     /// A stage ends when every constraint is met at its tolerance and the criterion has
     /// improved by less than [`STALL_FRACTION`] over the last [`CHECK_EVERY`] steps, or at its
-    /// budget.
+    /// budget: DNO's, and RG-DNO's branches (each on its own group) and final round. RG-DNO's
+    /// inversion, mask search and soft blend run their budgets.
     UntilMet,
 }
 
@@ -43,10 +46,12 @@ pub const CHECK_EVERY: usize = 10;
 pub const STALL_FRACTION: f64 = 0.01;
 
 /// The stopping rule of [`Schedule::UntilMet`] for one DNO stage: asked after every step with
-/// the step's motion (normalised features `[B, T, 263]`), it answers whether the stage is done.
+/// the step's motion (normalised features `[N, T, 263]`), it answers whether the stage is done.
 pub struct UntilMet<'a> {
     prior: &'a Prior,
-    compiled: &'a CompiledProgram,
+    /// The programs the stage fits, each with the rows of the motion it judges (RG-DNO's
+    /// branches fit `C1` on the first `B` rows and `C2` on the next `B`).
+    parts: Vec<(&'a CompiledProgram, Range<usize>)>,
     /// The unoptimised motion `[B, T, 22, 3]` that `stay_near_initial` terms compare with.
     initial: &'a Tensor,
     /// Steps of the learning rate's warm-up: no stop before them.
@@ -57,10 +62,21 @@ pub struct UntilMet<'a> {
 }
 
 impl<'a> UntilMet<'a> {
-    /// The rule for a stage on `compiled`, whose motions the prior decodes; no stop within the
-    /// first `warmup` steps.
+    /// The rule for a stage that fits `compiled` on every row, whose motions the prior decodes;
+    /// no stop within the first `warmup` steps.
     pub fn new(prior: &'a Prior, compiled: &'a CompiledProgram, initial: &'a Tensor, warmup: usize) -> Self {
-        UntilMet { prior, compiled, initial, warmup, losses: Vec::new(), round: 0 }
+        let rows = initial.dim(0).unwrap_or(0);
+        Self::of_parts(prior, vec![(compiled, 0..rows)], initial, warmup)
+    }
+
+    /// The rule for a stage that fits each program of `parts` on its own rows.
+    pub fn of_parts(
+        prior: &'a Prior,
+        parts: Vec<(&'a CompiledProgram, Range<usize>)>,
+        initial: &'a Tensor,
+        warmup: usize,
+    ) -> Self {
+        UntilMet { prior, parts, initial, warmup, losses: Vec::new(), round: 0 }
     }
 
     /// Whether restart `round`'s stage is done after `step` with motion `x`: every sample meets
@@ -80,7 +96,13 @@ impl<'a> UntilMet<'a> {
             return Ok(false);
         }
         let joints = self.prior.to_joints(x)?;
-        let judged = self.compiled.satisfaction(&joints, Some(self.initial)).map_err(candle_core::Error::wrap)?;
-        Ok(judged.iter().all(|c| c.pass.iter().all(|&p| p)))
+        for (compiled, rows) in &self.parts {
+            let part = joints.narrow(0, rows.start, rows.len())?;
+            let judged = compiled.satisfaction(&part, Some(self.initial)).map_err(candle_core::Error::wrap)?;
+            if !judged.iter().all(|c| c.pass.iter().all(|&p| p)) {
+                return Ok(false);
+            }
+        }
+        Ok(true)
     }
 }

@@ -6,8 +6,9 @@ use super::error::RgDnoError;
 use super::report::{Stage, StageProgress};
 use super::stages::Stages;
 use crate::diffusion::Denoiser;
-use crate::dno::{self, DnoConfig, DnoResult};
+use crate::dno::{self, DnoConfig, DnoResult, DnoStep};
 use crate::generation::objective::program_objective;
+use crate::generation::schedule::{Schedule, UntilMet};
 
 impl<M: Denoiser + ?Sized> Stages<'_, M> {
     /// The final round from `z_blend` `[B, T, 263]` on `F_C` with the jitter guard, keeping the
@@ -30,8 +31,12 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             keep_best: true,
             ..config.dno.clone()
         };
-        Ok(dno::optimize(solver, &full, z_blend, &last, |s| {
-            progress(&StageProgress::of_dno(Stage::FinalRound, round, s))
-        })?)
+        let mut until_met = UntilMet::new(prior, compiled, initial_joints, last.lr_warmup_steps);
+        let done = |s: &DnoStep, x: &Tensor| match config.schedule {
+            Schedule::Paper => Ok(false),
+            Schedule::UntilMet => until_met.done(round, s, x),
+        };
+        let progress = |s: &DnoStep| progress(&StageProgress::of_dno(Stage::FinalRound, round, s));
+        Ok(dno::optimize_until(solver, &full, z_blend, &last, progress, done)?)
     }
 }
