@@ -50,7 +50,8 @@ pub enum ScheduleArg {
     /// Every stage runs its whole step budget (the papers' schedule, as the tables were made).
     Paper,
     /// A stage ends once every constraint is met at its tolerance and the criterion has
-    /// stopped improving (checked every 10 steps after the warm-up), or at its budget.
+    /// stopped improving (checked every 10 steps after the warm-up), or at its budget; RG-DNO's
+    /// mask search is screened and its soft blend skipped when the masks meet the program.
     UntilMet,
 }
 
@@ -81,8 +82,9 @@ pub struct GenerationArgs {
     pub restarts: usize,
     /// When DNO's optimisation ends: `paper` runs every step of the budget; `until-met` ends
     /// once every constraint is met at its tolerance and the loss has stopped improving (DNO,
-    /// and RG-DNO's branches and final round; RG-DNO's inversion, mask search and soft blend
-    /// still run their budgets).
+    /// and RG-DNO's branches and final round), screens RG-DNO's mask candidates with a cheap
+    /// sampler before scoring the best 16 per sample, and skips the soft blend when the chosen
+    /// masks already meet the program (RG-DNO's inversion still runs its budget).
     #[arg(long, value_enum, default_value_t = ScheduleArg::Paper)]
     pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated

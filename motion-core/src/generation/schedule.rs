@@ -28,7 +28,8 @@ pub enum Schedule {
     /// A stage ends when every constraint is met at its tolerance and the criterion has
     /// improved by less than [`STALL_FRACTION`] over the last [`CHECK_EVERY`] steps, or at its
     /// budget: DNO's, and RG-DNO's branches (each on its own group) and final round. RG-DNO's
-    /// inversion, mask search and soft blend run their budgets.
+    /// mask search is screened by a cheap sampler first, and its soft blend is skipped when the
+    /// chosen binary masks meet the program; its inversion runs its budget.
     UntilMet,
 }
 

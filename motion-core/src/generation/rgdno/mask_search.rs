@@ -1,6 +1,11 @@
 //! Stage 5a (eq. 13): the binary temporal and spatial masks `M` of `z' = M·z1 + (1 − M)·z2`,
 //! every candidate sampled without gradients and scored by `F_C(G(z')) + R(G(z'), z')`; each
 //! sample keeps its best.
+//!
+//! With [`Schedule::UntilMet`] the candidates are screened first: every one is sampled by a
+//! cheap sampler ([`SCREEN_DDIM_STEPS`] unguided DDIM steps, a quarter of the passes of the
+//! default ten guided ones) and ranked by `F_C` alone, and only each sample's best
+//! [`SCREENED`] are scored as above.
 
 use candle_core::Tensor;
 use rand::rngs::StdRng;
@@ -12,12 +17,18 @@ use super::mask::{blend, MaskCandidate};
 use super::report::{ChosenMask, Stage, StageProgress};
 use super::reward::{reward, RewardWeights};
 use crate::constraints::CompiledProgram;
-use crate::diffusion::Denoiser;
+use crate::diffusion::{Denoiser, Guidance};
 use crate::dno::UnrolledDdim;
 use crate::generation::method::GenerationError;
 use crate::generation::objective::{joints_objective, Guards};
+use crate::generation::schedule::Schedule;
 use crate::prior::Prior;
 use crate::representation::FEATURE_DIM;
+
+/// Candidates each sample keeps from the screening for the full sampler.
+pub const SCREENED: usize = 16;
+/// DDIM steps of the screening sampler (unguided).
+pub const SCREEN_DDIM_STEPS: usize = 5;
 
 /// The mask search of one restart: eq. 13's binary candidates, then the soft blend.
 pub(super) struct MaskStages<'a, M: Denoiser + ?Sized> {
@@ -28,6 +39,8 @@ pub(super) struct MaskStages<'a, M: Denoiser + ?Sized> {
     pub(super) objective: Objective<'a>,
     pub(super) weights: &'a RewardWeights,
     pub(super) round: usize,
+    /// [`Schedule::UntilMet`] screens the candidates first.
+    pub(super) schedule: Schedule,
 }
 
 /// The program objective's parts ([`crate::generation::objective::program_objective`]): the compiled
@@ -64,9 +77,84 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let (rg, round) = (self.rg, self.round);
         let candidates: Vec<MaskCandidate> =
             MaskCandidate::all(rg.segments).into_iter().filter(|c| rg.mask_kinds.contains(&c.kind)).collect();
+        let candidates = match self.schedule {
+            Schedule::Paper => candidates,
+            Schedule::UntilMet => self.screen(&candidates, (z1, z2))?,
+        };
         self.choose(&candidates, (z1, z2), rng, &mut |done| {
             progress(&StageProgress { stage: Stage::Masks, round, step: done, steps: candidates.len(), loss: 0.0 })
         })
+    }
+
+    /// The candidates among the best [`SCREENED`] of some sample by `F_C` of the cheap sampler
+    /// (in their order in `candidates`).
+    fn screen(
+        &self,
+        candidates: &[MaskCandidate],
+        (z1, z2): (&Tensor, &Tensor),
+    ) -> Result<Vec<MaskCandidate>, RgDnoError> {
+        if candidates.len() <= SCREENED {
+            return Ok(candidates.to_vec());
+        }
+        let text = self.solver.text.clone();
+        let cheap = UnrolledDdim::new(self.solver.denoiser, text, Guidance::none(), SCREEN_DDIM_STEPS)?;
+        let (batch, frames, _) = z1.dims3()?;
+        let (z1, z2) = (&z1.detach(), &z2.detach());
+        let mut scores: Vec<Vec<f64>> = vec![Vec::with_capacity(candidates.len()); batch];
+        for chunk in candidates.chunks(self.rg.mask_batch.max(1)) {
+            let z = self.blended(chunk, (z1, z2), frames)?;
+            let x = cheap.sampler.sample(cheap.denoiser, &z, &cheap.text.repeat((chunk.len(), 1))?, cheap.guidance)?;
+            let constraint = to_vec(&self.objective.on_copies(&self.prior.to_joints(&x)?, chunk.len())?)?;
+            for k in 0..chunk.len() {
+                for (b, sample) in scores.iter_mut().enumerate() {
+                    let c = constraint[k * batch + b];
+                    sample.push(if c.is_finite() { c } else { f64::INFINITY });
+                }
+            }
+        }
+        let mut keep = vec![false; candidates.len()];
+        for sample in &scores {
+            let mut order: Vec<usize> = (0..candidates.len()).collect();
+            order.sort_by(|&a, &b| sample[a].total_cmp(&sample[b]));
+            for &k in order.iter().take(SCREENED) {
+                keep[k] = true;
+            }
+        }
+        Ok(candidates.iter().zip(keep).filter(|(_, k)| *k).map(|(c, _)| *c).collect())
+    }
+
+    /// `z' = M z1 + (1 − M) z2` of every candidate of `chunk`, candidate-major: row `k·B + b`
+    /// is candidate `k` on sample `b`.
+    fn blended(
+        &self,
+        chunk: &[MaskCandidate],
+        (z1, z2): (&Tensor, &Tensor),
+        frames: usize,
+    ) -> candle_core::Result<Tensor> {
+        let masks = chunk
+            .iter()
+            .map(|c| c.tensor(frames, z1.device())?.broadcast_as((1, frames, FEATURE_DIM))?.contiguous())
+            .collect::<candle_core::Result<Vec<_>>>()?;
+        Tensor::cat(&masks.iter().map(|m| blend(m, z1, z2)).collect::<candle_core::Result<Vec<_>>>()?, 0)
+    }
+
+    /// Whether every sample's motion from the chosen masks `[B, T, 263]` meets every constraint
+    /// of the program at its tolerance (then the soft blend has nothing to add).
+    pub(super) fn masks_meet_the_program(
+        &self,
+        best_masks: &Tensor,
+        z1: &Tensor,
+        z2: &Tensor,
+    ) -> Result<bool, RgDnoError> {
+        let z = blend(best_masks, &z1.detach(), &z2.detach())?;
+        let x = self.solver.sampler.sample(self.solver.denoiser, &z, &self.solver.text, self.solver.guidance)?;
+        let joints = self.prior.to_joints(&x)?;
+        let judged = self
+            .objective
+            .compiled
+            .satisfaction(&joints, Some(self.objective.initial))
+            .map_err(candle_core::Error::wrap)?;
+        Ok(judged.iter().all(|c| c.pass.iter().all(|&p| p)))
     }
 
     /// Every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient, in batches of
@@ -86,12 +174,8 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let (z1, z2) = (&z1.detach(), &z2.detach());
         let mut best: Vec<Option<(ChosenMask, f64)>> = vec![None; batch];
         for (chunk_index, chunk) in candidates.chunks(per_batch).enumerate() {
-            let masks = chunk
-                .iter()
-                .map(|c| c.tensor(frames, device)?.broadcast_as((1, frames, FEATURE_DIM))?.contiguous())
-                .collect::<candle_core::Result<Vec<_>>>()?;
             // Rows ordered candidate-major: row k·B + b is candidate k on sample b.
-            let z = Tensor::cat(&masks.iter().map(|m| blend(m, z1, z2)).collect::<candle_core::Result<Vec<_>>>()?, 0)?;
+            let z = self.blended(chunk, (z1, z2), frames)?;
             let text = self.solver.text.repeat((chunk.len(), 1))?;
             let x = self.solver.sampler.sample(self.solver.denoiser, &z, &text, self.solver.guidance)?;
             let joints = self.prior.to_joints(&x)?;

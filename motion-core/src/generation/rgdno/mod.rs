@@ -48,6 +48,7 @@ use crate::dno::{self, UnrolledDdim};
 use crate::generation::inversion::InversionConfig;
 use crate::generation::method::{Generated, GenerationConfig, GenerationError, Task};
 use crate::generation::postprocess::{finish, Unfinished};
+use crate::generation::schedule::Schedule;
 use crate::prior::Prior;
 use crate::program::TaskProgram;
 use crate::representation::FEATURE_DIM;
@@ -242,6 +243,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
                     objective: Objective { compiled, initial: &initial_joints, guards: config.guards },
                     weights: &reward_weights,
                     round,
+                    schedule: config.schedule,
                 };
                 // One stream for the reward's random terms of both stages.
                 let mut rng = StdRng::seed_from_u64(seed ^ 0x0052_4744_4e4f);
@@ -249,7 +251,16 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
                 let (masks, best_masks) = stages.binary_masks(&z1, &z2, &mut rng, progress)?;
                 seconds.masks += clock.elapsed().as_secs_f64();
                 let clock = Instant::now();
-                let (z_blend, objective) = stages.soft_blend(&best_masks, &z1, &z2, &mut rng, progress)?;
+                // With the until-met schedule, masks whose motion meets the whole program skip
+                // the soft blend; its objective is then the chosen masks' F_C + R.
+                let met =
+                    config.schedule == Schedule::UntilMet && stages.masks_meet_the_program(&best_masks, &z1, &z2)?;
+                let (z_blend, objective) = if met {
+                    let chosen = masks.iter().map(|m| m.constraint_error + m.reward).collect();
+                    (blend(&best_masks, &z1, &z2)?, chosen)
+                } else {
+                    stages.soft_blend(&best_masks, &z1, &z2, &mut rng, progress)?
+                };
                 seconds.soft_blend += clock.elapsed().as_secs_f64();
                 (z_blend, masks, objective)
             }

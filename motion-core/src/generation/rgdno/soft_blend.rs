@@ -27,7 +27,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         rng: &mut StdRng,
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<(Tensor, Vec<f64>), RgDnoError> {
-        let MaskStages { prior, rg, solver, objective, weights, round } = *self;
+        let MaskStages { prior, rg, solver, objective, weights, round, .. } = *self;
         let batch = z1.dim(0)?;
         // Soft blend (supp. A): logits M' from the chosen masks, Adam on F_C + R.
         let logits = Var::from_tensor(&soft_logits(best_masks)?)?;
