@@ -204,3 +204,59 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         Ok((chosen, Tensor::cat(&tensors, 0)?.to_dtype(z1.dtype())?))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use candle_core::Device;
+    use rand::SeedableRng;
+
+    use super::*;
+    use crate::diffusion::noise::gaussian;
+    use crate::generation::rgdno::mask::MaskKind;
+    use crate::program::TaskProgram;
+
+    /// On a small case (two samples, 32 temporal candidates, no reward so that the scores do not
+    /// depend on how much of the random stream each search draws), the screened search keeps
+    /// each sample's winner among its 16 and so chooses the full search's masks.
+    #[test]
+    fn the_screened_search_chooses_the_full_searchs_masks() {
+        let device = Device::Cpu;
+        let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures");
+        let prior = Prior::load(&fixtures.join("model/prior.safetensors"), &fixtures.join("text"), &device).unwrap();
+        let program = TaskProgram::from_json_validated(
+            r#"{"text": "a person walks forward", "frames": 40, "constraints": [{"id": "c1", "expr": {"op": "equal",
+            "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "z"}, "target": [1.5],
+            "frames": {"keyframes": ["last"]}}}]}"#,
+        )
+        .unwrap();
+        let compiled = CompiledProgram::compile(&program, &device).unwrap();
+        let text = prior.encode_text(&[program.text.as_str(); 2], &device).unwrap();
+        let guidance = Guidance::default().for_text(&text).unwrap();
+        let solver = UnrolledDdim::new(&prior.mdm, text, guidance, 10).unwrap();
+        let z1 = gaussian((2, 40, FEATURE_DIM), 1, &device).unwrap();
+        let z2 = gaussian((2, 40, FEATURE_DIM), 2, &device).unwrap();
+        let x0 = solver.sampler.sample(solver.denoiser, &z1, &solver.text, solver.guidance).unwrap();
+        let initial = prior.to_joints(&x0).unwrap();
+        let rg = RgDnoConfig { segments: 5, mask_kinds: vec![MaskKind::Temporal], ..RgDnoConfig::default() };
+        let chosen = |schedule| {
+            let stages = MaskStages {
+                prior: &prior,
+                rg: &rg,
+                solver: &solver,
+                objective: Objective { compiled: &compiled, initial: &initial, guards: Guards::DEFAULT },
+                weights: &RewardWeights::NONE,
+                round: 0,
+                schedule,
+            };
+            let mut rng = StdRng::seed_from_u64(0);
+            let (masks, _) = stages.binary_masks(&z1, &z2, &mut rng, &mut |_| {}).unwrap();
+            let temporal: Vec<MaskCandidate> =
+                MaskCandidate::all(5).into_iter().filter(|c| c.kind == MaskKind::Temporal).collect();
+            let screened = stages.screen(&temporal, (&z1, &z2)).unwrap().len();
+            (masks.into_iter().map(|m| m.candidate).collect::<Vec<_>>(), temporal.len(), screened)
+        };
+        let (full, all, screened) = chosen(Schedule::Paper);
+        assert!(all == 32 && (SCREENED..all).contains(&screened), "the screen keeps {screened} of {all}");
+        assert_eq!(chosen(Schedule::UntilMet).0, full);
+    }
+}
