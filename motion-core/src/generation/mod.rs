@@ -49,7 +49,7 @@ use rgdno::config::RgDnoConfig;
 use rgdno::error::{RetrievalError, RgDnoError};
 use rgdno::report::RgDnoReport;
 use rgdno::{generate_rg_dno, RgDnoTask};
-use schedule::{Schedule, UntilMet};
+use schedule::StageEnd;
 
 /// What RG-DNO retrieves from and how it runs its stages.
 #[derive(Debug, Clone, Copy)]
@@ -208,7 +208,7 @@ fn from_sample(
         FromSample::Dno => {
             let dno = DnoConfig { seed: config.seed, ..config.dno.clone() };
             let guarded = program_objective(prior, compiled, &initial_joints, config.guards);
-            let mut until_met = UntilMet::new(prior, compiled, &initial_joints, dno.lr_warmup_steps);
+            let mut stage_end = StageEnd::new(config.schedule, prior, compiled, &initial_joints, dno.lr_warmup_steps);
             let run = optimize_with_restarts(
                 &solver as &dyn Solver,
                 guarded,
@@ -216,10 +216,7 @@ fn from_sample(
                 device,
                 &dno,
                 |round, s| progress(round, s.step, s.steps, mean(&s.loss)),
-                |round, s, x| match config.schedule {
-                    Schedule::Paper => Ok(false),
-                    Schedule::UntilMet => until_met.done(round, s, x),
-                },
+                |round, s, x| stage_end.done(round, s, x),
             )?;
             let history = run.best.history.into_iter().map(|h| h.loss).collect();
             (run.best.x, history)

@@ -46,13 +46,15 @@ pub const CHECK_EVERY: usize = 10;
 /// [`CHECK_EVERY`] steps.
 pub const STALL_FRACTION: f64 = 0.01;
 
-/// The stopping rule of [`Schedule::UntilMet`] for one DNO stage: asked after every step with
-/// the step's motion (normalised features `[N, T, 263]`), it answers whether the stage is done.
-pub struct UntilMet<'a> {
+/// When one DNO stage ends under a [`Schedule`]: asked after every step with the step's motion
+/// (normalised features `[N, T, 263]`), it answers whether the stage is done (never, under
+/// [`Schedule::Paper`]).
+pub struct StageEnd<'a> {
+    schedule: Schedule,
     prior: &'a Prior,
-    /// The programs the stage fits, each with the rows of the motion it judges (RG-DNO's
-    /// branches fit `C1` on the first `B` rows and `C2` on the next `B`).
-    parts: Vec<(&'a CompiledProgram, Range<usize>)>,
+    /// The programs the stage fits, each with the rows of the motion it judges (all of them
+    /// for `None`; RG-DNO's branches fit `C1` on the first `B` rows and `C2` on the next `B`).
+    parts: Vec<(&'a CompiledProgram, Option<Range<usize>>)>,
     /// The unoptimised motion `[B, T, 22, 3]` that `stay_near_initial` terms compare with.
     initial: &'a Tensor,
     /// Steps of the learning rate's warm-up: no stop before them.
@@ -62,27 +64,37 @@ pub struct UntilMet<'a> {
     round: usize,
 }
 
-impl<'a> UntilMet<'a> {
-    /// The rule for a stage that fits `compiled` on every row, whose motions the prior decodes;
+impl<'a> StageEnd<'a> {
+    /// The end of a stage that fits `compiled` on every row, whose motions the prior decodes;
     /// no stop within the first `warmup` steps.
-    pub fn new(prior: &'a Prior, compiled: &'a CompiledProgram, initial: &'a Tensor, warmup: usize) -> Self {
-        let rows = initial.dim(0).unwrap_or(0);
-        Self::of_parts(prior, vec![(compiled, 0..rows)], initial, warmup)
-    }
-
-    /// The rule for a stage that fits each program of `parts` on its own rows.
-    pub fn of_parts(
+    pub fn new(
+        schedule: Schedule,
         prior: &'a Prior,
-        parts: Vec<(&'a CompiledProgram, Range<usize>)>,
+        compiled: &'a CompiledProgram,
         initial: &'a Tensor,
         warmup: usize,
     ) -> Self {
-        UntilMet { prior, parts, initial, warmup, losses: Vec::new(), round: 0 }
+        Self::of_parts(schedule, prior, vec![(compiled, None)], initial, warmup)
     }
 
-    /// Whether restart `round`'s stage is done after `step` with motion `x`: every sample meets
-    /// every constraint, and the mean criterion stalled over the last [`CHECK_EVERY`] steps.
+    /// The end of a stage that fits each program of `parts` on its own rows.
+    pub fn of_parts(
+        schedule: Schedule,
+        prior: &'a Prior,
+        parts: Vec<(&'a CompiledProgram, Option<Range<usize>>)>,
+        initial: &'a Tensor,
+        warmup: usize,
+    ) -> Self {
+        StageEnd { schedule, prior, parts, initial, warmup, losses: Vec::new(), round: 0 }
+    }
+
+    /// Whether restart `round`'s stage is done after `step` with motion `x`: under
+    /// [`Schedule::UntilMet`], every sample meets every constraint and the mean criterion
+    /// stalled over the last [`CHECK_EVERY`] steps.
     pub fn done(&mut self, round: usize, step: &DnoStep, x: &Tensor) -> candle_core::Result<bool> {
+        if self.schedule == Schedule::Paper {
+            return Ok(false);
+        }
         if round != self.round {
             self.round = round;
             self.losses.clear();
@@ -98,7 +110,10 @@ impl<'a> UntilMet<'a> {
         }
         let joints = self.prior.to_joints(x)?;
         for (compiled, rows) in &self.parts {
-            let part = joints.narrow(0, rows.start, rows.len())?;
+            let part = match rows {
+                Some(rows) => joints.narrow(0, rows.start, rows.len())?,
+                None => joints.clone(),
+            };
             let judged = compiled.satisfaction(&part, Some(self.initial)).map_err(candle_core::Error::wrap)?;
             if !judged.iter().all(|c| c.pass.iter().all(|&p| p)) {
                 return Ok(false);

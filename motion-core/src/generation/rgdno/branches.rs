@@ -9,7 +9,7 @@ use super::stages::Stages;
 use crate::diffusion::Denoiser;
 use crate::dno::{self, DnoConfig, DnoStep};
 use crate::generation::objective::program_objective;
-use crate::generation::schedule::{Schedule, UntilMet};
+use crate::generation::schedule::StageEnd;
 
 /// The fitted branches `[B, T, 263]` and their criteria `F_{C1}(G(z1))`, `F_{C2}(G(z2))` per
 /// sample.
@@ -48,12 +48,9 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         let f2 = program_objective(prior, &c2, initial_joints, config.guards);
         let branches = |x: &Tensor| Tensor::cat(&[f1(&x.narrow(0, 0, batch)?)?, f2(&x.narrow(0, batch, batch)?)?], 0);
         let starts = Tensor::cat(&[z0, z_r], 0)?;
-        let parts = vec![(&c1, 0..batch), (&c2, batch..2 * batch)];
-        let mut until_met = UntilMet::of_parts(prior, parts, initial_joints, first.lr_warmup_steps);
-        let done = |s: &DnoStep, x: &Tensor| match config.schedule {
-            Schedule::Paper => Ok(false),
-            Schedule::UntilMet => until_met.done(round, s, x),
-        };
+        let parts = vec![(&c1, Some(0..batch)), (&c2, Some(batch..2 * batch))];
+        let mut end = StageEnd::of_parts(config.schedule, prior, parts, initial_joints, first.lr_warmup_steps);
+        let done = |s: &DnoStep, x: &Tensor| end.done(round, s, x);
         let progress = |s: &DnoStep| progress(&StageProgress::of_dno(Stage::Branches, round, s));
         let fitted = dno::optimize_until(both, branches, &starts, &first, progress, done)?;
         Ok(Branches {

@@ -8,7 +8,7 @@ use super::stages::Stages;
 use crate::diffusion::Denoiser;
 use crate::dno::{self, DnoConfig, DnoResult, DnoStep};
 use crate::generation::objective::program_objective;
-use crate::generation::schedule::{Schedule, UntilMet};
+use crate::generation::schedule::StageEnd;
 
 impl<M: Denoiser + ?Sized> Stages<'_, M> {
     /// The final round from `z_blend` `[B, T, 263]` on `F_C` with the jitter guard, keeping the
@@ -31,11 +31,8 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             keep_best: true,
             ..config.dno.clone()
         };
-        let mut until_met = UntilMet::new(prior, compiled, initial_joints, last.lr_warmup_steps);
-        let done = |s: &DnoStep, x: &Tensor| match config.schedule {
-            Schedule::Paper => Ok(false),
-            Schedule::UntilMet => until_met.done(round, s, x),
-        };
+        let mut end = StageEnd::new(config.schedule, prior, compiled, initial_joints, last.lr_warmup_steps);
+        let done = |s: &DnoStep, x: &Tensor| end.done(round, s, x);
         let progress = |s: &DnoStep| progress(&StageProgress::of_dno(Stage::FinalRound, round, s));
         Ok(dno::optimize_until(solver, &full, z_blend, &last, progress, done)?)
     }
