@@ -99,6 +99,11 @@ def main():
     parser.add_argument("--current-bin", type=Path, help="a binary of the working tree, already built")
     parser.add_argument("--task", action="append", help="NAME=ARGS of mogen (repeatable)")
     parser.add_argument("--rounds", type=int, default=3, help="runs of each task with each binary")
+    parser.add_argument(
+        "--current-extra",
+        default="",
+        help="arguments added to the current binary's runs only (a new option against the base's default)",
+    )
     parser.add_argument("--work", type=Path, help="folder for builds and outputs (default: a new temporary one)")
     args = parser.parse_args()
     if args.base_bin is None and args.base is None:
@@ -109,6 +114,7 @@ def main():
     base = args.base_bin or build(args.base, work / "target-base")
     current = args.current_bin or build(None, work / "target-current")
     tasks = [parse_task(t) for t in (args.task or DEFAULT_TASKS)]
+    extra = {"base": [], "current": shlex.split(args.current_extra)}
 
     results = {}
     for r in range(args.rounds):
@@ -120,11 +126,12 @@ def main():
                 order.reverse()
             for label, binary in order:
                 out = work / "out" / f"{name}-{label}-{r}"
-                wall, report = run_once(binary, task_args, out)
+                wall, report = run_once(binary, task_args + extra[label], out)
                 results.setdefault(name, {}).setdefault(label, []).append((wall, report))
                 print(f"round {r + 1}: {name} {label} {wall:.1f} s", file=sys.stderr)
 
-    print(f"mogen speed: base {args.base or base} against the working tree; {args.rounds} round(s), interleaved\n")
+    with_extra = f" with {args.current_extra}" if args.current_extra else ""
+    print(f"mogen speed: base {args.base or base} against the working tree{with_extra}; {args.rounds} round(s), interleaved\n")
     header = "| task | base median (s) | current median (s) | base / current |"
     header += "".join(f" {f[0]} base → current |" for f in FIGURES)
     print(header)
