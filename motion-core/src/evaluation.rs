@@ -493,6 +493,12 @@ fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoRepor
         "  RG-DNO seconds: retrieval {:.1}, inversion {:.1}, branches {:.1}, masks {:.1}, soft blend {:.1}, final \
          round {:.1}",
         s.retrieval, s.inversion, s.branches, s.masks, s.soft_blend, s.final_round
+    )?;
+    let n = &rg.steps;
+    writeln!(
+        f,
+        "  RG-DNO steps: inversion {}, branches {}, masks {} candidates, soft blend {}, final round {}",
+        n.inversion, n.branches, n.masks, n.soft_blend, n.final_round
     )
 }
 

@@ -47,11 +47,15 @@ impl From<MethodArg> for Method {
 /// When DNO's stages end, on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ScheduleArg {
-    /// Every stage runs its whole step budget (the papers' schedule, as the tables were made).
+    /// Every stage runs its whole step budget (the papers' schedule: reproduces their tables).
     Paper,
-    /// A stage ends once every constraint is met at its tolerance and the criterion has
-    /// stopped improving (checked every 10 steps after the warm-up), or at its budget; RG-DNO's
-    /// mask search is screened and its soft blend skipped when the masks meet the program.
+    /// Each stage ends once its work is done, or at its budget (checked every 10 steps after
+    /// the warm-up): DNO and the final round once every constraint is met, the loss has
+    /// stopped improving and the cleaned motion's foot skate and peak acceleration are within
+    /// 10 % of capture's walks or of the prior's own sample; RG-DNO's branches once each meets
+    /// its group; the inversion and soft blend once their loss stalls. RG-DNO's mask candidates
+    /// are screened by a cheap sampler, and the soft blend is skipped when the masks meet the
+    /// program.
     UntilMet,
 }
 
@@ -80,12 +84,10 @@ pub struct GenerationArgs {
     /// Random restarts N_S of DNO and RG-DNO; the best per sample is kept.
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
-    /// When DNO's optimisation ends: `paper` runs every step of the budget; `until-met` ends
-    /// once every constraint is met at its tolerance and the loss has stopped improving (DNO,
-    /// and RG-DNO's branches and final round), screens RG-DNO's mask candidates with a cheap
-    /// sampler before scoring the best 16 per sample, and skips the soft blend when the chosen
-    /// masks already meet the program (RG-DNO's inversion still runs its budget).
-    #[arg(long, value_enum, default_value_t = ScheduleArg::Paper)]
+    /// When each optimisation stage ends: `until-met` (the default) once its work is done and
+    /// the motion looks no worse than capture or the prior's own sample; `paper` runs every
+    /// step of the papers' budgets (their tables' schedule).
+    #[arg(long, value_enum, default_value_t = ScheduleArg::UntilMet)]
     pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
     /// again from fresh noise (attempt k + 1 from seed + k·restarts) and keeps its best attempt

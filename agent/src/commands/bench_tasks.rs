@@ -9,6 +9,7 @@ use clap::Args;
 use motion_core::evaluation::TaskReport;
 use motion_core::export::{write_atomically, OutputFolder};
 use motion_core::generation::method::{GenerationConfig, Method};
+use motion_core::generation::schedule::Schedule;
 use motion_core::pipeline::TaskSettings;
 use motion_core::prior::PriorIdentity;
 use serde::{Deserialize, Serialize};
@@ -166,8 +167,8 @@ fn settings_and_priors(rows: &[ResultRow]) -> String {
     if let Some(first) = rows.first() {
         let c = &first.report.config;
         out.push_str(&format!(
-            "Settings: {} sample(s) per task, seed {}, guidance {}, DNO {} steps (lr {}, ddim{}, {} restart(s), jitter guard weight {}, flight guard weight {}, ballistic guard weight {}, floor guard weight {}), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
-            c.samples, c.seed, c.guidance, c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.guards.jitter, c.guards.flight, c.guards.ballistic, c.guards.floor, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
+            "Settings: {} sample(s) per task, seed {}, guidance {}, schedule {}, DNO {} steps (lr {}, ddim{}, {} restart(s), jitter guard weight {}, flight guard weight {}, ballistic guard weight {}, floor guard weight {}), IK {} steps (lr {}), IK+Reg smoothness weight {}.\n\n",
+            c.samples, c.seed, c.guidance, schedule_name(c.schedule), c.dno.steps, c.dno.lr, c.dno.ddim_steps, c.dno.restarts, c.guards.jitter, c.guards.flight, c.guards.ballistic, c.guards.floor, c.direct.steps, c.direct.lr, c.direct.smoothness_weight
         ));
         if rows.iter().any(|r| GenerationConfig { method: c.method, ..r.report.config.clone() } != *c) {
             out.push_str("**The rows were made with different settings** (rows kept from earlier runs); each row's are in results.json.\n\n");
@@ -188,6 +189,14 @@ fn settings_and_priors(rows: &[ResultRow]) -> String {
         }
     }
     out
+}
+
+/// The schedule as the command line names it.
+fn schedule_name(schedule: Schedule) -> &'static str {
+    match schedule {
+        Schedule::Paper => "paper (every stage runs its budget)",
+        Schedule::UntilMet => "until-met (each stage ends once its work is done)",
+    }
 }
 
 /// One line per task and method.

@@ -92,6 +92,12 @@ pub struct Satisfaction {
 }
 
 impl CompiledProgram {
+    /// Whether every sample of joints `[B, T, 22, 3]` meets every constraint at its tolerance
+    /// (the verdicts of [`CompiledProgram::satisfaction`]).
+    pub fn met_by_every_sample(&self, joints: &Tensor, initial: Option<&Tensor>) -> Result<bool, ConstraintError> {
+        Ok(self.satisfaction(joints, initial)?.iter().all(|c| c.pass.iter().all(|&p| p)))
+    }
+
     /// Every constraint's figures in natural units on joints `[B, T, 22, 3]` (no gradient);
     /// `initial` as for [`CompiledProgram::evaluate`].
     pub fn satisfaction(

@@ -104,8 +104,8 @@ pub fn optimize<S: Solver + ?Sized>(
 }
 
 /// [`optimize`], asking `done` after every step whether the run is done before its budget:
-/// `done` gets the step's figures and its motion `x` `[batch, frames, 263]` (the forward of that
-/// step, which the result returns when the run ends there).
+/// `done` gets the step's figures and the motion `x` `[batch, frames, 263]` the result returns
+/// when the run ends there (the forward of that step, or with `keep_best` the best iterate's).
 pub fn optimize_until<S: Solver + ?Sized>(
     solver: &S,
     criterion: impl Fn(&Tensor) -> Result<Tensor>,
@@ -195,7 +195,9 @@ pub fn optimize_until<S: Solver + ?Sized>(
             h.grad_norm.push(report.grad_norm[b]);
         }
         on_step(&report);
-        let stop = done(&report, &x_out)?;
+        // The motion the run hands on were it to end here: the best iterate with `keep_best`.
+        let handed_on = best.as_ref().map_or(&x_out, |(_, x, _)| x);
+        let stop = done(&report, handed_on)?;
         last = Some((x_out, report.loss));
         if stop {
             break;

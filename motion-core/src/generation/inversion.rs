@@ -18,6 +18,8 @@ use candle_core::{Result, Tensor};
 
 use crate::diffusion::Guidance;
 use crate::dno::{self, DnoConfig, DnoStep, UnrolledDdim};
+use crate::generation::schedule::{Schedule, Stall, INVERSION_TOLERANCE_M};
+use crate::numeric::mean;
 use crate::prior::Prior;
 
 /// Settings of [`invert_motion`].
@@ -42,6 +44,11 @@ pub struct InversionConfig {
     /// conditional model alone). RG-DNO inverts for the guided sampler it then optimises
     /// through.
     pub guidance: f64,
+    /// When each polish ends (default [`Schedule::Paper`]: its whole budget; RG-DNO passes its
+    /// run's schedule). Under [`Schedule::UntilMet`] a polish ends once its loss has stalled
+    /// ([`Stall`]), the joint polish also once the motion is within [`INVERSION_TOLERANCE_M`]
+    /// of the target.
+    pub schedule: Schedule,
 }
 
 impl InversionConfig {
@@ -61,6 +68,7 @@ impl Default for InversionConfig {
             polish_steps: 100,
             polish_lr: 0.02,
             guidance: 1.0,
+            schedule: Schedule::Paper,
         }
     }
 }
@@ -105,16 +113,24 @@ pub fn invert_motion(
         ..DnoConfig::default()
     };
     let target = x0.detach();
+    let fast = config.schedule == Schedule::UntilMet;
     if config.feature_polish_steps > 0 {
         let criterion = |x: &Tensor| (x - &target)?.sqr()?.mean((1, 2));
         let settings = polish(config.feature_polish_steps, config.feature_polish_lr);
-        z = dno::optimize(&solver, criterion, &z, &settings, &mut on_polish_step)?.z;
+        let mut stall = Stall::default();
+        let done = |s: &DnoStep, _: &Tensor| Ok(fast && stall.stalled_after(mean(&s.loss), 0));
+        z = dno::optimize_until(&solver, criterion, &z, &settings, &mut on_polish_step, done)?.z;
     }
     if config.polish_steps > 0 {
         let joints = prior.to_joints(&target)?.detach();
         let criterion = |x: &Tensor| mean_joint_distance(&prior.to_joints(x)?, &joints);
-        z = dno::optimize(&solver, criterion, &z, &polish(config.polish_steps, config.polish_lr), &mut on_polish_step)?
-            .z;
+        let settings = polish(config.polish_steps, config.polish_lr);
+        let mut stall = Stall::default();
+        let done = |s: &DnoStep, _: &Tensor| {
+            let error_m = mean(&s.loss);
+            Ok(fast && (stall.stalled_after(error_m, 0) || (stall.at_check(0) && error_m <= INVERSION_TOLERANCE_M)))
+        };
+        z = dno::optimize_until(&solver, criterion, &z, &settings, &mut on_polish_step, done)?.z;
     }
     // The optimiser reports the motion before its last update; sample the final noise.
     let x = solver.sampler.sample(&prior.mdm, &z, text, guidance)?;

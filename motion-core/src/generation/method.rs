@@ -89,10 +89,16 @@ pub struct GenerationConfig {
     /// constraints ([`crate::generation::refine`]; on by default), before the foot clean-up.
     #[serde(default)]
     pub refine: RefineConfig,
-    /// When DNO's stages end ([`Schedule`]; default: the papers' fixed budget). Reports made
-    /// with the papers' schedule leave it out.
-    #[serde(default, skip_serializing_if = "Schedule::is_paper")]
+    /// When DNO's stages end ([`Schedule`]; default: each once its work is done). Always
+    /// written; a report without it was made when the papers' schedule was the default and
+    /// went unwritten, so it reads as [`Schedule::Paper`].
+    #[serde(default = "schedule_of_older_reports")]
     pub schedule: Schedule,
+}
+
+/// The schedule of a report that does not name one.
+fn schedule_of_older_reports() -> Schedule {
+    Schedule::Paper
 }
 
 impl GenerationConfig {
@@ -152,7 +158,7 @@ impl GenerationConfig {
             guards: Guards::DEFAULT,
             foot_lock: FootLockConfig::default(),
             refine: RefineConfig::default(),
-            schedule: Schedule::Paper,
+            schedule: Schedule::UntilMet,
         }
     }
 }

@@ -43,7 +43,7 @@ use crate::prior::Prior;
 use crate::representation::FEATURE_DIM;
 use method::{Generated, GenerationConfig, GenerationError, Method, Task};
 use objective::{program_objective, Guards};
-use postprocess::{finish, Unfinished};
+use postprocess::{finish, finishing_foot_lock, Unfinished};
 use rgdno::candidates::RetrievalDatabase;
 use rgdno::config::RgDnoConfig;
 use rgdno::error::{RetrievalError, RgDnoError};
@@ -208,7 +208,9 @@ fn from_sample(
         FromSample::Dno => {
             let dno = DnoConfig { seed: config.seed, ..config.dno.clone() };
             let guarded = program_objective(prior, compiled, &initial_joints, config.guards);
-            let mut stage_end = StageEnd::new(config.schedule, prior, compiled, &initial_joints, dno.lr_warmup_steps);
+            let lock = finishing_foot_lock(program, config);
+            let mut stage_end =
+                StageEnd::shown(config.schedule, prior, compiled, &initial_joints, dno.lr_warmup_steps, &lock);
             let run = optimize_with_restarts(
                 &solver as &dyn Solver,
                 guarded,

@@ -42,10 +42,7 @@ pub fn finish(
     let refine_config = RefineConfig { enabled: config.refines(), ..config.refine.clone() };
     let (refined, refine) = refine_in_parallel(&raw_joints, compiled, &initial_joints, &refine_config)?;
     ensure_finite(&refined, "the refinement's joint positions")?;
-    let mut lock = config.foot_lock.clone();
-    lock.plant_on_floor &= !has_raised_support(program);
-    lock.keep_above_floor &= !has_sunk_ground(program);
-    let (joints, foot_lock) = clean_up(&refined, &lock)?;
+    let (joints, foot_lock) = clean_up(&refined, &finishing_foot_lock(program, config))?;
     ensure_finite(&joints, "the foot clean-up's joint positions")?;
     Ok(Generated {
         features,
@@ -57,6 +54,15 @@ pub fn finish(
         loss_history,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The clean-up a generation of `program` ends with: `config.foot_lock`, with its floor planting
+/// off for programs on a raised support and its floor guard off over a pit.
+pub fn finishing_foot_lock(program: &TaskProgram, config: &GenerationConfig) -> FootLockConfig {
+    let mut lock = config.foot_lock.clone();
+    lock.plant_on_floor &= !has_raised_support(program);
+    lock.keep_above_floor &= !has_sunk_ground(program);
+    lock
 }
 
 /// [`refine`] with the batch cut into one contiguous group per rayon worker, the groups

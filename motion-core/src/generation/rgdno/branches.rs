@@ -1,5 +1,6 @@
 //! Stage 4 (eqs. 8–9): the two branches in one batch: `z1` from random noise fitted to `C1`
-//! and `z2` from the inverted noise `z_R` fitted to `C2`, each `N1` DNO steps.
+//! and `z2` from the inverted noise `z_R` fitted to `C2`, each `N1` DNO steps (or, under
+//! [`crate::generation::schedule::Schedule::UntilMet`], until each branch meets its group).
 
 use candle_core::Tensor;
 
@@ -49,7 +50,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         let branches = |x: &Tensor| Tensor::cat(&[f1(&x.narrow(0, 0, batch)?)?, f2(&x.narrow(0, batch, batch)?)?], 0);
         let starts = Tensor::cat(&[z0, z_r], 0)?;
         let parts = vec![(&c1, Some(0..batch)), (&c2, Some(batch..2 * batch))];
-        let mut end = StageEnd::of_parts(config.schedule, prior, parts, initial_joints, first.lr_warmup_steps);
+        let mut end = StageEnd::intermediate(config.schedule, prior, parts, initial_joints, first.lr_warmup_steps);
         let done = |s: &DnoStep, x: &Tensor| end.done(round, s, x);
         let progress = |s: &DnoStep| progress(&StageProgress::of_dno(Stage::Branches, round, s));
         let fitted = dno::optimize_until(both, branches, &starts, &first, progress, done)?;

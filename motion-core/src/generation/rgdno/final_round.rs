@@ -21,7 +21,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         round: usize,
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<DnoResult, RgDnoError> {
-        let Stages { prior, compiled, config, rg, solver, .. } = *self;
+        let Stages { prior, compiled, config, rg, solver, foot_lock, .. } = *self;
         let full = program_objective(prior, compiled, initial_joints, config.guards);
         let last = DnoConfig {
             steps: rg.final_steps,
@@ -31,7 +31,8 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             keep_best: true,
             ..config.dno.clone()
         };
-        let mut end = StageEnd::new(config.schedule, prior, compiled, initial_joints, last.lr_warmup_steps);
+        let mut end =
+            StageEnd::shown(config.schedule, prior, compiled, initial_joints, last.lr_warmup_steps, foot_lock);
         let done = |s: &DnoStep, x: &Tensor| end.done(round, s, x);
         let progress = |s: &DnoStep| progress(&StageProgress::of_dno(Stage::FinalRound, round, s));
         Ok(dno::optimize_until(solver, &full, z_blend, &last, progress, done)?)

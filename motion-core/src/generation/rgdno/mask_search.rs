@@ -62,6 +62,11 @@ impl Objective<'_> {
         let objective = joints_objective(self.compiled, &initial, self.guards);
         objective(joints)
     }
+
+    /// Whether every sample of joints `[B, T, 22, 3]` meets every constraint at its tolerance.
+    pub(super) fn meets(&self, joints: &Tensor) -> candle_core::Result<bool> {
+        self.compiled.met_by_every_sample(joints, Some(self.initial)).map_err(candle_core::Error::wrap)
+    }
 }
 
 impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
@@ -148,13 +153,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
     ) -> Result<bool, RgDnoError> {
         let z = blend(best_masks, &z1.detach(), &z2.detach())?;
         let x = self.solver.sampler.sample(self.solver.denoiser, &z, &self.solver.text, self.solver.guidance)?;
-        let joints = self.prior.to_joints(&x)?;
-        let judged = self
-            .objective
-            .compiled
-            .satisfaction(&joints, Some(self.objective.initial))
-            .map_err(candle_core::Error::wrap)?;
-        Ok(judged.iter().all(|c| c.pass.iter().all(|&p| p)))
+        Ok(self.objective.meets(&self.prior.to_joints(&x)?)?)
     }
 
     /// Every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient, in batches of

@@ -47,7 +47,7 @@ use crate::diffusion::{Denoiser, Guidance};
 use crate::dno::{self, UnrolledDdim};
 use crate::generation::inversion::InversionConfig;
 use crate::generation::method::{Generated, GenerationConfig, GenerationError, Task};
-use crate::generation::postprocess::{finish, Unfinished};
+use crate::generation::postprocess::{finish, finishing_foot_lock, Unfinished};
 use crate::generation::schedule::Schedule;
 use crate::prior::Prior;
 use crate::program::TaskProgram;
@@ -58,7 +58,7 @@ use config::{Ablation, RgDnoConfig};
 use error::RgDnoError;
 use mask::blend;
 use mask_search::{MaskStages, Objective};
-use report::{ChosenMask, RetrievedReport, RgDnoReport, StageProgress, StageSeconds};
+use report::{ChosenMask, RetrievedReport, RgDnoReport, StageProgress, StageSeconds, StageSteps};
 use retrieval::{retrieve, RetrievalQuery};
 use reward::RewardWeights;
 use stages::Stages;
@@ -86,8 +86,13 @@ pub fn generate_rg_dno(
     config: &GenerationConfig,
     rg: &RgDnoConfig,
     device: &Device,
-    mut progress: impl FnMut(&StageProgress),
+    mut on_progress: impl FnMut(&StageProgress),
 ) -> Result<(Generated, RgDnoReport), RgDnoError> {
+    let (mut steps, mut masks_done) = (StageSteps::default(), 0);
+    let mut progress = |p: &StageProgress| {
+        steps.record(p, &mut masks_done);
+        on_progress(p)
+    };
     let RgDnoTask { program, compiled, database } = task;
     rg.validate(compiled.frames())?;
     config.check(compiled.frames())?;
@@ -120,14 +125,29 @@ pub fn generate_rg_dno(
 
     // Inversion (eq. 7), once for the batch.
     let clock = Instant::now();
-    let inversion =
-        InversionConfig { guidance: config.guidance, ddim_steps: config.dno.ddim_steps, ..rg.inversion.clone() };
+    let inversion = InversionConfig {
+        guidance: config.guidance,
+        ddim_steps: config.dno.ddim_steps,
+        schedule: config.schedule,
+        ..rg.inversion.clone()
+    };
     let (z_r, inversion_error_m) =
         invert::invert_retrieved(prior, &best.features, &text.narrow(0, 0, 1)?, &inversion, &mut progress)?;
     let z_r = z_r.broadcast_as((batch, compiled.frames(), FEATURE_DIM))?.contiguous()?;
     seconds.inversion = clock.elapsed().as_secs_f64();
 
-    let stages = Stages { prior, compiled, groups: &groups, config, rg, solver: &solver, both: &both, z_r: &z_r };
+    let foot_lock = finishing_foot_lock(program, config);
+    let stages = Stages {
+        prior,
+        compiled,
+        groups: &groups,
+        config,
+        rg,
+        solver: &solver,
+        both: &both,
+        z_r: &z_r,
+        foot_lock: &foot_lock,
+    };
     let mut kept: Option<Attempt> = None;
     let mut restart = vec![0; batch];
     for r in 0..config.dno.restarts {
@@ -172,6 +192,7 @@ pub fn generate_rg_dno(
         restart,
         final_objective: kept.objective,
         seconds,
+        steps,
         config: rg.clone(),
     };
     Ok((generated, report))

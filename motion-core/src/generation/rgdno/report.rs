@@ -50,6 +50,51 @@ pub struct StageSeconds {
     pub final_round: f64,
 }
 
+/// Steps each stage ran, summed over the restarts (the masks: candidates scored through the
+/// full sampler). The [`crate::generation::schedule::Schedule`] decides where a stage ends.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageSteps {
+    /// The inversion's feature and joint polishes.
+    pub inversion: usize,
+    /// The branches (one batch for both).
+    pub branches: usize,
+    /// Mask candidates scored by eq. 13.
+    pub masks: usize,
+    /// The soft blend.
+    pub soft_blend: usize,
+    /// The final round.
+    pub final_round: usize,
+}
+
+impl StageSteps {
+    /// Counts one progress report: a step of a DNO stage, or the candidates done of the mask
+    /// search (which counts up from the start of each restart).
+    pub(super) fn record(&mut self, progress: &StageProgress, masks_done: &mut usize) {
+        match progress.stage {
+            Stage::Inversion => self.inversion += 1,
+            Stage::Branches => self.branches += 1,
+            Stage::Masks => {
+                let before = if progress.step > *masks_done { *masks_done } else { 0 };
+                self.masks += progress.step - before;
+                *masks_done = progress.step;
+            }
+            Stage::SoftBlend => self.soft_blend += 1,
+            Stage::FinalRound => self.final_round += 1,
+        }
+    }
+
+    /// The steps of both runs, stage by stage.
+    pub(super) fn plus(&self, other: &StageSteps) -> StageSteps {
+        StageSteps {
+            inversion: self.inversion + other.inversion,
+            branches: self.branches + other.branches,
+            masks: self.masks + other.masks,
+            soft_blend: self.soft_blend + other.soft_blend,
+            final_round: self.final_round + other.final_round,
+        }
+    }
+}
+
 impl StageSeconds {
     /// The seconds of both runs, stage by stage.
     pub(super) fn plus(&self, other: &StageSeconds) -> StageSeconds {
@@ -76,6 +121,7 @@ impl RgDnoReport {
             restart: pick_rows(self.restart, &other.restart, rows),
             final_objective: pick_rows(self.final_objective, &other.final_objective, rows),
             seconds: self.seconds.plus(&other.seconds),
+            steps: self.steps.plus(&other.steps),
             ..self
         }
     }
@@ -115,6 +161,9 @@ pub struct RgDnoReport {
     pub final_objective: Vec<f64>,
     /// Seconds per stage.
     pub seconds: StageSeconds,
+    /// Steps per stage.
+    #[serde(default)]
+    pub steps: StageSteps,
     /// The settings.
     pub config: RgDnoConfig,
 }

@@ -3,6 +3,7 @@
 use candle_core::Tensor;
 
 use super::config::RgDnoConfig;
+use crate::cleanup::FootLockConfig;
 use crate::constraints::CompiledProgram;
 use crate::diffusion::Denoiser;
 use crate::dno::UnrolledDdim;
@@ -11,7 +12,8 @@ use crate::prior::Prior;
 use crate::program::ConstraintGroups;
 
 /// What every restart shares: the compiled task and its groups, the settings, the two solvers
-/// (batch `B` and `2B`) and the inverted noise `z_R` `[B, T, 263]`.
+/// (batch `B` and `2B`), the inverted noise `z_R` `[B, T, 263]` and the clean-up the generation
+/// ends with.
 pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
     pub(super) prior: &'a Prior,
     pub(super) compiled: &'a CompiledProgram,
@@ -21,4 +23,5 @@ pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
     pub(super) solver: &'a UnrolledDdim<'a, M>,
     pub(super) both: &'a UnrolledDdim<'a, M>,
     pub(super) z_r: &'a Tensor,
+    pub(super) foot_lock: &'a FootLockConfig,
 }
