@@ -35,7 +35,8 @@ BONE_EPS_M2 = 1e-12
 
 
 def load_safetensors(path):
-    """Tensors (float32 numpy) and metadata of a safetensors file."""
+    """Tensors (float32 numpy; F16 ones, such as the caption table, widened) and metadata of a
+    safetensors file."""
     with open(path, "rb") as f:
         n = struct.unpack("<Q", f.read(8))[0]
         header = json.loads(f.read(n))
@@ -43,10 +44,11 @@ def load_safetensors(path):
     meta = header.pop("__metadata__", {})
     tensors = {}
     for name, info in header.items():
-        if info["dtype"] != "F32":
-            raise ValueError(f"{name}: dtype {info['dtype']}, expected F32")
+        dtype = {"F32": np.float32, "F16": np.float16}.get(info["dtype"])
+        if dtype is None:
+            raise ValueError(f"{name}: dtype {info['dtype']}, expected F32 or F16")
         start, end = info["data_offsets"]
-        tensors[name] = np.frombuffer(data[start:end], dtype=np.float32).reshape(info["shape"])
+        tensors[name] = np.frombuffer(data[start:end], dtype=dtype).reshape(info["shape"]).astype(np.float32)
     return tensors, meta
 
 
@@ -224,7 +226,8 @@ def main():
         step = time_steps(mirror, batch, args.frames, args.reps)
         rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
         print(json.dumps({"batch": batch, "threads": torch.get_num_threads(), "dno_step_s": step,
-                          "peak_rss_mib": rss, "torch": torch.__version__}), flush=True)
+                          "peak_rss_mib": rss, "torch": torch.__version__,
+                          "cpu_capability": torch.backends.cpu.get_cpu_capability()}), flush=True)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ use super::layer::Dropout;
 use super::*;
 use crate::diffusion::{Denoiser, NoiseSchedule};
 use crate::nn::testing::randn;
+use crate::nn::Isa;
 use crate::testing::finite_difference_check;
 use crate::testing::max_abs_diff;
 
@@ -223,7 +224,7 @@ fn fused_stack_gradient_matches_finite_differences(dev: &Device) -> Result<()> {
     let model = Mdm::random(cfg.clone(), DType::F64, dev, 9)?;
     let h = randn(&[2, 4, 12], 54, dev)?;
     let w = randn(&[2, 4, 12], 55, dev)?;
-    finite_difference_check(&h, |h| layer::frozen_stack(&model.layers, h, None)?.mul(&w)?.sum_all(), 1e-6, 1e-7)
+    finite_difference_check(&h, |h| layer::frozen_stack(&model.layers, h, None, Isa::selected())?.mul(&w)?.sum_all(), 1e-6, 1e-7)
 }
 
 /// Output and input gradient of the fused stack on 1, 2 and 3 worker threads, for one
@@ -243,7 +244,7 @@ fn fused_stack_is_the_same_on_any_thread_count(dev: &Device) -> Result<()> {
                 .map_err(|e| candle_core::Error::Msg(e.to_string()))?;
             pool.install(|| {
                 let var = candle_core::Var::from_tensor(&h)?;
-                let y = layer::frozen_stack(&model.layers, var.as_tensor(), None)?;
+                let y = layer::frozen_stack(&model.layers, var.as_tensor(), None, Isa::selected())?;
                 let grads = y.mul(&w)?.sum_all()?.backward()?;
                 let g = grads.get(var.as_tensor()).ok_or_else(|| candle_core::Error::Msg("no gradient".into()))?;
                 Ok((y.flatten_all()?.to_vec1()?, g.flatten_all()?.to_vec1()?))
