@@ -162,7 +162,8 @@ impl Mdm {
         if !crate::nn::ops::has_cpu_kernel(x_t) {
             return self.forward_eval(x_t, timesteps, text);
         }
-        let out = layer::frozen_stack(&self.layers, x_t, Some(self.frozen_ends(frames, timesteps, text, None)?), self.isa)?;
+        let out =
+            layer::frozen_stack(&self.layers, x_t, Some(self.frozen_ends(frames, timesteps, text, None)?), self.isa)?;
         self.to_x0(out, x_t, timesteps)
     }
 

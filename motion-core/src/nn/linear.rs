@@ -116,7 +116,9 @@ impl FrozenLinearOp {
     fn bwd_impl<T: Real>(&self, arg: &Tensor, grad: &Tensor) -> Result<Tensor> {
         let (n, k) = self.weight.dims2()?;
         let grad = grad.contiguous()?;
-        let dx = with_slice::<T, _>(&grad, |g| with_slice::<T, _>(&self.weight, |w| kernels::linear_bwd(Isa::selected(), g, w, n, k)))?;
+        let dx = with_slice::<T, _>(&grad, |g| {
+            with_slice::<T, _>(&self.weight, |w| kernels::linear_bwd(Isa::selected(), g, w, n, k))
+        })?;
         Tensor::from_vec(dx, arg.shape(), arg.device())
     }
 }

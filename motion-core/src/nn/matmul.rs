@@ -210,8 +210,25 @@ macro_rules! avx2_gemm {
                     use $kernels as ukr;
                     let Some(simd) = gemm_common::simd::V3::try_new() else {
                         return gemm::gemm(
-                            m, n, k, dst, dst_cs, dst_rs, read_dst, lhs, lhs_cs, lhs_rs, rhs, rhs_cs, rhs_rs, alpha,
-                            beta, conj_dst, conj_lhs, conj_rhs, parallelism,
+                            m,
+                            n,
+                            k,
+                            dst,
+                            dst_cs,
+                            dst_rs,
+                            read_dst,
+                            lhs,
+                            lhs_cs,
+                            lhs_rs,
+                            rhs,
+                            rhs_cs,
+                            rhs_rs,
+                            alpha,
+                            beta,
+                            conj_dst,
+                            conj_lhs,
+                            conj_rhs,
+                            parallelism,
                         );
                     };
                     gemm_common::gemm::gemm_basic_generic::<
@@ -285,4 +302,78 @@ pub fn sgemm_gflops(isa: Isa, side: usize, reps: usize) -> Result<f64> {
     times.sort_by(f64::total_cmp);
     let median = times[times.len() / 2];
     Ok(2.0 * (side as f64).powi(3) / median / 1e9)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `C (+)= A·B` in f64 through the views, the reference for the kernels.
+    fn reference(c: &mut [f64], cv: MatView, a: &[f32], av: MatView, b: &[f32], bv: MatView, accumulate: bool) {
+        let at = |buf: &[f32], v: MatView, i: usize, j: usize| buf[v.offset + i * v.strides[1] + j * v.strides[2]];
+        for i in 0..cv.rows {
+            for j in 0..cv.cols {
+                let dot: f64 = (0..av.cols).map(|p| at(a, av, i, p) as f64 * at(b, bv, p, j) as f64).sum();
+                let slot = &mut c[cv.offset + i * cv.strides[1] + j * cv.strides[2]];
+                *slot = if accumulate { *slot + dot } else { dot };
+            }
+        }
+    }
+
+    /// The AVX2 products against an f64 reference, to 1e-5 of the largest entry, on the fused
+    /// layer's kinds of views: a linear layer's rows (`[rows, 128]·[128, 384]`, accumulating
+    /// onto a bias), a head of the q/k/v buffer against a transposed head (`Q·Kᵀ`, written
+    /// into one head of the probabilities), probabilities against a head (`P·V`), and a
+    /// transposed block of probabilities (`Pᵀ·dO`); row counts off the microkernels' tiles.
+    #[test]
+    fn avx2_products_match_the_reference() -> Result<()> {
+        if !Isa::Avx2.is_available() {
+            return Ok(());
+        }
+        let (s, d, heads) = (37usize, 128usize, 4usize);
+        let hd = d / heads;
+        let fill = |n: usize, seed: usize| -> Vec<f32> {
+            (0..n).map(|i| ((i * 7919 + seed * 104_729) % 1000) as f32 / 500.0 - 1.0).collect()
+        };
+        let qkv = fill(s * 3 * d, 1);
+        let probs = fill(s * heads * s, 2);
+        let w = fill(d * 3 * d, 3);
+        let head = |part: usize, h: usize| MatView {
+            offset: part * d + h * hd,
+            batch: 1,
+            rows: s,
+            cols: hd,
+            strides: [0, 3 * d, 1],
+        };
+        let prob_head = |h: usize| MatView { offset: h * s, batch: 1, rows: s, cols: s, strides: [0, heads * s, 1] };
+        let out_head = |h: usize| MatView { offset: h * hd, batch: 1, rows: s, cols: hd, strides: [0, d, 1] };
+        let keys = MatView { offset: 3 * s + 5, rows: 11, ..prob_head(3).t() };
+        // (name, A, its view, B, its view, C's view, C's length, accumulate)
+        let cases = [
+            (
+                "x·Wᵀ",
+                &qkv,
+                MatView::contiguous(0, 1, s, d),
+                &w,
+                MatView::contiguous(0, 1, d, 3 * d),
+                MatView::contiguous(0, 1, s, 3 * d),
+                s * 3 * d,
+                true,
+            ),
+            ("Q·Kᵀ", &qkv, head(0, 2), &qkv, head(1, 2).t(), prob_head(2), s * heads * s, false),
+            ("P·V", &probs, prob_head(1), &qkv, head(2, 1), out_head(1), s * d, false),
+            ("Pᵀ·dO", &probs, keys, &qkv, head(0, 3), MatView { rows: 11, ..out_head(3) }, s * d, false),
+        ];
+        for (name, a, av, b, bv, cv, len, accumulate) in cases {
+            let start = fill(len, 4);
+            let mut want: Vec<f64> = start.iter().map(|&v| v as f64).collect();
+            reference(&mut want, cv, a, av, b, bv, accumulate);
+            let mut got = start.clone();
+            gemm_into(Isa::Avx2, &mut got, cv, a, av, b, bv, accumulate)?;
+            let scale = want.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            let err = got.iter().zip(&want).map(|(&g, &w)| (g as f64 - w).abs()).fold(0.0, f64::max);
+            assert!(err <= 1e-5 * scale, "{name}: error {err:e} of {scale}");
+        }
+        Ok(())
+    }
 }

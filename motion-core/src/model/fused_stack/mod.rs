@@ -503,8 +503,7 @@ impl FusedEncoderStack {
                     ..dims.qkv_head(0, 0, hh)
                 };
                 let k_t = dims.qkv_head(blk.batch, 1, hh).t();
-                kernels::gemm_into(
-                    self.isa,probs, dims.block_prob_head(n, hh), qkv_ref, q, qkv_ref, k_t, false)?;
+                kernels::gemm_into(self.isa, probs, dims.block_prob_head(n, hh), qkv_ref, q, qkv_ref, k_t, false)?;
             }
             kernels::softmax_fwd(self.isa, probs, s, scale);
             for hh in 0..h {
@@ -651,11 +650,18 @@ impl FusedEncoderStack {
                 let key_rows = |v: MatView| MatView { offset: v.offset + blk.start, rows: n, ..v.t() };
                 let prob_t = key_rows(dims.prob_head(blk.batch, hh));
                 let q = dims.qkv_head(blk.batch, 0, hh);
-                kernels::gemm_into(
-                    self.isa,dqkv, dims.block_head(n, 3 * d, d, hh), ds, prob_t, qkv, q, false)?;
+                kernels::gemm_into(self.isa, dqkv, dims.block_head(n, 3 * d, d, hh), ds, prob_t, qkv, q, false)?;
                 let d_out = dims.block_head(s, d, blk.batch * s * d, hh);
                 kernels::gemm_into(
-                    self.isa,dqkv, dims.block_head(n, 3 * d, 2 * d, hh), probs, prob_t, dctx, d_out, false)?;
+                    self.isa,
+                    dqkv,
+                    dims.block_head(n, 3 * d, 2 * d, hh),
+                    probs,
+                    prob_t,
+                    dctx,
+                    d_out,
+                    false,
+                )?;
             }
             Ok(())
         })?;
