@@ -18,6 +18,7 @@ import argparse
 import json
 import os
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
@@ -41,7 +42,14 @@ def run_json(cmd, env):
     return {r["batch"]: r for r in lines_json(cmd, env)}
 
 
-def step_gflop(batch, d=128, ff=256, layers=4, frames=100, feats=263, k=10):
+def prior_config(path):
+    """The `mdm_config` in a prior file's safetensors metadata."""
+    with open(path, "rb") as f:
+        n = struct.unpack("<Q", f.read(8))[0]
+        return json.loads(json.loads(f.read(n))["__metadata__"]["mdm_config"])
+
+
+def step_gflop(batch, d, ff, layers, frames=100, feats=263, k=10):
     """Analytic GFLOP of one step (K passes forward, input gradient only backward): linear
     layers count twice (forward, dX), attention three times (forward, both operands)."""
     s = frames + 1
@@ -64,10 +72,11 @@ def main():
     args = ap.parse_args()
     envs = {side: dict(os.environ, **(AVX2_ENV[side] if args.simd == "avx2" else {})) for side in ("mogen", "torch")}
     mirror = [args.python, os.path.join(HERE, "dno_step.py"), "--prior", args.prior]
-    with tempfile.TemporaryDirectory() as dump:
-        subprocess.run([args.mogen, "bench", "prior", "--prior", args.prior, "--batches", "1", "--reps", "1", "--dump", dump],
-                       check=True, capture_output=True, env=envs["mogen"])
-        subprocess.run(mirror + ["--check", dump], check=True, env=envs["torch"])
+    cfg = prior_config(args.prior)
+    dump = tempfile.mkdtemp()
+    subprocess.run([args.mogen, "bench", "prior", "--prior", args.prior, "--batches", "1", "--reps", "1", "--dump", dump],
+                   check=True, capture_output=True, env=envs["mogen"])
+    subprocess.run(mirror + ["--check", dump], check=True, env=envs["torch"])
     peak = {}
     for threads in (1, 2):
         probe = lines_json([args.mogen, "bench", "prior", "--prior", args.prior, "--json", "--threads", str(threads),
@@ -77,7 +86,7 @@ def main():
           f"{peak[2]:.0f} on 2.", file=sys.stderr, flush=True)
     common = ["--batches", args.batches, "--reps", str(args.reps)]
     ours = [args.mogen, "bench", "prior", "--prior", args.prior, "--json"] + common
-    theirs = mirror + ["--threads", "2"] + common
+    theirs = mirror + ["--threads", "2", "--text", os.path.join(dump, "text.npy")] + common
     batches = [int(b) for b in args.batches.split(",")]
     rows = {b: {"ours": [], "one": [], "torch": [], "ratio": [], "rss": 0.0, "torch_rss": 0.0} for b in batches}
     sets = {}
@@ -104,7 +113,7 @@ def main():
     for b in batches:
         row = rows[b]
         ours_s, torch_s, one_s = (statistics.median(row[n]) for n in ("ours", "torch", "one"))
-        gf = step_gflop(b)
+        gf = step_gflop(b, cfg["latent_dim"], cfg["ff_size"], cfg["num_layers"])
         share = lambda s, threads: f"{gf / s:.0f} ({100 * gf / s / peak[threads]:.0f} %)"
         print(f"| {b} | {gf:.1f} | {ours_s:.4f} | {torch_s:.4f} | {statistics.median(row['ratio']):.2f} "
               f"({min(row['ratio']):.2f}–{max(row['ratio']):.2f}) | {share(ours_s, 2)} | {share(torch_s, 2)} | "

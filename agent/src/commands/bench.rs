@@ -194,9 +194,10 @@ fn step_loss(
     Ok((loss, grads))
 }
 
-/// Writes one batch-1 step for a mirror to check its maths against: the noise `z.npy`
-/// `[1, frames, 263]`, the unrolled sample's joints `joints.npy` `[1, frames, 22, 3]`, the
-/// loss `loss.npy` `[1]` and its gradient `grad.npy` with respect to `z`.
+/// Writes one batch-1 step for a mirror to check its maths against: the empty prompt's
+/// condition `text.npy` `[1, text_dim]`, the noise `z.npy` `[1, frames, 263]`, the unrolled
+/// sample's joints `joints.npy` `[1, frames, 22, 3]`, the loss `loss.npy` `[1]` and its
+/// gradient `grad.npy` with respect to `z`.
 fn dump_step(prior: &Prior, sampler: &DdimSampler, frames: usize, dir: &Path) -> anyhow::Result<()> {
     let device = load::device()?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -206,6 +207,7 @@ fn dump_step(prior: &Prior, sampler: &DdimSampler, frames: usize, dir: &Path) ->
     let (loss, grads) = step_loss(prior, sampler, &z, &text)?;
     let grad = grads.get(z.as_tensor()).context("no gradient reached the noise")?;
     for (name, tensor) in [
+        ("text", text.clone()),
         ("z", z.as_tensor().clone()),
         ("joints", prior.to_joints(&out)?),
         ("loss", loss.reshape(1)?),
