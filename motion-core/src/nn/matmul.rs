@@ -6,10 +6,9 @@
 //! picks on a CPU without AVX-512), called directly, so that a CPU with AVX-512 runs the same
 //! code as one without; otherwise `gemm::gemm` picks the microkernels for this CPU.
 
-use candle_core::{bail, Result};
+use candle_core::{bail, Result, WithDType};
 
 use super::isa::{avx2_fma, Isa};
-use super::kernels::Real;
 
 /// A strided view of `batch` matrices `[rows, cols]` inside a flat buffer.
 #[derive(Debug, Clone, Copy)]
@@ -70,7 +69,8 @@ static LHS_PACKING: std::sync::Once = std::sync::Once::new();
 ///
 /// Errors when the shapes disagree or a view reaches past its slice; then nothing is
 /// written.
-pub(crate) fn gemm_into<T: Real>(
+#[allow(clippy::too_many_arguments)] // three operands, each a slice and its view
+pub(crate) fn gemm_into<T: WithDType + Avx2Gemm>(
     isa: Isa,
     dst: &mut [T],
     cv: MatView,
@@ -276,33 +276,6 @@ macro_rules! avx2_gemm {
 }
 avx2_gemm!(f32, gemm_f32::microkernel::fma::f32, 8);
 avx2_gemm!(f64, gemm_f64::microkernel::fma::f64, 4);
-
-/// The rate of [`gemm_into`] on `isa` on a square f32 product `[side, side]·[side, side]`
-/// (GFLOP/s, 2·side³ flops per product), its rows split into one block per thread of the
-/// current rayon pool as the fused layer splits its own: the median of `reps` products after
-/// one warm-up. Entries are small integers, so the rate does not depend on the values.
-pub fn sgemm_gflops(isa: Isa, side: usize, reps: usize) -> Result<f64> {
-    use super::kernels::{par_each, row_chunks, rows_of, split_rows};
-    let a: Vec<f32> = (0..side * side).map(|i| (i % 7) as f32 - 3.0).collect();
-    let b: Vec<f32> = (0..side * side).map(|i| (i % 5) as f32 - 2.0).collect();
-    let mut c = vec![0f32; side * side];
-    let chunks = row_chunks(side, rayon::current_num_threads());
-    let mut times = Vec::with_capacity(reps);
-    for rep in 0..=reps.max(1) {
-        let tasks: Vec<_> = chunks.iter().copied().zip(split_rows(&mut c, side, chunks.iter().copied())).collect();
-        let start = std::time::Instant::now();
-        par_each(tasks, |(r, out)| {
-            let rows = MatView::contiguous(0, 1, r.len, side);
-            gemm_into(isa, out, rows, rows_of(&a, side, r), rows, &b, MatView::contiguous(0, 1, side, side), false)
-        })?;
-        if rep > 0 {
-            times.push(start.elapsed().as_secs_f64());
-        }
-    }
-    times.sort_by(f64::total_cmp);
-    let median = times[times.len() / 2];
-    Ok(2.0 * (side as f64).powi(3) / median / 1e9)
-}
 
 #[cfg(test)]
 mod tests {

@@ -23,7 +23,6 @@ pub use dropout::dropout;
 pub use isa::{Isa, IsaRequest, UnknownIsa};
 pub use layer_norm::{LayerNorm, LAYER_NORM_EPS};
 pub use linear::Linear;
-pub use matmul::sgemm_gflops;
 
 /// `torch.nn.functional.normalize(x, p=2, dim=1)`: each row of `[n, k]` over
 /// `max(‖row‖, 1e-12)`, so a zero row stays zero; differentiable.
