@@ -6,12 +6,19 @@ Each round runs `mogen bench prior --json` (2 threads, and 1 thread for the scal
 and `dno_step.py` (2 threads) back to back, reversing the order every round; ratios are taken
 per round and the medians printed, so a load change on the machine hits both sides alike.
 The parity check runs first: the table is only printed when both compute the same step.
+
+`--simd avx2` runs both sides on AVX2/FMA even where the CPU has AVX-512: mogen with
+`MOGEN_SIMD=avx2`, PyTorch with `ATEN_CPU_CAPABILITY=avx2`, `MKL_ENABLE_INSTRUCTIONS=AVX2` and
+`ONEDNN_MAX_CPU_ISA=AVX2`; the table names the set each side reports. The GFLOP/s are set
+against mogen's sgemm rate on a large square product (`mogen bench prior --sgemm`) on the same
+set, for 1 and 2 threads.
 """
 
 import argparse
 import json
 import os
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
@@ -19,12 +26,30 @@ import tempfile
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def run_json(cmd):
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-    return {r["batch"]: r for r in (json.loads(line) for line in out.splitlines() if line.startswith("{"))}
+# Environment that keeps each side on AVX2/FMA on a CPU with AVX-512.
+AVX2_ENV = {
+    "mogen": {"MOGEN_SIMD": "avx2"},
+    "torch": {"ATEN_CPU_CAPABILITY": "avx2", "MKL_ENABLE_INSTRUCTIONS": "AVX2", "ONEDNN_MAX_CPU_ISA": "AVX2"},
+}
 
 
-def step_gflop(batch, d=128, ff=256, layers=4, frames=100, feats=263, k=10):
+def lines_json(cmd, env):
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env).stdout
+    return [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+
+
+def run_json(cmd, env):
+    return {r["batch"]: r for r in lines_json(cmd, env)}
+
+
+def prior_config(path):
+    """The `mdm_config` in a prior file's safetensors metadata."""
+    with open(path, "rb") as f:
+        n = struct.unpack("<Q", f.read(8))[0]
+        return json.loads(json.loads(f.read(n))["__metadata__"]["mdm_config"])
+
+
+def step_gflop(batch, d, ff, layers, frames=100, feats=263, k=10):
     """Analytic GFLOP of one step (K passes forward, input gradient only backward): linear
     layers count twice (forward, dX), attention three times (forward, both operands)."""
     s = frames + 1
@@ -41,20 +66,35 @@ def main():
     ap.add_argument("--batches", default="1,2,8")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reps", type=int, default=10)
+    ap.add_argument("--simd", choices=["native", "avx2"], default="native",
+                    help="instruction set of both sides (avx2: no AVX-512 on either)")
+    ap.add_argument("--sgemm", type=int, default=2048, help="side of the square product for the sgemm peak")
     args = ap.parse_args()
+    envs = {side: dict(os.environ, **(AVX2_ENV[side] if args.simd == "avx2" else {})) for side in ("mogen", "torch")}
     mirror = [args.python, os.path.join(HERE, "dno_step.py"), "--prior", args.prior]
-    with tempfile.TemporaryDirectory() as dump:
-        subprocess.run([args.mogen, "bench", "prior", "--prior", args.prior, "--batches", "1", "--reps", "1", "--dump", dump],
-                       check=True, capture_output=True)
-        subprocess.run(mirror + ["--check", dump], check=True)
+    cfg = prior_config(args.prior)
+    dump = tempfile.mkdtemp()
+    subprocess.run([args.mogen, "bench", "prior", "--prior", args.prior, "--batches", "1", "--reps", "1", "--dump", dump],
+                   check=True, capture_output=True, env=envs["mogen"])
+    subprocess.run(mirror + ["--check", dump], check=True, env=envs["torch"])
+    peak = {}
+    for threads in (1, 2):
+        probe = lines_json([args.mogen, "bench", "prior", "--prior", args.prior, "--json", "--threads", str(threads),
+                            "--sgemm", str(args.sgemm)], envs["mogen"])[0]
+        peak[threads] = probe["gflops"]
+    print(f"sgemm {args.sgemm}² on mogen's {probe['simd']} kernels: {peak[1]:.0f} GFLOP/s on 1 thread, "
+          f"{peak[2]:.0f} on 2.", file=sys.stderr, flush=True)
     common = ["--batches", args.batches, "--reps", str(args.reps)]
     ours = [args.mogen, "bench", "prior", "--prior", args.prior, "--json"] + common
-    theirs = mirror + ["--threads", "2"] + common
+    theirs = mirror + ["--threads", "2", "--text", os.path.join(dump, "text.npy")] + common
     batches = [int(b) for b in args.batches.split(",")]
     rows = {b: {"ours": [], "one": [], "torch": [], "ratio": [], "rss": 0.0, "torch_rss": 0.0} for b in batches}
+    sets = {}
     for r in range(args.rounds):
-        order = [("ours", ours + ["--threads", "2"]), ("one", ours + ["--threads", "1"]), ("torch", theirs)]
-        results = {name: run_json(cmd) for name, cmd in (order if r % 2 == 0 else order[::-1])}
+        order = [("ours", ours + ["--threads", "2"], "mogen"), ("one", ours + ["--threads", "1"], "mogen"),
+                 ("torch", theirs, "torch")]
+        results = {name: run_json(cmd, envs[side]) for name, cmd, side in (order if r % 2 == 0 else order[::-1])}
+        sets = {"mogen": results["ours"][batches[0]]["simd"], "torch": results["torch"][batches[0]]["cpu_capability"]}
         for b in batches:
             row = rows[b]
             for name in ("ours", "one", "torch"):
@@ -65,16 +105,20 @@ def main():
         print(f"round {r + 1}/{args.rounds} done", file=sys.stderr, flush=True)
     load = os.getloadavg()
     print(f"Medians of {args.rounds} interleaved rounds ({args.reps} steps each after a warm-up); "
-          f"load average at the end {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}.\n")
-    print("| batch | GFLOP/step | mogen, 2 threads (s) | PyTorch, 2 threads (s) | ratio (per-round range) | mogen GFLOP/s | PyTorch GFLOP/s | mogen, 1 thread (s) | 1 → 2 threads | peak RSS MiB mogen / PyTorch |")
+          f"load average at the end {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}. "
+          f"Instruction sets: mogen {sets['mogen']}, PyTorch {sets['torch']}. "
+          f"sgemm {args.sgemm}² on mogen's kernels: {peak[1]:.0f} GFLOP/s (1 thread), {peak[2]:.0f} (2 threads).\n")
+    print("| batch | GFLOP/step | mogen, 2 threads (s) | PyTorch, 2 threads (s) | ratio (per-round range) | mogen GFLOP/s (% of sgemm) | PyTorch GFLOP/s (% of sgemm) | mogen, 1 thread (s) (% of sgemm) | 1 → 2 threads | peak RSS MiB mogen / PyTorch |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for b in batches:
         row = rows[b]
         ours_s, torch_s, one_s = (statistics.median(row[n]) for n in ("ours", "torch", "one"))
-        gf = step_gflop(b)
+        gf = step_gflop(b, cfg["latent_dim"], cfg["ff_size"], cfg["num_layers"])
+        share = lambda s, threads: f"{gf / s:.0f} ({100 * gf / s / peak[threads]:.0f} %)"
         print(f"| {b} | {gf:.1f} | {ours_s:.4f} | {torch_s:.4f} | {statistics.median(row['ratio']):.2f} "
-              f"({min(row['ratio']):.2f}–{max(row['ratio']):.2f}) | {gf / ours_s:.0f} | {gf / torch_s:.0f} | "
-              f"{one_s:.4f} | {one_s / ours_s:.2f}× | {row['rss']:.0f} / {row['torch_rss']:.0f} |")
+              f"({min(row['ratio']):.2f}–{max(row['ratio']):.2f}) | {share(ours_s, 2)} | {share(torch_s, 2)} | "
+              f"{one_s:.4f} ({100 * gf / one_s / peak[1]:.0f} %) | {one_s / ours_s:.2f}× | "
+              f"{row['rss']:.0f} / {row['torch_rss']:.0f} |")
 
 
 if __name__ == "__main__":

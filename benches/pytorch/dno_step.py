@@ -2,14 +2,14 @@
 
 The same maths, op for op, on the same weights (read from our `prior.safetensors`):
 DDIM-10 (eta = 0) over MDM's cosine schedule, unrolled from the optimised noise z through
-the frozen MDM denoiser (post-LN transformer encoder, x0 prediction, empty prompt: the text
-vector is zeros); de-normalisation; HumanML3D's `recover_from_ric`; bones re-scaled to the
+the frozen MDM denoiser (post-LN transformer encoder, x0 prediction, the empty prompt's
+condition as mogen's sentence encoder gives it, read from the dump's `text.npy`); de-normalisation; HumanML3D's `recover_from_ric`; bones re-scaled to the
 file's rest skeleton; the loss (mean joint height, metres) standing in for a task's
 constraint loss; backward to z; one Adam step (lr 0.05). Weights are frozen
 (`requires_grad=False`), as in our fused layer that forms no weight gradient.
 
     python dno_step.py --prior fixtures/model/prior.safetensors --check DUMP_DIR
-    python dno_step.py --prior fixtures/model/prior.safetensors --batches 1,2,8 --threads 2
+    python dno_step.py --prior fixtures/model/prior.safetensors --text DUMP_DIR/text.npy --batches 1,2,8
 
 `--check` compares the joints, loss and gradient of one batch-1 step with the files that
 `mogen bench prior --dump DUMP_DIR` wrote, and exits 1 when they differ. The timing run
@@ -35,7 +35,8 @@ BONE_EPS_M2 = 1e-12
 
 
 def load_safetensors(path):
-    """Tensors (float32 numpy) and metadata of a safetensors file."""
+    """Tensors (float32 numpy; F16 ones, such as the caption table, widened) and metadata of a
+    safetensors file."""
     with open(path, "rb") as f:
         n = struct.unpack("<Q", f.read(8))[0]
         header = json.loads(f.read(n))
@@ -43,10 +44,11 @@ def load_safetensors(path):
     meta = header.pop("__metadata__", {})
     tensors = {}
     for name, info in header.items():
-        if info["dtype"] != "F32":
-            raise ValueError(f"{name}: dtype {info['dtype']}, expected F32")
+        dtype = {"F32": np.float32, "F16": np.float16}.get(info["dtype"])
+        if dtype is None:
+            raise ValueError(f"{name}: dtype {info['dtype']}, expected F32 or F16")
         start, end = info["data_offsets"]
-        tensors[name] = np.frombuffer(data[start:end], dtype=np.float32).reshape(info["shape"])
+        tensors[name] = np.frombuffer(data[start:end], dtype=dtype).reshape(info["shape"]).astype(np.float32)
     return tensors, meta
 
 
@@ -176,7 +178,7 @@ class Mirror:
 def check(mirror, folder):
     """Compares one batch-1 step with `mogen bench prior --dump` files; True when they agree."""
     z = torch.from_numpy(np.load(f"{folder}/z.npy")).float().requires_grad_(True)
-    text = torch.zeros(1, mirror.text_dim)
+    text = torch.from_numpy(np.load(f"{folder}/text.npy")).float()
     joints = mirror.joints(mirror.sample(z, text))
     loss = joints[..., 1].mean()
     loss.backward()
@@ -191,10 +193,10 @@ def check(mirror, folder):
     return ok
 
 
-def time_steps(mirror, batch, frames, reps):
+def time_steps(mirror, batch, frames, reps, text_file):
     torch.manual_seed(0)
     z = torch.randn(batch, frames, 263).requires_grad_(True)
-    text = torch.zeros(batch, mirror.text_dim)
+    text = torch.from_numpy(np.load(text_file)).float().expand(batch, -1)
     adam = torch.optim.Adam([z], lr=0.05)
     times = []
     for i in range(reps + 1):
@@ -211,6 +213,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--prior", required=True)
     ap.add_argument("--check", help="folder written by `mogen bench prior --dump`")
+    ap.add_argument("--text", help="the empty prompt's condition `[1, text_dim]` (`text.npy` of a dump)")
     ap.add_argument("--batches", default="1,2,8")
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--reps", type=int, default=10)
@@ -220,11 +223,14 @@ def main():
     mirror = Mirror(args.prior, frames=args.frames)
     if args.check:
         sys.exit(0 if check(mirror, args.check) else 1)
+    if not args.text:
+        ap.error("--text is required for timing")
     for batch in [int(b) for b in args.batches.split(",")]:
-        step = time_steps(mirror, batch, args.frames, args.reps)
+        step = time_steps(mirror, batch, args.frames, args.reps, args.text)
         rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
         print(json.dumps({"batch": batch, "threads": torch.get_num_threads(), "dno_step_s": step,
-                          "peak_rss_mib": rss, "torch": torch.__version__}), flush=True)
+                          "peak_rss_mib": rss, "torch": torch.__version__,
+                          "cpu_capability": torch.backends.cpu.get_cpu_capability()}), flush=True)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,7 @@
 //! `mogen bench prior`: speed of the shipped prior on this machine.
+//!
+//! The CPU kernels run the best vector instruction set the CPU has; `MOGEN_SIMD=avx2` keeps
+//! them on AVX2/FMA on a CPU with AVX-512 (the path a CPU without AVX-512 runs).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -9,6 +12,8 @@ use clap::Args;
 use motion_core::diffusion::noise::gaussian;
 use motion_core::diffusion::{DdimSampler, Denoiser, Guidance, NoiseSchedule};
 use motion_core::export::write_atomically;
+use motion_core::model::bench::sgemm_gflops;
+use motion_core::nn::Isa;
 use motion_core::npy::npy_bytes;
 use motion_core::optim::AdamW;
 use motion_core::prior::Prior;
@@ -19,6 +24,9 @@ use crate::cli::load;
 use crate::cli::measure::{median, peak_rss_mib};
 use agent::paths;
 
+/// Timings of the shipped prior's DNO step. The CPU kernels run the best vector instruction
+/// set of this CPU; set `MOGEN_SIMD=avx2` to keep them on AVX2/FMA on a CPU with AVX-512 (what
+/// a CPU without AVX-512 runs). Every row names the set it ran.
 #[derive(Debug, Args)]
 pub struct BenchArgs {
     /// Trained prior file.
@@ -46,6 +54,11 @@ pub struct BenchArgs {
     /// the PyTorch mirror's parity check (`benches/pytorch/`).
     #[arg(long)]
     dump: Option<PathBuf>,
+    /// Instead of the prior, time the kernels' f32 product on a square `[SIDE, SIDE]` matrix
+    /// (rows split over the threads, as in the denoiser): the machine's sgemm rate that the
+    /// step's GFLOP/s are measured against.
+    #[arg(long, value_name = "SIDE")]
+    sgemm: Option<usize>,
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
@@ -61,13 +74,35 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
 struct Row {
     batch: usize,
     threads: usize,
+    /// The instruction set of the CPU kernels (`avx512`, `avx2`, `baseline`).
+    simd: String,
     forward_s: f64,
     sample_s: f64,
     dno_step_s: f64,
     peak_rss_mib: f64,
 }
 
+/// The sgemm rate of the kernels on this machine, printed as a line or a JSON object.
+#[derive(Debug, Serialize)]
+struct SgemmRow {
+    sgemm: usize,
+    threads: usize,
+    simd: String,
+    gflops: f64,
+}
+
 fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
+    let isa = Isa::for_request(Isa::request_from_env()?);
+    if let Some(side) = args.sgemm {
+        let gflops = sgemm_gflops(isa, side, args.reps)?;
+        let row = SgemmRow { sgemm: side, threads: rayon::current_num_threads(), simd: isa.to_string(), gflops };
+        if args.json {
+            println!("{}", serde_json::to_string(&row)?);
+        } else {
+            println!("sgemm {side}×{side}, {} threads, {isa}: {gflops:.1} GFLOP/s", row.threads);
+        }
+        return Ok(());
+    }
     let device = load::device()?;
     let prior = load::load_prior(&args.prior, &device)?;
     let cfg = prior.mdm.config();
@@ -77,7 +112,7 @@ fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
     }
     if !args.json {
         println!(
-            "prior: d={} ff={} layers={} heads={} ({} parameters); {} frames; {} threads",
+            "prior: d={} ff={} layers={} heads={} ({} parameters); {} frames; {} threads; {}",
             cfg.latent_dim,
             cfg.ff_size,
             cfg.num_layers,
@@ -85,6 +120,7 @@ fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
             cfg.parameter_count(),
             args.frames,
             rayon::current_num_threads(),
+            prior.mdm.isa(),
         );
         println!("| batch | denoiser forward (s) | ddim{k} sample, no graph (s) | DNO step: ddim{k} unrolled, joints, loss, backward to the noise, Adam (s) | 500 DNO steps (s) | peak RSS (MiB) |", k = args.ddim_steps);
         println!("|---|---|---|---|---|---|");
@@ -122,6 +158,7 @@ fn run_in_pool(args: BenchArgs) -> anyhow::Result<()> {
         let row = Row {
             batch: b,
             threads: rayon::current_num_threads(),
+            simd: prior.mdm.isa().to_string(),
             forward_s: forward,
             sample_s: sample,
             dno_step_s: step,
@@ -158,9 +195,10 @@ fn step_loss(
     Ok((loss, grads))
 }
 
-/// Writes one batch-1 step for a mirror to check its maths against: the noise `z.npy`
-/// `[1, frames, 263]`, the unrolled sample's joints `joints.npy` `[1, frames, 22, 3]`, the
-/// loss `loss.npy` `[1]` and its gradient `grad.npy` with respect to `z`.
+/// Writes one batch-1 step for a mirror to check its maths against: the empty prompt's
+/// condition `text.npy` `[1, text_dim]`, the noise `z.npy` `[1, frames, 263]`, the unrolled
+/// sample's joints `joints.npy` `[1, frames, 22, 3]`, the loss `loss.npy` `[1]` and its
+/// gradient `grad.npy` with respect to `z`.
 fn dump_step(prior: &Prior, sampler: &DdimSampler, frames: usize, dir: &Path) -> anyhow::Result<()> {
     let device = load::device()?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -170,6 +208,7 @@ fn dump_step(prior: &Prior, sampler: &DdimSampler, frames: usize, dir: &Path) ->
     let (loss, grads) = step_loss(prior, sampler, &z, &text)?;
     let grad = grads.get(z.as_tensor()).context("no gradient reached the noise")?;
     for (name, tensor) in [
+        ("text", text.clone()),
         ("z", z.as_tensor().clone()),
         ("joints", prior.to_joints(&out)?),
         ("loss", loss.reshape(1)?),

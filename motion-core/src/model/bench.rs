@@ -16,6 +16,8 @@ use serde::Serialize;
 use super::config::MdmConfig;
 use super::mdm::Mdm;
 use crate::diffusion::Denoiser;
+use crate::nn::isa::Isa;
+use crate::nn::kernels::{gemm_into, par_each, row_chunks, rows_of, split_rows, MatView};
 
 /// Frames per motion in the benchmark (5 s at 20 fps).
 pub const BENCH_FRAMES: usize = 100;
@@ -171,6 +173,32 @@ pub fn bench_train_step(cfg: &MdmConfig, batch: usize, frames: usize, reps: usiz
         }
     }
     Ok(median(&mut times))
+}
+
+/// The rate of [`gemm_into`] on `isa` on a square f32 product `[side, side]·[side, side]`
+/// (GFLOP/s, 2·side³ flops per product), its rows split into one block per thread of the
+/// current rayon pool as the fused layer splits its own: the median of `reps` products after
+/// one warm-up. Entries are small integers, so the rate does not depend on the values.
+pub fn sgemm_gflops(isa: Isa, side: usize, reps: usize) -> Result<f64> {
+    let a: Vec<f32> = (0..side * side).map(|i| (i % 7) as f32 - 3.0).collect();
+    let b: Vec<f32> = (0..side * side).map(|i| (i % 5) as f32 - 2.0).collect();
+    let mut c = vec![0f32; side * side];
+    let chunks = row_chunks(side, rayon::current_num_threads());
+    let mut times = Vec::with_capacity(reps);
+    for rep in 0..=reps.max(1) {
+        let tasks: Vec<_> = chunks.iter().copied().zip(split_rows(&mut c, side, chunks.iter().copied())).collect();
+        let start = std::time::Instant::now();
+        par_each(tasks, |(r, out)| {
+            let rows = MatView::contiguous(0, 1, r.len, side);
+            gemm_into(isa, out, rows, rows_of(&a, side, r), rows, &b, MatView::contiguous(0, 1, side, side), false)
+        })?;
+        if rep > 0 {
+            times.push(start.elapsed().as_secs_f64());
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    let median = times[times.len() / 2];
+    Ok(2.0 * (side as f64).powi(3) / median / 1e9)
 }
 
 #[cfg(test)]

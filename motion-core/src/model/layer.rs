@@ -10,7 +10,7 @@ use rand::RngCore;
 use super::config::MdmConfig;
 pub(crate) use super::fused_stack::{Ends, Epilogue};
 use super::fused_stack::{FusedEncoderStack, LayerWeights};
-use crate::nn::{self, LayerNorm, Linear, LAYER_NORM_EPS};
+use crate::nn::{self, Isa, LayerNorm, Linear, LAYER_NORM_EPS};
 
 /// Parameters fetched from a [`VarBuilder`], each recorded with its full checkpoint name.
 pub(crate) struct ParamLoader<'a> {
@@ -173,10 +173,10 @@ impl EncoderLayer {
 
 /// Frozen-weight path of a stack of layers, `[batch, tokens, d] → [batch, tokens, d]`, or with
 /// `ends` a whole denoiser pass `[batch, frames, F] → [batch, frames, F]` (see [`Ends`]): one
-/// fused custom op on the CPU (input gradient only, [`FusedEncoderStack`]). Elsewhere the
-/// layers' primitive path without dropout (callers handle the ends there). Errors on an empty
-/// stack.
-pub(crate) fn frozen_stack(layers: &[EncoderLayer], h: &Tensor, ends: Option<Ends>) -> Result<Tensor> {
+/// fused custom op on the CPU (input gradient only, [`FusedEncoderStack`]) whose kernels run
+/// on `isa`. Elsewhere the layers' primitive path without dropout (callers handle the ends
+/// there). Errors on an empty stack.
+pub(crate) fn frozen_stack(layers: &[EncoderLayer], h: &Tensor, ends: Option<Ends>, isa: Isa) -> Result<Tensor> {
     let Some(first) = layers.first() else {
         candle_core::bail!("an encoder stack needs at least one layer");
     };
@@ -197,6 +197,7 @@ pub(crate) fn frozen_stack(layers: &[EncoderLayer], h: &Tensor, ends: Option<End
         ends,
         first.num_heads,
         first.norm1.eps(),
+        isa,
         keep_activations,
     ))
 }

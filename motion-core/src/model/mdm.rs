@@ -14,7 +14,7 @@ use super::layer::{self, Dropout, EncoderLayer, ParamLoader};
 use super::positions::{sinusoidal_table, MAX_LEN};
 use crate::diffusion::ddim::timestep_tensor;
 use crate::diffusion::{guided_move, DdimMove, Denoiser, Guidance, NoiseSchedule};
-use crate::nn::Linear;
+use crate::nn::{Isa, Linear};
 
 /// MDM with the text condition given as a vector (CLIP is run elsewhere).
 #[derive(Debug, Clone)]
@@ -35,6 +35,8 @@ pub struct Mdm {
     /// For [`Prediction::Velocity`]: MDM's schedule, whose ᾱ_t turns v̂ into x̂0.
     velocity_schedule: Option<NoiseSchedule>,
     params: Vec<(String, Tensor)>,
+    /// The instruction set of the fused CPU pass.
+    isa: Isa,
 }
 
 impl Mdm {
@@ -57,7 +59,18 @@ impl Mdm {
         let output_process = loader.linear(&vb.pp("output_process").pp("poseFinal"), d, cfg.input_feats)?;
         let pe = sinusoidal_table(MAX_LEN, d, vb.device())?.to_dtype(vb.dtype())?;
         let velocity_schedule = (cfg.prediction == Prediction::Velocity).then(NoiseSchedule::mdm);
-        Ok(Self { cfg, input_process, time_embed, embed_text, layers, output_process, pe, velocity_schedule, params })
+        Ok(Self {
+            cfg,
+            input_process,
+            time_embed,
+            embed_text,
+            layers,
+            output_process,
+            pe,
+            velocity_schedule,
+            params,
+            isa: Isa::selected(),
+        })
     }
 
     /// Loads a safetensors checkpoint by name (e.g. one converted from `model000475000.pt`).
@@ -78,6 +91,17 @@ impl Mdm {
         let trained = Self::init_seeded(cfg.clone(), &VarMap::new(), dtype, device, seed)?;
         let tensors = trained.params.iter().map(|(n, t)| (n.clone(), t.detach())).collect();
         Self::new(cfg, VarBuilder::from_tensors(tensors, dtype, device))
+    }
+
+    /// The model running its fused CPU pass on `isa` instead of [`Isa::selected`] (the same
+    /// values up to rounding; a set the CPU lacks runs the CPU's own choice).
+    pub fn with_isa(self, isa: Isa) -> Self {
+        Self { isa, ..self }
+    }
+
+    /// The instruction set of the fused CPU pass.
+    pub fn isa(&self) -> Isa {
+        self.isa
     }
 
     /// The sizes.
@@ -138,7 +162,8 @@ impl Mdm {
         if !crate::nn::ops::has_cpu_kernel(x_t) {
             return self.forward_eval(x_t, timesteps, text);
         }
-        let out = layer::frozen_stack(&self.layers, x_t, Some(self.frozen_ends(frames, timesteps, text, None)?))?;
+        let out =
+            layer::frozen_stack(&self.layers, x_t, Some(self.frozen_ends(frames, timesteps, text, None)?), self.isa)?;
         self.to_x0(out, x_t, timesteps)
     }
 
@@ -238,7 +263,7 @@ impl Denoiser for Mdm {
         };
         let epilogue = layer::Epilogue { guidance: scale, x_coeff, out_coeff };
         let ends = self.frozen_ends(frames, &timesteps, &rows, Some(epilogue))?;
-        layer::frozen_stack(&self.layers, x_t, Some(ends))
+        layer::frozen_stack(&self.layers, x_t, Some(ends), self.isa)
     }
 
     fn text_dim(&self) -> usize {

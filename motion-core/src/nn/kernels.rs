@@ -1,12 +1,15 @@
 //! CPU kernels shared by the custom ops and the fused encoder layer: plain loops over
-//! contiguous rows of f32/f64, and matrix products through candle's CPU backend (its `gemm`
-//! call) or, where the caller parallelises over row blocks itself, [`gemm_into`]: the one
-//! place in this crate with `unsafe`, a bounds-checked call of the `gemm` crate.
+//! contiguous rows of f32/f64 compiled for the selected instruction set ([`Isa`]), and the
+//! linear layers' products through [`gemm_into`] (`super::matmul`), on row blocks the caller
+//! runs in parallel.
 
 use candle_core::{bail, CpuStorage, Layout, Result, Storage, Tensor, WithDType};
 
+use super::isa::Isa;
+pub(crate) use super::matmul::{gemm_into, MatView};
+
 /// The float types the custom ops run on: f32 for work, f64 for gradient tests.
-pub(crate) trait Real: WithDType {
+pub(crate) trait Real: WithDType + super::matmul::Avx2Gemm {
     fn exp(self) -> Self;
     fn sqrt(self) -> Self;
     fn erf(self) -> Self;
@@ -104,22 +107,6 @@ pub(crate) fn erf_f32(x: f32) -> f32 {
     x * p / q
 }
 
-/// Runs `f` compiled for the best SIMD level of this CPU (AVX2+FMA, AVX-512, ...), so the
-/// plain row loops below auto-vectorise beyond the SSE2 baseline. The kernels are
-/// `#[inline(always)]` so they are compiled inside the dispatched function.
-#[inline(always)]
-pub(crate) fn vectorized<R>(f: impl FnOnce() -> R) -> R {
-    struct Op<F>(F);
-    impl<R, F: FnOnce() -> R> pulp::WithSimd for Op<F> {
-        type Output = R;
-        #[inline(always)]
-        fn with_simd<S: pulp::Simd>(self, _simd: S) -> R {
-            (self.0)()
-        }
-    }
-    pulp::Arch::new().dispatch(Op(f))
-}
-
 /// `Σ f(x_i)` with eight independent accumulators (vectorisable; no serial dependency).
 #[inline(always)]
 fn sum_map<T: Real>(x: &[T], f: impl Fn(T) -> T) -> T {
@@ -209,135 +196,6 @@ pub(crate) fn with_slice<T: WithDType, R>(t: &Tensor, f: impl FnOnce(&[T]) -> Re
     }
 }
 
-/// A strided view of `batch` matrices `[rows, cols]` inside a flat buffer.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct MatView {
-    pub offset: usize,
-    pub batch: usize,
-    pub rows: usize,
-    pub cols: usize,
-    /// Element strides of (batch, row, column).
-    pub strides: [usize; 3],
-}
-
-impl MatView {
-    /// `batch` row-major contiguous `[rows, cols]` matrices starting at `offset`.
-    pub fn contiguous(offset: usize, batch: usize, rows: usize, cols: usize) -> Self {
-        Self { offset, batch, rows, cols, strides: [rows * cols, cols, 1] }
-    }
-
-    /// The transpose of this view (no data moves).
-    pub fn t(self) -> Self {
-        Self { rows: self.cols, cols: self.rows, strides: [self.strides[0], self.strides[2], self.strides[1]], ..self }
-    }
-
-    /// One past the last element the view touches.
-    fn end(&self) -> usize {
-        if self.batch == 0 || self.rows == 0 || self.cols == 0 {
-            return self.offset;
-        }
-        self.offset
-            + (self.batch - 1) * self.strides[0]
-            + (self.rows - 1) * self.strides[1]
-            + (self.cols - 1) * self.strides[2]
-            + 1
-    }
-}
-
-/// gemm copies a product's left operand (its vector axis; our `B`, since gemm transposes
-/// row-major products) into a packed layout when the product has more than this many × 6
-/// columns (gemm's default: 8). Our operands are small, and a layer's weight stays in L2
-/// between calls, so for operands already contiguous along that axis (the transposed weights,
-/// the input gradient's weights) packing costs more than it saves: products of 51–202 rows of
-/// the denoiser's shapes ran 5–30 % faster unpacked on one core (a standalone probe), and a
-/// Task-1 DNO sample 0.6–0.8 s faster, with the same values (packing moves data, it does not
-/// reorder sums). Operands strided along that axis, or whose length along it is not a multiple
-/// of 16, are still packed. 256 is the largest value gemm takes.
-const LHS_PACKING_THRESHOLD: usize = 256;
-
-/// Applies [`LHS_PACKING_THRESHOLD`] once per process. The setting is gemm's global, so it also
-/// holds for candle's single-threaded (small) products.
-static LHS_PACKING: std::sync::Once = std::sync::Once::new();
-
-/// `C = A·B`, or `C += A·B` when `accumulate`, for single matrices (`batch` 1) held in
-/// slices, with `C` written through the strided view `cv` of `dst`. The product runs on the
-/// calling thread only (the `gemm` crate without its own threading): the fused layer
-/// splits its rows into blocks and runs the blocks on the rayon pool, which keeps both
-/// cores busy where one small product per thread pair cost more than it saved.
-///
-/// Errors when the shapes disagree or a view reaches past its slice; then nothing is
-/// written.
-pub(crate) fn gemm_into<T: Real>(
-    dst: &mut [T],
-    cv: MatView,
-    a: &[T],
-    av: MatView,
-    b: &[T],
-    bv: MatView,
-    accumulate: bool,
-) -> Result<()> {
-    if av.batch != 1 || bv.batch != 1 || cv.batch != 1 {
-        bail!("gemm_into multiplies single matrices, got batches {} · {} → {}", av.batch, bv.batch, cv.batch);
-    }
-    if av.cols != bv.rows || cv.rows != av.rows || cv.cols != bv.cols {
-        bail!("gemm_into shapes do not match: {av:?} · {bv:?} → {cv:?}");
-    }
-    if av.end() > a.len() || bv.end() > b.len() || cv.end() > dst.len() {
-        bail!(
-            "gemm_into view outside its buffer: {av:?} in {}, {bv:?} in {}, {cv:?} in {}",
-            a.len(),
-            b.len(),
-            dst.len()
-        );
-    }
-    let (m, n, k) = (av.rows, bv.cols, av.cols);
-    if m == 0 || n == 0 {
-        return Ok(());
-    }
-    let zero = T::from_f64(0.0);
-    if k == 0 {
-        if !accumulate {
-            for i in 0..m {
-                for j in 0..n {
-                    dst[cv.offset + i * cv.strides[1] + j * cv.strides[2]] = zero;
-                }
-            }
-        }
-        return Ok(());
-    }
-    let stride = |s: usize| s as isize;
-    LHS_PACKING.call_once(|| gemm::set_lhs_packing_threshold_single_thread(LHS_PACKING_THRESHOLD));
-    // SAFETY: every element the call reads or writes is `offset + i·row_stride +
-    // j·col_stride` of its view with `i < rows`, `j < cols`: at most `end() − 1`, which the
-    // checks above keep inside `a`, `b` and `dst`. `dst` is borrowed mutably and `a`, `b`
-    // shared, so they cannot alias. `Parallelism::None` keeps the call on this thread.
-    #[allow(unsafe_code)]
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            dst.as_mut_ptr().add(cv.offset),
-            stride(cv.strides[2]),
-            stride(cv.strides[1]),
-            accumulate,
-            a.as_ptr().add(av.offset),
-            stride(av.strides[2]),
-            stride(av.strides[1]),
-            b.as_ptr().add(bv.offset),
-            stride(bv.strides[2]),
-            stride(bv.strides[1]),
-            T::from_f64(1.0),
-            T::from_f64(1.0),
-            false,
-            false,
-            false,
-            gemm::Parallelism::None,
-        );
-    }
-    Ok(())
-}
-
 /// A range of rows of a row-major buffer.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Rows {
@@ -400,6 +258,7 @@ impl<T> Weight<'_, T> {
 /// `dst [rows, n] = x [rows, k] · Wᵀ + bias` (bias broadcast over rows, or `dst` kept and
 /// accumulated when `bias` is `None`).
 pub(crate) fn linear_rows<T: Real>(
+    isa: Isa,
     dst: &mut [T],
     x: &[T],
     rows: usize,
@@ -414,12 +273,13 @@ pub(crate) fn linear_rows<T: Real>(
             row.copy_from_slice(bias);
         }
     }
-    gemm_into(dst, MatView::contiguous(0, 1, rows, n), x, MatView::contiguous(0, 1, rows, k), w, wt, true)
+    gemm_into(isa, dst, MatView::contiguous(0, 1, rows, n), x, MatView::contiguous(0, 1, rows, k), w, wt, true)
 }
 
 /// `dst [rows, k] (+)= g [rows, n] · W` for a row-major `W [n, k]` (the input gradient of
 /// `x·Wᵀ`).
 pub(crate) fn linear_rows_bwd<T: Real>(
+    isa: Isa,
     dst: &mut [T],
     g: &[T],
     rows: usize,
@@ -429,6 +289,7 @@ pub(crate) fn linear_rows_bwd<T: Real>(
 ) -> Result<()> {
     let n = w.len() / k.max(1);
     gemm_into(
+        isa,
         dst,
         MatView::contiguous(0, 1, rows, k),
         g,
@@ -442,7 +303,7 @@ pub(crate) fn linear_rows_bwd<T: Real>(
 /// `y = x·Wᵀ (+ b)` for `x` given as a strided view `[batch, m, k]` whose rows are
 /// contiguous and `W` as a row-major `[n, k]` (PyTorch's Linear layout, read transposed in
 /// place). Returns contiguous `[batch·m, n]`, computed in parallel row chunks.
-pub(crate) fn linear<T: Real>(x: &[T], xv: MatView, w: &[T], n: usize, bias: Option<&[T]>) -> Result<Vec<T>> {
+pub(crate) fn linear<T: Real>(isa: Isa, x: &[T], xv: MatView, w: &[T], n: usize, bias: Option<&[T]>) -> Result<Vec<T>> {
     let k = xv.cols;
     if w.len() != n * k || xv.strides[2] != 1 || xv.strides[1] != k {
         bail!("linear: weight of {} elements for [{n}, {k}], or input rows not contiguous: {xv:?}", w.len());
@@ -461,14 +322,14 @@ pub(crate) fn linear<T: Real>(x: &[T], xv: MatView, w: &[T], n: usize, bias: Opt
         let Some(rows) = x.get(first..first + r.len * k) else {
             bail!("linear: input view {xv:?} reaches past its {} elements", x.len());
         };
-        linear_rows(out, rows, r.len, k, Weight::OutIn(w), bias)
+        linear_rows(isa, out, rows, r.len, k, Weight::OutIn(w), bias)
     })?;
     Ok(y)
 }
 
 /// `dx [m, k] = g [m, n] · W` for contiguous `g` and a row-major `W [n, k]` (the input
 /// gradient of [`linear`]), in parallel row chunks.
-pub(crate) fn linear_bwd<T: Real>(g: &[T], w: &[T], n: usize, k: usize) -> Result<Vec<T>> {
+pub(crate) fn linear_bwd<T: Real>(isa: Isa, g: &[T], w: &[T], n: usize, k: usize) -> Result<Vec<T>> {
     if w.len() != n * k || g.len() % n.max(1) != 0 {
         bail!("linear backward: weight of {} elements for [{n}, {k}], gradient of {}", w.len(), g.len());
     }
@@ -478,7 +339,7 @@ pub(crate) fn linear_bwd<T: Real>(g: &[T], w: &[T], n: usize, k: usize) -> Resul
         .into_iter()
         .zip(split_rows(&mut dx, k, row_chunks(m, rayon::current_num_threads())))
         .collect();
-    par_each(tasks, |(r, out)| linear_rows_bwd(out, rows_of(g, n, r), r.len, w, k, false))?;
+    par_each(tasks, |(r, out)| linear_rows_bwd(isa, out, rows_of(g, n, r), r.len, w, k, false))?;
     Ok(dx)
 }
 
@@ -486,6 +347,7 @@ pub(crate) fn linear_bwd<T: Real>(g: &[T], w: &[T], n: usize, k: usize) -> Resul
 /// `xhat = (x − mean)/sqrt(var + eps)`, `y = xhat·gamma + beta` (biased variance, as PyTorch).
 /// Optionally keeps `xhat` and `1/sqrt(var + eps)` per row for the backward pass.
 pub(crate) fn layer_norm_fwd<T: Real>(
+    isa: Isa,
     x: &[T],
     gamma: &[T],
     beta: &[T],
@@ -496,7 +358,7 @@ pub(crate) fn layer_norm_fwd<T: Real>(
     let d = gamma.len();
     let inv_d = T::from_f64(1.0 / d as f64);
     let eps = T::from_f64(eps);
-    vectorized(
+    isa.vectorize(
         #[inline(always)]
         || {
             for (r, (xr, yr)) in x.chunks_exact(d).zip(y.chunks_exact_mut(d)).enumerate() {
@@ -525,10 +387,10 @@ pub(crate) fn layer_norm_fwd<T: Real>(
 
 /// LayerNorm input gradient (gamma, beta frozen), in place on `g`:
 /// `dx = rstd·(g·γ − mean(g·γ) − xhat·mean(g·γ·xhat))`.
-pub(crate) fn layer_norm_bwd<T: Real>(g: &mut [T], xhat: &[T], rstd: &[T], gamma: &[T]) {
+pub(crate) fn layer_norm_bwd<T: Real>(isa: Isa, g: &mut [T], xhat: &[T], rstd: &[T], gamma: &[T]) {
     let d = gamma.len();
     let inv_d = T::from_f64(1.0 / d as f64);
-    vectorized(
+    isa.vectorize(
         #[inline(always)]
         || {
             for ((gr, xr), &rs) in g.chunks_exact_mut(d).zip(xhat.chunks_exact(d)).zip(rstd) {
@@ -568,8 +430,8 @@ fn flush_tiny<T: Real>(v: T) -> T {
 
 /// Softmax of `scale·x` over rows of length `d`, in place; probabilities below
 /// [`FLUSH_BELOW`] are exact zeros.
-pub(crate) fn softmax_fwd<T: Real>(x: &mut [T], d: usize, scale: T) {
-    vectorized(
+pub(crate) fn softmax_fwd<T: Real>(isa: Isa, x: &mut [T], d: usize, scale: T) {
+    isa.vectorize(
         #[inline(always)]
         || {
             for row in x.chunks_exact_mut(d) {
@@ -587,8 +449,8 @@ pub(crate) fn softmax_fwd<T: Real>(x: &mut [T], d: usize, scale: T) {
 }
 
 /// Gradient through `y = softmax(scale·x)`, in place on `g`: `dx = scale·y·(g − Σ g·y)`.
-pub(crate) fn softmax_bwd<T: Real>(y: &[T], g: &mut [T], d: usize, scale: T) {
-    vectorized(
+pub(crate) fn softmax_bwd<T: Real>(isa: Isa, y: &[T], g: &mut [T], d: usize, scale: T) {
+    isa.vectorize(
         #[inline(always)]
         || {
             for (yr, gr) in y.chunks_exact(d).zip(g.chunks_exact_mut(d)) {
@@ -602,11 +464,11 @@ pub(crate) fn softmax_bwd<T: Real>(y: &[T], g: &mut [T], d: usize, scale: T) {
 }
 
 /// Exact GELU, `0.5·x·(1 + erf(x/√2))`.
-pub(crate) fn gelu_fwd<T: Real>(x: &[T], y: &mut [T]) {
+pub(crate) fn gelu_fwd<T: Real>(isa: Isa, x: &[T], y: &mut [T]) {
     let half = T::from_f64(0.5);
     let one = T::from_f64(1.0);
     let inv_sqrt2 = T::from_f64(std::f64::consts::FRAC_1_SQRT_2);
-    vectorized(
+    isa.vectorize(
         #[inline(always)]
         || {
             for (o, &v) in y.iter_mut().zip(x) {
@@ -618,13 +480,13 @@ pub(crate) fn gelu_fwd<T: Real>(x: &[T], y: &mut [T]) {
 
 /// GELU gradient in place on `g`: `dx = g·(Φ(x) + x·φ(x))`, with `φ(x)` below
 /// [`FLUSH_BELOW`] taken as zero (`|x|` > 7.3, where `x·φ(x)` < 1e-11).
-pub(crate) fn gelu_bwd<T: Real>(x: &[T], g: &mut [T]) {
+pub(crate) fn gelu_bwd<T: Real>(isa: Isa, x: &[T], g: &mut [T]) {
     let half = T::from_f64(0.5);
     let one = T::from_f64(1.0);
     let inv_sqrt2 = T::from_f64(std::f64::consts::FRAC_1_SQRT_2);
     let neg_half = T::from_f64(-0.5);
     let inv_sqrt_2pi = T::from_f64(0.5 * std::f64::consts::FRAC_2_SQRT_PI * std::f64::consts::FRAC_1_SQRT_2);
-    vectorized(
+    isa.vectorize(
         #[inline(always)]
         || {
             for (gv, &v) in g.iter_mut().zip(x) {
@@ -644,13 +506,13 @@ mod tests {
     fn softmax_leaves_no_subnormal_probabilities() {
         // Scores 0, −1, …, −99 at scale 1: e^-k underflows past f32's normal range for k > 87.
         let mut row: Vec<f32> = (0..100).map(|k| -(k as f32)).collect();
-        softmax_fwd(&mut row, 100, 1.0);
+        softmax_fwd(Isa::best(), &mut row, 100, 1.0);
         assert!(row.iter().all(|p| *p == 0.0 || p.is_normal()), "subnormal probability in {row:?}");
         assert!(row[..28].iter().all(|p| *p > 0.0), "a probability above 1e-12 was dropped");
         assert!(row[28..].iter().all(|p| *p == 0.0), "probabilities below 1e-12 are kept");
         assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-6);
         let mut g = vec![1e-3f32; 100];
-        softmax_bwd(&row, &mut g, 100, 1.0);
+        softmax_bwd(Isa::best(), &row, &mut g, 100, 1.0);
         assert!(g.iter().all(|v| *v == 0.0 || v.is_normal()), "subnormal gradient in {g:?}");
     }
 
@@ -670,5 +532,57 @@ mod tests {
         assert!(worst_erf < 5e-7, "erf absolute error {worst_erf}");
         assert_eq!(exp_f32(-1000.0), exp_f32(-87.3));
         assert_eq!(erf_f32(10.0), erf_f32(4.0));
+    }
+
+    /// The row loops compiled for AVX2/FMA against the same loops for the CPU's best set and
+    /// against f64: LayerNorm, softmax and GELU, forward and backward, on rows of 128 and 101
+    /// (a denoiser's width and its attention rows), to 1e-5.
+    #[test]
+    fn avx2_row_loops_match_the_reference() {
+        let fill = |n: usize, seed: usize| -> Vec<f32> {
+            (0..n).map(|i| ((i * 7919 + seed * 104_729) % 1000) as f32 / 250.0 - 2.0).collect()
+        };
+        let close = |name: &str, a: &[f32], b: &[f32]| {
+            let scale = b.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            let err = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            assert!(err <= 1e-5 * scale, "{name}: error {err:e} of {scale}");
+        };
+        let run = |isa: Isa| -> Vec<Vec<f32>> {
+            let (d, rows) = (128, 5);
+            let (x, gamma, beta, g) = (fill(rows * d, 1), fill(d, 2), fill(d, 3), fill(rows * d, 4));
+            let (mut y, mut xhat, mut rstd) = (vec![0f32; rows * d], vec![0f32; rows * d], vec![0f32; rows]);
+            layer_norm_fwd(isa, &x, &gamma, &beta, 1e-5, &mut y, Some((&mut xhat, &mut rstd)));
+            let mut dx = g.clone();
+            layer_norm_bwd(isa, &mut dx, &xhat, &rstd, &gamma);
+            let mut p = fill(3 * 101, 5);
+            softmax_fwd(isa, &mut p, 101, 0.7);
+            let mut dp = fill(3 * 101, 6);
+            softmax_bwd(isa, &p, &mut dp, 101, 0.7);
+            let mut act = vec![0f32; rows * d];
+            gelu_fwd(isa, &x, &mut act);
+            let mut dact = g;
+            gelu_bwd(isa, &x, &mut dact);
+            vec![y, dx, p, dp, act, dact]
+        };
+        let names = ["LayerNorm", "LayerNorm backward", "softmax", "softmax backward", "GELU", "GELU backward"];
+        let (avx2, best) = (run(Isa::Avx2), run(Isa::best()));
+        for ((name, a), b) in names.iter().zip(&avx2).zip(&best) {
+            close(name, a, b);
+        }
+        // GELU and softmax against f64 (the others are checked by the layers' own tests).
+        let x = fill(5 * 128, 1);
+        let gelu: Vec<f32> = x
+            .iter()
+            .map(|&v| (0.5 * v as f64 * (1.0 + candle_core::cpu::erf::erf_f64(v as f64 / 2f64.sqrt()))) as f32)
+            .collect();
+        close("GELU against f64", &avx2[4], &gelu);
+        let mut soft = Vec::new();
+        for row in fill(3 * 101, 5).chunks(101) {
+            let m = row.iter().fold(f64::MIN, |m, &v| m.max(0.7 * v as f64));
+            let e: Vec<f64> = row.iter().map(|&v| (0.7 * v as f64 - m).exp()).collect();
+            let sum: f64 = e.iter().sum();
+            soft.extend(e.iter().map(|v| (v / sum) as f32));
+        }
+        close("softmax against f64", &avx2[2], &soft);
     }
 }

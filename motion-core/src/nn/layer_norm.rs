@@ -6,6 +6,7 @@
 use candle_core::backend::BackendStorage;
 use candle_core::{bail, CpuStorage, CustomOp1, Layout, Result, Shape, Tensor, WithDType, D};
 
+use super::isa::Isa;
 use super::kernels::{self, contiguous_slice, dispatch_real, with_slice};
 use super::ops::has_cpu_kernel;
 
@@ -83,7 +84,7 @@ impl CustomOp1 for LayerNormOp {
             let mut y = vec![T::from_f64(0.0); x.len()];
             with_slice::<T, _>(&self.weight, |gamma| {
                 with_slice::<T, _>(&self.bias, |beta| {
-                    kernels::layer_norm_fwd(x, gamma, beta, self.eps, &mut y, None);
+                    kernels::layer_norm_fwd(Isa::selected(), x, gamma, beta, self.eps, &mut y, None);
                     Ok(())
                 })
             })?;
@@ -102,9 +103,9 @@ impl CustomOp1 for LayerNormOp {
                             let rows = x.len() / d.max(1);
                             let (mut y, mut xhat) = (vec![T::from_f64(0.0); x.len()], vec![T::from_f64(0.0); x.len()]);
                             let mut rstd = vec![T::from_f64(0.0); rows];
-                            kernels::layer_norm_fwd(x, gamma, beta, self.eps, &mut y, Some((&mut xhat, &mut rstd)));
+                            kernels::layer_norm_fwd(Isa::selected(), x, gamma, beta, self.eps, &mut y, Some((&mut xhat, &mut rstd)));
                             y.copy_from_slice(g);
-                            kernels::layer_norm_bwd(&mut y, &xhat, &rstd, gamma);
+                            kernels::layer_norm_bwd(Isa::selected(), &mut y, &xhat, &rstd, gamma);
                             Ok(y)
                         })
                     })

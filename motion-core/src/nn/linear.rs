@@ -2,6 +2,7 @@
 
 use candle_core::{bail, CpuStorage, CustomOp1, Layout, Result, Shape, Tensor};
 
+use super::isa::Isa;
 use super::kernels::{self, dispatch_real, with_slice, MatView, Real};
 use super::ops::has_cpu_kernel;
 
@@ -102,8 +103,8 @@ impl FrozenLinearOp {
         };
         let x = T::cpu_storage_as_slice(s)?;
         let y = with_slice::<T, _>(&self.weight, |w| match &self.bias {
-            Some(b) => with_slice::<T, _>(b, |bias| kernels::linear(x, xv, w, n, Some(bias))),
-            None => kernels::linear(x, xv, w, n, None),
+            Some(b) => with_slice::<T, _>(b, |bias| kernels::linear(Isa::selected(), x, xv, w, n, Some(bias))),
+            None => kernels::linear(Isa::selected(), x, xv, w, n, None),
         })?;
         let mut dims = l.dims().to_vec();
         if let Some(last) = dims.last_mut() {
@@ -115,7 +116,9 @@ impl FrozenLinearOp {
     fn bwd_impl<T: Real>(&self, arg: &Tensor, grad: &Tensor) -> Result<Tensor> {
         let (n, k) = self.weight.dims2()?;
         let grad = grad.contiguous()?;
-        let dx = with_slice::<T, _>(&grad, |g| with_slice::<T, _>(&self.weight, |w| kernels::linear_bwd(g, w, n, k)))?;
+        let dx = with_slice::<T, _>(&grad, |g| {
+            with_slice::<T, _>(&self.weight, |w| kernels::linear_bwd(Isa::selected(), g, w, n, k))
+        })?;
         Tensor::from_vec(dx, arg.shape(), arg.device())
     }
 }

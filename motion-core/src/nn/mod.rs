@@ -12,12 +12,15 @@
 //! path: they have no backward and drop gradients silently.
 
 mod dropout;
+pub mod isa;
 pub(crate) mod kernels;
 mod layer_norm;
 mod linear;
+mod matmul;
 pub mod ops;
 
 pub use dropout::dropout;
+pub use isa::{Isa, IsaRequest, UnknownIsa};
 pub use layer_norm::{LayerNorm, LAYER_NORM_EPS};
 pub use linear::Linear;
 

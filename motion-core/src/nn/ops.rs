@@ -7,6 +7,7 @@
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Layout, Result, Shape, Tensor, WithDType, D};
 
+use super::isa::Isa;
 use super::kernels::{self, contiguous_slice, dispatch_real, with_slice};
 
 /// Whether the CPU custom ops can run on `x` (CPU device, f32 or f64).
@@ -47,7 +48,7 @@ impl CustomOp1 for SoftmaxOp {
         let d = l.dims().last().copied().unwrap_or(1).max(1);
         dispatch_real!(s.dtype(), T => {
             let mut y = contiguous_slice::<T>(s, l)?.to_vec();
-            kernels::softmax_fwd(&mut y, d, T::from_f64(1.0));
+            kernels::softmax_fwd(Isa::selected(), &mut y, d, T::from_f64(1.0));
             Ok((T::to_cpu_storage_owned(y), l.shape().clone()))
         })
     }
@@ -59,7 +60,7 @@ impl CustomOp1 for SoftmaxOp {
             let dx = with_slice::<T, _>(res, |y| {
                 with_slice::<T, _>(&grad, |g| {
                     let mut dx = g.to_vec();
-                    kernels::softmax_bwd(y, &mut dx, d, T::from_f64(1.0));
+                    kernels::softmax_bwd(Isa::selected(), y, &mut dx, d, T::from_f64(1.0));
                     Ok(dx)
                 })
             })?;
@@ -79,7 +80,7 @@ impl CustomOp1 for GeluOp {
         dispatch_real!(s.dtype(), T => {
             let x = contiguous_slice::<T>(s, l)?;
             let mut y = vec![T::from_f64(0.0); x.len()];
-            kernels::gelu_fwd(x, &mut y);
+            kernels::gelu_fwd(Isa::selected(), x, &mut y);
             Ok((T::to_cpu_storage_owned(y), l.shape().clone()))
         })
     }
@@ -90,7 +91,7 @@ impl CustomOp1 for GeluOp {
             let dx = with_slice::<T, _>(arg, |x| {
                 with_slice::<T, _>(&grad, |g| {
                     let mut dx = g.to_vec();
-                    kernels::gelu_bwd(x, &mut dx);
+                    kernels::gelu_bwd(Isa::selected(), x, &mut dx);
                     Ok(dx)
                 })
             })?;

@@ -4,6 +4,7 @@
 use candle_core::{bail, Layout, Result, Storage, StorageRef, Tensor};
 
 use super::plan::run;
+use crate::nn::isa::Isa;
 use crate::nn::kernels::{contiguous_slice, linear_rows, linear_rows_bwd, row_chunks, split_rows, Real, Rows, Weight};
 
 /// The denoiser's ends around the stack: MDM's `input_process` (features → width), the
@@ -108,6 +109,8 @@ pub(super) struct EndSlices<'a, T> {
     pub(super) pe: &'a [T],
     /// Features per frame `F`.
     pub(super) feats: usize,
+    /// The instruction set of the projections.
+    pub(super) isa: Isa,
 }
 
 /// Tasks over the frame rows of `buf`, which holds elements of `element_rows` rows each
@@ -133,7 +136,7 @@ pub(super) fn frame_tasks<T>(
 }
 
 impl<'a, T: Real> EndSlices<'a, T> {
-    pub(super) fn new(g: &'a [(StorageRef<'_>, &'a Layout); 6], d: usize) -> Result<Self> {
+    pub(super) fn new(g: &'a [(StorageRef<'_>, &'a Layout); 6], d: usize, isa: Isa) -> Result<Self> {
         let slice = |i: usize| -> Result<&'a [T]> {
             match &*g[i].0 {
                 Storage::Cpu(storage) => contiguous_slice::<T>(storage, g[i].1),
@@ -149,6 +152,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
             cond: slice(4)?,
             pe: slice(5)?,
             feats,
+            isa,
         };
         if ends.w_in.len() != d * feats
             || ends.b_in.len() != d
@@ -192,7 +196,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
                 }
             }
             let rows = &x[((first + i) * frames + r.first) * f..][..r.len * f];
-            linear_rows(out, rows, r.len, f, Weight::OutIn(self.w_in), None)
+            linear_rows(self.isa, out, rows, r.len, f, Weight::OutIn(self.w_in), None)
         })?;
         Ok(h)
     }
@@ -204,7 +208,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
         let tasks = frame_tasks(&mut out, frames, 0, f, frames, threads);
         run(threads, tasks, |(i, r, o)| {
             let rows = &h[(i * s + 1 + r.first) * d..][..r.len * d];
-            linear_rows(o, rows, r.len, d, Weight::OutIn(self.w_out), Some(self.b_out))
+            linear_rows(self.isa, o, rows, r.len, d, Weight::OutIn(self.w_out), Some(self.b_out))
         })
         .map(|()| out)
     }
@@ -223,7 +227,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
         let mut dh = vec![T::from_f64(0.0); count * s * d];
         let tasks = frame_tasks(&mut dh, s, 1, d, frames, threads);
         run(threads, tasks, |(i, r, o)| {
-            linear_rows_bwd(o, &g[(i * frames + r.first) * f..][..r.len * f], r.len, self.w_out, d, false)
+            linear_rows_bwd(self.isa, o, &g[(i * frames + r.first) * f..][..r.len * f], r.len, self.w_out, d, false)
         })
         .map(|()| dh)
     }
@@ -234,7 +238,7 @@ impl<'a, T: Real> EndSlices<'a, T> {
         let mut dx = vec![T::from_f64(0.0); count * frames * f];
         let tasks = frame_tasks(&mut dx, frames, 0, f, frames, threads);
         run(threads, tasks, |(i, r, o)| {
-            linear_rows_bwd(o, &dh[(i * s + 1 + r.first) * d..][..r.len * d], r.len, self.w_in, f, false)
+            linear_rows_bwd(self.isa, o, &dh[(i * s + 1 + r.first) * d..][..r.len * d], r.len, self.w_in, f, false)
         })
         .map(|()| dx)
     }

@@ -31,6 +31,7 @@ use ends::EndSlices;
 pub(crate) use ends::{Ends, Epilogue};
 use plan::{attention_blocks, run, Plan};
 
+use crate::nn::isa::Isa;
 use crate::nn::kernels::{
     self, contiguous_slice, dispatch_real, linear_rows, linear_rows_bwd, row_chunks, rows_of, split_rows, MatView,
     Real, Weight,
@@ -90,6 +91,8 @@ pub(crate) struct FusedEncoderStack {
     ends: Option<Ends>,
     num_heads: usize,
     eps: f64,
+    /// The instruction set of every kernel of the pass.
+    isa: Isa,
     /// Whether the forward pass keeps its activations for a backward pass (false when the
     /// input records no graph, so no gradient can reach this op: then each layer's
     /// activations are dropped as soon as the next layer has its input).
@@ -293,9 +296,10 @@ impl FusedEncoderStack {
         ends: Option<Ends>,
         num_heads: usize,
         eps: f64,
+        isa: Isa,
         keep_activations: bool,
     ) -> Self {
-        Self { layers, ends, num_heads, eps, keep_activations, cache: Mutex::new(None) }
+        Self { layers, ends, num_heads, eps, isa, keep_activations, cache: Mutex::new(None) }
     }
 
     fn lock(&self) -> Result<std::sync::MutexGuard<'_, Option<Saved>>> {
@@ -319,7 +323,7 @@ impl FusedEncoderStack {
         let guards: Vec<_> = self.layers.iter().map(|w| w.each().map(|t| t.storage_and_layout())).collect();
         let params = guards.iter().map(|g| Params::<T>::new(g, d)).collect::<Result<Vec<_>>>()?;
         let end_guards = self.ends.as_ref().map(|e| e.each().map(|t| t.storage_and_layout()));
-        let ends = end_guards.as_ref().map(|g| EndSlices::<T>::new(g, d)).transpose()?;
+        let ends = end_guards.as_ref().map(|g| EndSlices::<T>::new(g, d, self.isa)).transpose()?;
         f(&params, ends.as_ref())
     }
 
@@ -483,7 +487,7 @@ impl FusedEncoderStack {
             };
         let tasks: Vec<_> = chunks.iter().copied().zip(split_rows(&mut qkv, 3 * d, chunks.iter().copied())).collect();
         run(threads, tasks, |(r, out)| {
-            linear_rows(out, rows_of(x, d, r), r.len, d, Weight::InOut(p.in_wt), Some(p.in_b))
+            linear_rows(self.isa, out, rows_of(x, d, r), r.len, d, Weight::InOut(p.in_wt), Some(p.in_b))
         })?;
 
         let rows = blocks.iter().map(|blk| blk.rows);
@@ -499,12 +503,13 @@ impl FusedEncoderStack {
                     ..dims.qkv_head(0, 0, hh)
                 };
                 let k_t = dims.qkv_head(blk.batch, 1, hh).t();
-                kernels::gemm_into(probs, dims.block_prob_head(n, hh), qkv_ref, q, qkv_ref, k_t, false)?;
+                kernels::gemm_into(self.isa, probs, dims.block_prob_head(n, hh), qkv_ref, q, qkv_ref, k_t, false)?;
             }
-            kernels::softmax_fwd(probs, s, scale);
+            kernels::softmax_fwd(self.isa, probs, s, scale);
             for hh in 0..h {
                 let v = dims.qkv_head(blk.batch, 2, hh);
                 kernels::gemm_into(
+                    self.isa,
                     ctx,
                     dims.block_head(n, d, 0, hh),
                     probs,
@@ -531,19 +536,19 @@ impl FusedEncoderStack {
             // r1 = x + ctx·W_outᵀ + b_out, h1 = LN1(r1).
             let mut r1: Vec<T> =
                 rows_of(x, d, r).iter().zip(p.out_b.iter().cycle()).map(|(&xv, &bv)| xv + bv).collect();
-            linear_rows(&mut r1, rows_of(ctx_ref, d, r), n, d, Weight::InOut(p.out_wt), None)?;
+            linear_rows(self.isa, &mut r1, rows_of(ctx_ref, d, r), n, d, Weight::InOut(p.out_wt), None)?;
             let mut h1 = vec![zero; n * d];
-            kernels::layer_norm_fwd(&r1, p.n1_w, p.n1_b, self.eps, &mut h1, Some((xhat1, rstd1)));
+            kernels::layer_norm_fwd(self.isa, &r1, p.n1_w, p.n1_b, self.eps, &mut h1, Some((xhat1, rstd1)));
             // r2 = h1 + GELU(h1·W1ᵀ + b1)·W2ᵀ + b2, y = LN2(r2).
-            linear_rows(pre, &h1, n, d, Weight::InOut(p.l1_wt), Some(p.l1_b))?;
+            linear_rows(self.isa, pre, &h1, n, d, Weight::InOut(p.l1_wt), Some(p.l1_b))?;
             let mut act = vec![zero; n * ff];
-            kernels::gelu_fwd(pre, &mut act);
+            kernels::gelu_fwd(self.isa, pre, &mut act);
             let mut r2 = r1;
             for ((r, &hv), &bv) in r2.iter_mut().zip(&h1).zip(p.l2_b.iter().cycle()) {
                 *r = hv + bv;
             }
-            linear_rows(&mut r2, &act, n, ff, Weight::InOut(p.l2_wt), None)?;
-            kernels::layer_norm_fwd(&r2, p.n2_w, p.n2_b, self.eps, y, Some((xhat2, rstd2)));
+            linear_rows(self.isa, &mut r2, &act, n, ff, Weight::InOut(p.l2_wt), None)?;
+            kernels::layer_norm_fwd(self.isa, &r2, p.n2_w, p.n2_b, self.eps, y, Some((xhat2, rstd2)));
             Ok(())
         })?;
 
@@ -584,14 +589,14 @@ impl FusedEncoderStack {
             run(threads, tasks, |((r, dr1), dctx)| {
                 let n = r.len;
                 let mut dr2 = rows_of(g, d, r).to_vec();
-                kernels::layer_norm_bwd(&mut dr2, rows_of(xhat2, d, r), rows_of(rstd2, 1, r), p.n2_w);
+                kernels::layer_norm_bwd(self.isa, &mut dr2, rows_of(xhat2, d, r), rows_of(rstd2, 1, r), p.n2_w);
                 let mut dact = vec![zero; n * ff];
-                linear_rows_bwd(&mut dact, &dr2, n, p.l2_w, ff, false)?;
-                kernels::gelu_bwd(rows_of(pre, ff, r), &mut dact);
+                linear_rows_bwd(self.isa, &mut dact, &dr2, n, p.l2_w, ff, false)?;
+                kernels::gelu_bwd(self.isa, rows_of(pre, ff, r), &mut dact);
                 dr1.copy_from_slice(&dr2);
-                linear_rows_bwd(dr1, &dact, n, p.l1_w, d, true)?;
-                kernels::layer_norm_bwd(dr1, rows_of(xhat1, d, r), rows_of(rstd1, 1, r), p.n1_w);
-                linear_rows_bwd(dctx, dr1, n, p.out_w, d, false)
+                linear_rows_bwd(self.isa, dr1, &dact, n, p.l1_w, d, true)?;
+                kernels::layer_norm_bwd(self.isa, dr1, rows_of(xhat1, d, r), rows_of(rstd1, 1, r), p.n1_w);
+                linear_rows_bwd(self.isa, dctx, dr1, n, p.out_w, d, false)
             })?;
         }
 
@@ -608,6 +613,7 @@ impl FusedEncoderStack {
             for hh in 0..h {
                 let v_t = dims.qkv_head(blk.batch, 2, hh).t();
                 kernels::gemm_into(
+                    self.isa,
                     ds,
                     dims.block_prob_head(n, hh),
                     d_out,
@@ -617,10 +623,11 @@ impl FusedEncoderStack {
                     false,
                 )?;
             }
-            kernels::softmax_bwd(rows_of(probs, h * s, blk.rows), ds, s, scale);
+            kernels::softmax_bwd(self.isa, rows_of(probs, h * s, blk.rows), ds, s, scale);
             for hh in 0..h {
                 let k = dims.qkv_head(blk.batch, 1, hh);
                 kernels::gemm_into(
+                    self.isa,
                     dqkv,
                     dims.block_head(n, 3 * d, 0, hh),
                     ds,
@@ -643,9 +650,18 @@ impl FusedEncoderStack {
                 let key_rows = |v: MatView| MatView { offset: v.offset + blk.start, rows: n, ..v.t() };
                 let prob_t = key_rows(dims.prob_head(blk.batch, hh));
                 let q = dims.qkv_head(blk.batch, 0, hh);
-                kernels::gemm_into(dqkv, dims.block_head(n, 3 * d, d, hh), ds, prob_t, qkv, q, false)?;
+                kernels::gemm_into(self.isa, dqkv, dims.block_head(n, 3 * d, d, hh), ds, prob_t, qkv, q, false)?;
                 let d_out = dims.block_head(s, d, blk.batch * s * d, hh);
-                kernels::gemm_into(dqkv, dims.block_head(n, 3 * d, 2 * d, hh), probs, prob_t, dctx, d_out, false)?;
+                kernels::gemm_into(
+                    self.isa,
+                    dqkv,
+                    dims.block_head(n, 3 * d, 2 * d, hh),
+                    probs,
+                    prob_t,
+                    dctx,
+                    d_out,
+                    false,
+                )?;
             }
             Ok(())
         })?;
@@ -653,7 +669,7 @@ impl FusedEncoderStack {
         // dx = dqkv·W_in + dr1.
         let mut dx = dr1;
         let (dqkv, tasks): (&[T], Vec<_>) = (&dqkv, cs().zip(split_rows(&mut dx, d, cs())).collect());
-        run(threads, tasks, |(r, dx)| linear_rows_bwd(dx, rows_of(dqkv, 3 * d, r), r.len, p.in_w, d, true))?;
+        run(threads, tasks, |(r, dx)| linear_rows_bwd(self.isa, dx, rows_of(dqkv, 3 * d, r), r.len, p.in_w, d, true))?;
         Ok(dx)
     }
 }
