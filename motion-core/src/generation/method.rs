@@ -89,7 +89,7 @@ pub struct GenerationConfig {
     /// constraints ([`crate::generation::refine`]; on by default), before the foot clean-up.
     #[serde(default)]
     pub refine: RefineConfig,
-    /// When DNO's stages end ([`Schedule`]; default: each once its work is done). Always
+    /// When DNO's stages end ([`Schedule`]; default: the papers' fixed budgets). Always
     /// written; a report without it was made when the papers' schedule was the default and
     /// went unwritten, so it reads as [`Schedule::Paper`].
     #[serde(default = "schedule_of_older_reports")]
@@ -158,7 +158,7 @@ impl GenerationConfig {
             guards: Guards::DEFAULT,
             foot_lock: FootLockConfig::default(),
             refine: RefineConfig::default(),
-            schedule: Schedule::UntilMet,
+            schedule: Schedule::Paper,
         }
     }
 }

@@ -1,5 +1,5 @@
-//! When an optimisation stage ends: at its step budget (the paper's schedule), or as soon as
-//! its work is done (the default): the motion meets every constraint at its tolerance (the
+//! When an optimisation stage ends: at its step budget (the paper's schedule, the default), or
+//! as soon as its work is done: the motion meets every constraint at its tolerance (the
 //! judgement of `report.json`), the criterion has stopped improving, and the motion the stage
 //! would hand on looks no worse than capture or than the prior's own sample.
 //!
@@ -30,6 +30,7 @@ use crate::prior::Prior;
 #[serde(rename_all = "snake_case")]
 pub enum Schedule {
     /// Every stage runs its whole step budget (the papers' fixed schedule; the tables').
+    #[default]
     Paper,
     /// Every stage ends when its work is done, or at its budget:
     /// - DNO and RG-DNO's final round when every constraint is met, the criterion has stalled
@@ -42,7 +43,6 @@ pub enum Schedule {
     /// - RG-DNO's mask search screens its candidates with a cheap sampler and scores only the
     ///   best few by eq. 13; the soft blend is skipped when the chosen binary masks meet the
     ///   program.
-    #[default]
     UntilMet,
 }
 
