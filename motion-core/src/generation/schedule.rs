@@ -76,10 +76,10 @@ impl Stall {
     /// [`STALL_FRACTION`] over the last [`CHECK_EVERY`] steps (a rise counts as stalled).
     pub fn stalled_after(&mut self, loss: f64, after: usize) -> bool {
         self.losses.push(loss);
-        let taken = self.losses.len();
-        if taken <= after.max(CHECK_EVERY) || taken % CHECK_EVERY != 0 {
+        if !self.at_check(after) {
             return false;
         }
+        let taken = self.losses.len();
         let (before, now) = (self.losses[taken - 1 - CHECK_EVERY], self.losses[taken - 1]);
         before - now <= STALL_FRACTION * before.abs()
     }
@@ -112,9 +112,12 @@ fn looks(joints: &Tensor, config: &FootLockConfig) -> candle_core::Result<Vec<(f
     tensor_to_poses(joints)?
         .iter()
         .map(|poses| {
+            let figures = |p: &[_]| (foot_skate_ratio(p), max_acceleration(p));
+            if !config.enabled {
+                return Ok(figures(poses));
+            }
             let locked = foot_lock(poses, None, config).map_err(candle_core::Error::wrap)?;
-            let cleaned = if config.enabled { &locked.poses } else { poses };
-            Ok((foot_skate_ratio(cleaned), max_acceleration(cleaned)))
+            Ok(figures(&locked.poses))
         })
         .collect()
 }
@@ -142,10 +145,10 @@ impl LookBar {
 }
 
 /// What ends a stage under [`Schedule::UntilMet`].
-enum Goal {
+enum Goal<'a> {
     /// A shown motion: every constraint met, the criterion stalled, and the look under its bars
     /// (made at the first judgement from the unoptimised motion and the generation's clean-up).
-    Shown { foot_lock: Box<FootLockConfig>, bar: Option<LookBar> },
+    Shown { foot_lock: &'a FootLockConfig, bar: Option<LookBar> },
     /// An intermediate one: every program met on its rows.
     Met,
 }
@@ -163,7 +166,7 @@ pub struct StageEnd<'a> {
     initial: &'a Tensor,
     /// Steps of the learning rate's warm-up: no stop before them.
     warmup: usize,
-    goal: Goal,
+    goal: Goal<'a>,
     /// The mean criterion of the current restart.
     stall: Stall,
     round: usize,
@@ -179,9 +182,9 @@ impl<'a> StageEnd<'a> {
         compiled: &'a CompiledProgram,
         initial: &'a Tensor,
         warmup: usize,
-        foot_lock: &FootLockConfig,
+        foot_lock: &'a FootLockConfig,
     ) -> Self {
-        let goal = Goal::Shown { foot_lock: Box::new(foot_lock.clone()), bar: None };
+        let goal = Goal::Shown { foot_lock, bar: None };
         Self::with_goal(schedule, prior, vec![(compiled, None)], initial, warmup, goal)
     }
 
@@ -202,7 +205,7 @@ impl<'a> StageEnd<'a> {
         parts: Vec<(&'a CompiledProgram, Option<Range<usize>>)>,
         initial: &'a Tensor,
         warmup: usize,
-        goal: Goal,
+        goal: Goal<'a>,
     ) -> Self {
         StageEnd { schedule, prior, parts, initial, warmup, goal, stall: Stall::default(), round: 0 }
     }
