@@ -54,8 +54,9 @@ pub enum ScheduleArg {
     /// stopped improving and the cleaned motion's foot skate and peak acceleration are within
     /// 10 % of capture's walks or of the prior's own sample; RG-DNO's branches once each meets
     /// its group; the inversion and soft blend once their loss stalls. RG-DNO's mask candidates
-    /// are screened by a cheap sampler, and the soft blend is skipped when the masks meet the
-    /// program.
+    /// are screened by a cheap sampler, the soft blend is skipped when the masks meet the
+    /// program, and the refinement when nothing is left to close. Unless set, the sampler takes
+    /// 5 DDIM steps and a sample that misses a constraint is tried once more.
     UntilMet,
 }
 
@@ -84,22 +85,24 @@ pub struct GenerationArgs {
     /// Random restarts N_S of DNO and RG-DNO; the best per sample is kept.
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
-    /// When each optimisation stage ends: `paper` (the default) runs every step of the papers'
-    /// budgets (their tables' schedule); `until-met` ends each stage once its work is done and
-    /// the motion looks no worse than capture or the prior's own sample: about 2x faster on
-    /// walks, but it met fewer of Table 6's counting and touching samples
-    /// (fixtures/results/issue59-look-bar/).
-    #[arg(long, value_enum, default_value_t = ScheduleArg::Paper)]
+    /// When each optimisation stage ends: `until-met` (the default) ends each stage once its
+    /// work is done and the motion looks no worse than capture or the prior's own sample,
+    /// samples with 5 DDIM steps and tries a sample that missed a constraint once more;
+    /// `paper` runs every step of the papers' budgets with 10 DDIM steps and no retry (their
+    /// tables' schedule). Figures: fixtures/results/issue59-fast-default/.
+    #[arg(long, value_enum, default_value_t = ScheduleArg::UntilMet)]
     pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
     /// again from fresh noise (attempt k + 1 from seed + k·restarts) and keeps its best attempt
     /// (most constraints met, then the lowest error); report.json's `attempt` says which. 0: off
-    #[arg(long, default_value_t = 0)]
-    pub retry_unmet: usize,
+    /// (default: 1 with `--schedule until-met`, 0 with `paper`).
+    #[arg(long)]
+    pub retry_unmet: Option<usize>,
     /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).
     #[arg(long, value_parser = flags::learning_rate)]
     pub lr: Option<f64>,
-    /// DDIM steps of the sampler that DNO differentiates through (default 10).
+    /// DDIM steps of the sampler that DNO differentiates through (default: 5 with `--schedule
+    /// until-met`, 10 with `paper`).
     #[arg(long, value_parser = flags::ddim_steps)]
     pub ddim_steps: Option<usize>,
     /// Late start of DNO: optimise the noise of the unconstrained motion noised to this
@@ -181,7 +184,7 @@ impl GenerationArgs {
             generation: self.config(method),
             rg_dno,
             database: retrieval_source(self.database.as_deref()),
-            retry_unmet: self.retry_unmet,
+            retry_unmet: self.retry_unmet.unwrap_or(Schedule::from(self.schedule).retries_unmet()),
             exports: self.formats.options(),
         }
     }
@@ -209,9 +212,7 @@ impl GenerationArgs {
         if let Some(scale) = self.decorrelate_scale {
             config.dno.decorrelate_scale = scale;
         }
-        if let Some(ddim_steps) = self.ddim_steps {
-            config.dno.ddim_steps = ddim_steps;
-        }
+        config.dno.ddim_steps = self.ddim_steps.unwrap_or(config.schedule.ddim_steps());
         if let Some(steps) = self.steps {
             config.dno.steps = steps;
             config.direct.steps = steps;

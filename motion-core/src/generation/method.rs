@@ -327,6 +327,7 @@ mod tests {
                 error_after: 0.0,
                 max_offset_m: 0.0,
                 mean_offset_m: 0.0,
+                steps: 0,
             };
             Generated {
                 features: rows(&[samples, 2, FEATURE_DIM]),

@@ -11,6 +11,7 @@ use crate::cleanup::{foot_lock, FootLockConfig, FootLockReport};
 use crate::constraints::CompiledProgram;
 use crate::generation::method::{ensure_finite, Generated, GenerationConfig, GenerationError, Task};
 use crate::generation::refine::{refine, RefineConfig, RefineReport};
+use crate::generation::schedule::Schedule;
 use crate::motion::{poses_to_tensor, tensor_to_poses};
 use crate::prior::Prior;
 use crate::program::{Primitive, TaskProgram};
@@ -40,7 +41,8 @@ pub fn finish(
     let raw_joints = prior.to_joints(&features)?;
     ensure_finite(&raw_joints, &format!("{}'s joint positions", config.method))?;
     let refine_config = RefineConfig { enabled: config.refines(), ..config.refine.clone() };
-    let (refined, refine) = refine_in_parallel(&raw_joints, compiled, &initial_joints, &refine_config)?;
+    let (refined, refine) =
+        refine_in_parallel(&raw_joints, compiled, &initial_joints, (&refine_config, config.schedule))?;
     ensure_finite(&refined, "the refinement's joint positions")?;
     let (joints, foot_lock) = clean_up(&refined, &finishing_foot_lock(program, config))?;
     ensure_finite(&joints, "the foot clean-up's joint positions")?;
@@ -73,20 +75,20 @@ fn refine_in_parallel(
     joints: &Tensor,
     compiled: &CompiledProgram,
     initial: &Tensor,
-    config: &RefineConfig,
+    (config, schedule): (&RefineConfig, Schedule),
 ) -> Result<(Tensor, Vec<RefineReport>), GenerationError> {
     use rayon::prelude::*;
     let batch = joints.dim(0)?;
     let groups = rayon::current_num_threads().clamp(1, batch.max(1));
     if groups == 1 || initial.dim(0)? != batch {
-        return Ok(refine(joints, compiled, Some(initial), config)?);
+        return Ok(refine(joints, compiled, Some(initial), config, schedule)?);
     }
     let parts = (0..groups)
         .into_par_iter()
         .map(|g| {
             let (first, end) = (g * batch / groups, (g + 1) * batch / groups);
             let (joints, initial) = (joints.narrow(0, first, end - first)?, initial.narrow(0, first, end - first)?);
-            refine(&joints, compiled, Some(&initial), config)
+            refine(&joints, compiled, Some(&initial), config, schedule)
         })
         .collect::<std::result::Result<Vec<_>, _>>()?;
     let (tensors, reports): (Vec<Tensor>, Vec<Vec<RefineReport>>) = parts.into_iter().unzip();

@@ -43,6 +43,7 @@ use candle_core::{DType, Result, Tensor, Var, D};
 use serde::{Deserialize, Serialize};
 
 use crate::constraints::{CompiledProgram, ConstraintError};
+use crate::generation::schedule::Schedule;
 use crate::metrics::{longest_flight_s, FLOATING_FLIGHT_S};
 use crate::motion::tensor_to_poses;
 use crate::optim::AdamW;
@@ -139,16 +140,23 @@ pub struct RefineReport {
     pub max_offset_m: f64,
     /// Mean distance the joints moved, m.
     pub mean_offset_m: f64,
+    /// Adam steps run (0 where none did: off, nothing to refine, or under
+    /// [`Schedule::UntilMet`] a motion whose geometric error was already zero).
+    #[serde(default)]
+    pub steps: usize,
 }
 
 /// Refines `joints` `[B, T, 22, 3]` (m, rigid bones) against `compiled`'s geometric
-/// constraints; `initial` as for [`CompiledProgram::evaluate`]. Returns the joints (the input
-/// rows where not applied) and one report per sample.
+/// constraints; `initial` as for [`CompiledProgram::evaluate`]. Runs `config.steps` Adam steps;
+/// under [`Schedule::UntilMet`] none when every sample's geometric error is already zero (the
+/// layer has nothing to close). Returns the joints (the input rows where not applied) and one
+/// report per sample.
 pub fn refine(
     joints: &Tensor,
     compiled: &CompiledProgram,
     initial: Option<&Tensor>,
     config: &RefineConfig,
+    schedule: Schedule,
 ) -> std::result::Result<(Tensor, Vec<RefineReport>), ConstraintError> {
     let batch = joints.dim(0)?;
     let before = per_sample(&compiled.evaluate(joints, initial)?.total)?;
@@ -159,11 +167,17 @@ pub fn refine(
         error_after: *e,
         max_offset_m: 0.0,
         mean_offset_m: 0.0,
+        steps: 0,
     };
     let rest = RestSkeleton::mean_of(joints)?;
     let (Some(rest), true, false) = (rest, config.enabled && config.steps > 0, geometric.is_empty()) else {
         return Ok((joints.clone(), before.iter().map(unchanged).collect()));
     };
+    if schedule == Schedule::UntilMet
+        && per_sample(&geometric.evaluate(joints, initial)?.total)?.iter().all(|&e| e <= 0.0)
+    {
+        return Ok((joints.clone(), before.iter().map(unchanged).collect()));
+    }
     let start = joints.detach().to_dtype(DType::F32)?;
     let p = Var::from_tensor(&start)?;
     let mut adam = AdamW::new(vec![p.clone()], 0.0)?;
@@ -201,6 +215,7 @@ pub fn refine(
                 error_after: after[i],
                 max_offset_m: max_offset[i],
                 mean_offset_m: mean_offset[i],
+                steps: config.steps,
             },
             false => unchanged(&before[i]),
         })
@@ -345,10 +360,19 @@ mod tests {
         let compiled = compile(30, &[GAP]);
         let before = compiled.satisfaction(&tensor(&motion), None).unwrap()[0].checks[0].value[0];
         assert!((before - 0.12).abs() < 1e-9, "the wrists start 0.12 m into the walls: {before}");
-        let (out, reports) = refine(&tensor(&motion), &compiled, None, &RefineConfig::default()).unwrap();
+        let (out, reports) =
+            refine(&tensor(&motion), &compiled, None, &RefineConfig::default(), Schedule::Paper).unwrap();
         let after = compiled.satisfaction(&out, None).unwrap()[0].checks[0].value[0];
         assert!(after <= 0.01, "penetration left: {after} m");
         let report = &reports[0];
+        assert_eq!(report.steps, RefineConfig::default().steps);
+        let (fast, fast_reports) =
+            refine(&tensor(&motion), &compiled, None, &RefineConfig::default(), Schedule::UntilMet).unwrap();
+        assert_eq!(fast_reports, reports, "an unmet program: the whole budget under either schedule");
+        assert_eq!(poses(&fast), poses(&out));
+        let (again, met) = refine(&out, &compiled, None, &RefineConfig::default(), Schedule::UntilMet).unwrap();
+        assert!(!met[0].applied && met[0].steps == 0, "{:?}", met[0]);
+        assert_eq!(poses(&again), poses(&out), "a met program: nothing to refine");
         assert!(report.applied && report.error_after < report.error_before, "{report:?}");
         assert!(report.max_offset_m <= RefineConfig::default().max_offset_m + 1e-3, "{report:?}");
         let refined = poses(&out);
@@ -396,7 +420,8 @@ mod tests {
         let motion: Motion = (0..30).map(|t| STANDING.map(|[x, y, z]| [x, y + lift(t), z])).collect();
         let pelvis_high = r#"{"op": "greater_than", "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "y"}, "min": 1.2, "frames": {"range": {"from": {"frame": 5}, "to": {"frame": 22}}}}"#;
         let compiled = compile(30, &[pelvis_high]);
-        let (out, reports) = refine(&tensor(&motion), &compiled, None, &RefineConfig::default()).unwrap();
+        let (out, reports) =
+            refine(&tensor(&motion), &compiled, None, &RefineConfig::default(), Schedule::Paper).unwrap();
         // Lifting the touch-down would lower the error but leave the body 0.9 s in the air.
         assert!(!reports[0].applied, "{:?}", reports[0]);
         assert_eq!(poses(&out), motion);
@@ -408,7 +433,7 @@ mod tests {
         let head_low = r#"{"op": "less_than", "quantity": {"kind": "position", "of": {"joint": "head"}, "axes": "y"}, "max": 0.5}"#;
         let compiled = compile(20, &[head_low]);
         let config = RefineConfig::default();
-        let (out, reports) = refine(&tensor(&motion), &compiled, None, &config).unwrap();
+        let (out, reports) = refine(&tensor(&motion), &compiled, None, &config, Schedule::Paper).unwrap();
         let verdict = &compiled.satisfaction(&out, None).unwrap()[0];
         assert!(!verdict.pass[0], "a standing figure cannot put its head 1.1 m lower by an offset layer");
         for (a, b) in motion.iter().zip(&poses(&out)) {
@@ -423,11 +448,12 @@ mod tests {
     fn counting_constraints_and_a_switched_off_refinement_leave_the_motion_as_it_is() {
         let motion = tensor(&arms_out(20));
         let steps = r#"{"op": "steps", "target_count": 4}"#;
-        let (out, reports) = refine(&motion, &compile(20, &[steps]), None, &RefineConfig::default()).unwrap();
+        let (out, reports) =
+            refine(&motion, &compile(20, &[steps]), None, &RefineConfig::default(), Schedule::Paper).unwrap();
         assert_eq!((&out - &motion).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f64>().unwrap(), 0.0);
         assert!(!reports[0].applied);
         let off = RefineConfig { enabled: false, ..RefineConfig::default() };
-        let (out, reports) = refine(&motion, &compile(20, &[GAP]), None, &off).unwrap();
+        let (out, reports) = refine(&motion, &compile(20, &[GAP]), None, &off, Schedule::Paper).unwrap();
         assert_eq!((&out - &motion).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f64>().unwrap(), 0.0);
         assert!(!reports[0].applied && reports[0].error_after == reports[0].error_before);
     }

@@ -25,7 +25,9 @@ use crate::motion::tensor_to_poses;
 use crate::numeric::mean;
 use crate::prior::Prior;
 
-/// When a stage of DNO ends.
+/// When a stage of DNO ends, and the sampler and retries a run gets where it does not set them
+/// ([`Schedule::ddim_steps`], [`Schedule::retries_unmet`]). The library's default is the
+/// papers' schedule; `mogen`'s is [`Schedule::UntilMet`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Schedule {
@@ -42,8 +44,32 @@ pub enum Schedule {
     ///   [`INVERSION_TOLERANCE_M`]);
     /// - RG-DNO's mask search screens its candidates with a cheap sampler and scores only the
     ///   best few by eq. 13; the soft blend is skipped when the chosen binary masks meet the
-    ///   program.
+    ///   program;
+    /// - the kinematic refinement is skipped when the motion's geometric error is already zero.
     UntilMet,
+}
+
+impl Schedule {
+    /// DDIM steps `K` of the sampler DNO differentiates through, where a run does not set them:
+    /// the papers' 10, or 5 under [`Schedule::UntilMet`], half the denoiser passes of every
+    /// step (measured on Table 6: `fixtures/results/issue59-fast-default/`).
+    pub fn ddim_steps(self) -> usize {
+        match self {
+            Schedule::Paper => 10,
+            Schedule::UntilMet => 5,
+        }
+    }
+
+    /// Extra attempts from fresh noise for a sample that misses a constraint, where a run does
+    /// not set them ([`crate::pipeline::TaskSettings::retry_unmet`]): none under the papers'
+    /// schedule; one under [`Schedule::UntilMet`], which spends part of the time its early ends
+    /// save on a second try of what it did not meet.
+    pub fn retries_unmet(self) -> usize {
+        match self {
+            Schedule::Paper => 0,
+            Schedule::UntilMet => 1,
+        }
+    }
 }
 
 /// Steps between two judgements of the motion.
