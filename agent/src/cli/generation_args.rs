@@ -85,24 +85,25 @@ pub struct GenerationArgs {
     /// Random restarts N_S of DNO and RG-DNO; the best per sample is kept.
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
-    /// When each optimisation stage ends: `until-met` (the default) ends each stage once its
-    /// work is done and the motion looks no worse than capture or the prior's own sample,
-    /// samples with 5 DDIM steps and tries a sample that missed a constraint once more;
-    /// `paper` runs every step of the papers' budgets with 10 DDIM steps and no retry (their
-    /// tables' schedule). Figures: fixtures/results/issue59-fast-default/.
-    #[arg(long, value_enum, default_value_t = ScheduleArg::UntilMet)]
+    /// When each optimisation stage ends: `paper` (the default) runs every step of the papers'
+    /// budgets with 10 DDIM steps and no retry (their tables' schedule); `until-met` ends each
+    /// stage once its work is done and the motion looks no worse than capture or the prior's
+    /// own sample, samples with 5 DDIM steps and tries a sample that missed a constraint once
+    /// more: 2 to 8 times faster, but on Table 6 it met none of the three touches, and the
+    /// README's main command skates more (fixtures/results/issue59-fast-default/).
+    #[arg(long, value_enum, default_value_t = ScheduleArg::Paper)]
     pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
     /// again from fresh noise (attempt k + 1 from seed + k·restarts) and keeps its best attempt
     /// (most constraints met, then the lowest error); report.json's `attempt` says which. 0: off
-    /// (default: 1 with `--schedule until-met`, 0 with `paper`).
+    /// (default: 0, or 1 with `--schedule until-met`).
     #[arg(long)]
     pub retry_unmet: Option<usize>,
     /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).
     #[arg(long, value_parser = flags::learning_rate)]
     pub lr: Option<f64>,
-    /// DDIM steps of the sampler that DNO differentiates through (default: 5 with `--schedule
-    /// until-met`, 10 with `paper`).
+    /// DDIM steps of the sampler that DNO differentiates through (default: 10, or 5 with
+    /// `--schedule until-met`).
     #[arg(long, value_parser = flags::ddim_steps)]
     pub ddim_steps: Option<usize>,
     /// Late start of DNO: optimise the noise of the unconstrained motion noised to this

@@ -26,8 +26,8 @@ use crate::numeric::mean;
 use crate::prior::Prior;
 
 /// When a stage of DNO ends, and the sampler and retries a run gets where it does not set them
-/// ([`Schedule::ddim_steps`], [`Schedule::retries_unmet`]). The library's default is the
-/// papers' schedule; `mogen`'s is [`Schedule::UntilMet`].
+/// ([`Schedule::ddim_steps`], [`Schedule::retries_unmet`]). The papers' schedule is the
+/// default, the library's and `mogen`'s.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Schedule {
@@ -52,7 +52,8 @@ pub enum Schedule {
 impl Schedule {
     /// DDIM steps `K` of the sampler DNO differentiates through, where a run does not set them:
     /// the papers' 10, or 5 under [`Schedule::UntilMet`], half the denoiser passes of every
-    /// step (measured on Table 6: `fixtures/results/issue59-fast-default/`).
+    /// step (what it costs on Table 6 and the README's main command:
+    /// `fixtures/results/issue59-fast-default/`).
     pub fn ddim_steps(self) -> usize {
         match self {
             Schedule::Paper => 10,
