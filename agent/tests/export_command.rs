@@ -68,6 +68,46 @@ fn a_joints_file_becomes_bvh_glb_and_the_viewer() {
 }
 
 #[test]
+fn files_at_an_engines_frame_rate_keep_the_duration_and_the_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let npy = dir.path().join("joints.npy");
+    // 30 frames at 20 fps: 1.45 s, walking 0.05 m per frame.
+    Tensor::from_vec(standing(1, 30), (1, 30, 22, 3), &Device::Cpu).unwrap().write_npy(&npy).unwrap();
+    let export = |fps: &str| {
+        let out = dir.path().join(format!("at{fps}"));
+        let output = mogen(&["export", &npy.display().to_string(), "--out", &out.display().to_string(), "--fps", fps]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let manifest: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).unwrap()).unwrap();
+        (std::fs::read_to_string(out.join("sample_0/motion.bvh")).unwrap(), manifest)
+    };
+    let (bvh, manifest) = export("60");
+    // 1.45 s at 60 fps: 87 frame times, 88 frames.
+    assert!(bvh.contains("Frames: 88") && bvh.contains("Frame Time: 0.016666667"), "{bvh}");
+    assert_eq!((manifest["fps"].as_f64(), manifest["motion_fps"].as_f64()), (Some(60.0), Some(20.0)));
+    // The last probe is the last frame: the pelvis has walked 29 × 0.05 m, as at 20 fps.
+    let probes = manifest["samples"][0]["probes"].as_array().unwrap();
+    let last = probes.iter().rfind(|p| p["joint"] == "pelvis").unwrap();
+    assert_eq!(last["frame"], 87);
+    assert!((last["position_m"][2].as_f64().unwrap() - 1.45).abs() < 1e-5, "{last}");
+    let (bvh, _) = export("24");
+    // 1.45 s is 34.8 frame times at 24 fps: 35 frames, ending 0.2 frame times early.
+    assert!(bvh.contains("Frames: 35"), "{bvh}");
+
+    let output = mogen(&[
+        "export",
+        &npy.display().to_string(),
+        "--out",
+        &dir.path().join("bad").display().to_string(),
+        "--fps",
+        "0",
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success() && stderr.contains("--fps") && stderr.contains("1..=240"), "{stderr}");
+    assert!(!dir.path().join("bad").exists());
+}
+
+#[test]
 fn bad_input_is_named_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");

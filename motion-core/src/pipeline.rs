@@ -207,13 +207,16 @@ fn rg_dno_database(
     Ok(database)
 }
 
-/// Choices about the exported files (default: no GIF, BVH in metres).
+/// Choices about the exported files (default: no GIF, BVH in metres, the motion's frame rate).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ExportOptions {
     /// Also write `motion.gif` (side and top views, animated).
     pub gif: bool,
     /// Length unit of the BVH files.
     pub bvh_unit: BvhUnit,
+    /// Frame rate of the BVH and GLB files, frames per second (rotations resampled by slerp:
+    /// [`crate::export::RotationTrack::resampled`]); `None`: the motion's own.
+    pub fps: Option<u32>,
 }
 
 /// Writes a run into `folder` (committed by the caller): `features.npy` (de-normalised
@@ -281,6 +284,7 @@ pub fn write_exports(
         carried: program.map(TaskProgram::carried_objects).unwrap_or_default(),
         report,
         bvh_unit: options.bvh_unit,
+        file_fps: options.fps,
     };
     let manifest = write_outputs(folder.path(), &input)?;
     if options.gif {

@@ -17,13 +17,20 @@ pub struct ExportFormats {
     /// Write BVH in centimetres instead of metres.
     #[arg(long)]
     pub centimetres: bool,
+    /// Frame rate of the BVH and GLB files (1 to 240 fps, e.g. 30 or 60 for a game engine,
+    /// 24 for film; default: the motion's 20). Every joint's rotation is interpolated by slerp
+    /// and the root path linearly between the motion's frames; the duration is kept (less than
+    /// one frame short when the rate does not divide it). The viewer, the strip and the npy
+    /// files keep the motion's frames.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=i64::from(motion_core::export::resample::MAX_FPS)))]
+    pub fps: Option<u32>,
 }
 
 impl ExportFormats {
     /// The library's export choices.
     pub fn options(self) -> ExportOptions {
         let bvh_unit = if self.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
-        ExportOptions { gif: self.gif, bvh_unit }
+        ExportOptions { gif: self.gif, bvh_unit, fps: self.fps }
     }
 }
 

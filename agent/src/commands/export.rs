@@ -26,9 +26,9 @@ pub struct ExportArgs {
     /// next to the joints, when there is one).
     #[arg(long, value_name = "FILE")]
     program: Option<PathBuf>,
-    /// Frames per second of the motion.
+    /// Frames per second of the motion in the npy (`--fps` sets the files' rate).
     #[arg(long, default_value_t = FPS, value_parser = flags::fps)]
-    fps: f64,
+    input_fps: f64,
     #[command(flatten)]
     formats: ExportFormats,
 }
@@ -56,7 +56,7 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     let title = program.map_or_else(|| joints.display().to_string(), |p| p.text.clone());
     let out = OutputFolder::create(&args.out.unwrap_or(folder))?;
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
-    let motions = Motions { title: &title, fps: args.fps, poses: &motions, labels };
+    let motions = Motions { title: &title, fps: args.input_fps, poses: &motions, labels };
     let manifest = write_exports(&out, motions, program, report, args.formats.options())
         .with_context(|| format!("exporting into {}", out.target().display()))?;
     // The folder's other files (the run's npy, report, strip) stay.

@@ -57,6 +57,9 @@ pub struct ExportInput<'a> {
     pub report: Option<serde_json::Value>,
     /// Length unit of the BVH files.
     pub bvh_unit: BvhUnit,
+    /// Frame rate of the BVH and GLB files, frames per second ([`RotationTrack::resampled`]);
+    /// `None`: the motions' own.
+    pub file_fps: Option<u32>,
 }
 
 /// One joint's position at one frame, by forward kinematics of the solved track.
@@ -64,7 +67,7 @@ pub struct ExportInput<'a> {
 pub struct Probe {
     /// Joint name.
     pub joint: &'static str,
-    /// Frame, from 0.
+    /// Frame of the files, from 0.
     pub frame: usize,
     /// Position, m, project axes.
     pub position_m: [f64; 3],
@@ -75,13 +78,14 @@ pub struct Probe {
 pub struct ExportedSample {
     /// Label.
     pub label: String,
-    /// Frames.
+    /// Frames of its files.
     pub frames: usize,
     /// BVH file, relative to the output folder.
     pub bvh: String,
     /// GLB file, relative to the output folder.
     pub glb: String,
-    /// Mean distance between the input joints and forward kinematics of the rotations, m.
+    /// Mean distance between the input joints and forward kinematics of the rotations (at the
+    /// motion's own frames), m.
     pub fit_mean_m: f64,
     /// Largest such distance, m.
     pub fit_max_m: f64,
@@ -94,8 +98,10 @@ pub struct ExportedSample {
 pub struct ExportManifest {
     /// The axes and units of every file.
     pub axes: &'static str,
-    /// Frames per second.
+    /// Frames per second of the files.
     pub fps: f64,
+    /// Frames per second of the motions (the files' rate unless resampled).
+    pub motion_fps: f64,
     /// BVH length unit.
     pub bvh_unit: &'static str,
     /// The viewer page, relative to the output folder.
@@ -130,26 +136,30 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         report: input.report.clone(),
     };
     let mut samples = Vec::with_capacity(tracks.len());
-    for (i, (track, (label, poses))) in tracks.iter().zip(&input.samples).enumerate() {
+    let files = match input.file_fps {
+        Some(fps) => tracks.iter().map(|t| t.resampled(fps)).collect::<Result<Vec<_>, _>>()?,
+        None => tracks.clone(),
+    };
+    for (i, ((track, file), (label, poses))) in tracks.iter().zip(&files).zip(&input.samples).enumerate() {
         let (bvh, glb) = (format!("sample_{i}/motion.bvh"), format!("sample_{i}/motion.glb"));
-        write_bvh(&out.join(&bvh), track, input.bvh_unit)?;
-        write_glb(&out.join(&glb), label, track, &boxes)?;
-        let fk = track.forward_kinematics();
-        let SolveFit { mean_m, max_m } = SolveFit::between(&fk, poses);
+        write_bvh(&out.join(&bvh), file, input.bvh_unit)?;
+        write_glb(&out.join(&glb), label, file, &boxes)?;
+        let SolveFit { mean_m, max_m } = track.fit(poses);
         samples.push(ExportedSample {
             label: label.clone(),
-            frames: track.frames(),
+            frames: file.frames(),
             bvh,
             glb,
             fit_mean_m: mean_m,
             fit_max_m: max_m,
-            probes: probes(&fk),
+            probes: probes(&file.forward_kinematics()),
         });
     }
     write_viewer(&out.join("viewer.html"), &viewer)?;
     let manifest = ExportManifest {
         axes: "metres; right-handed, y up, +z the direction the motion starts facing, +x the character's left (glTF's axes)",
-        fps: input.fps,
+        fps: input.file_fps.map_or(input.fps, f64::from),
+        motion_fps: input.fps,
         bvh_unit: input.bvh_unit.name(),
         viewer: "viewer.html",
         samples,
