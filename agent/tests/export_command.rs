@@ -94,6 +94,31 @@ fn files_at_an_engines_frame_rate_keep_the_duration_and_the_path() {
     // 1.45 s is 34.8 frame times at 24 fps: 35 frames, ending 0.2 frame times early.
     assert!(bvh.contains("Frames: 35"), "{bvh}");
 
+    // In place at 30 fps: the pelvis stays over its first position, at its height.
+    let out = dir.path().join("in-place");
+    let output = mogen(&[
+        "export",
+        &npy.display().to_string(),
+        "--out",
+        &out.display().to_string(),
+        "--fps",
+        "30",
+        "--in-place",
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).unwrap()).unwrap();
+    assert_eq!(manifest["in_place"], true);
+    let pelvis: Vec<&serde_json::Value> =
+        manifest["samples"][0]["probes"].as_array().unwrap().iter().filter(|p| p["joint"] == "pelvis").collect();
+    assert_eq!(pelvis.last().unwrap()["frame"], 43, "1.45 s at 30 fps: 44 frames");
+    for probe in &pelvis {
+        let xyz: Vec<f64> = (0..3).map(|k| probe["position_m"][k].as_f64().unwrap()).collect();
+        let first: Vec<f64> = (0..3).map(|k| pelvis[0]["position_m"][k].as_f64().unwrap()).collect();
+        assert!((xyz[0] - first[0]).abs() < 1e-9 && (xyz[2] - first[2]).abs() < 1e-9, "{probe}");
+        assert!((xyz[1] - first[1]).abs() < 1e-9, "the standing figure keeps its height: {probe}");
+    }
+
     let output = mogen(&[
         "export",
         &npy.display().to_string(),

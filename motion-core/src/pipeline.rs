@@ -217,6 +217,9 @@ pub struct ExportOptions {
     /// Frame rate of the BVH and GLB files, frames per second (rotations resampled by slerp:
     /// [`crate::export::RotationTrack::resampled`]); `None`: the motion's own.
     pub fps: Option<u32>,
+    /// Leave the root's horizontal motion out of the BVH and GLB files
+    /// ([`crate::export::RotationTrack::in_place`]).
+    pub in_place: bool,
 }
 
 /// Writes a run into `folder` (committed by the caller): `features.npy` (de-normalised
@@ -285,6 +288,7 @@ pub fn write_exports(
         report,
         bvh_unit: options.bvh_unit,
         file_fps: options.fps,
+        in_place: options.in_place,
     };
     let manifest = write_outputs(folder.path(), &input)?;
     if options.gif {

@@ -24,13 +24,18 @@ pub struct ExportFormats {
     /// files keep the motion's frames.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=i64::from(motion_core::export::resample::MAX_FPS)))]
     pub fps: Option<u32>,
+    /// Leave the root's horizontal motion out of the BVH and GLB files, for engines that move
+    /// the character themselves: the pelvis stays over its first position on the floor, and
+    /// keeps its height and every turn. The viewer, the strip and the npy files keep the path.
+    #[arg(long)]
+    pub in_place: bool,
 }
 
 impl ExportFormats {
     /// The library's export choices.
     pub fn options(self) -> ExportOptions {
         let bvh_unit = if self.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
-        ExportOptions { gif: self.gif, bvh_unit, fps: self.fps }
+        ExportOptions { gif: self.gif, bvh_unit, fps: self.fps, in_place: self.in_place }
     }
 }
 

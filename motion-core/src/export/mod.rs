@@ -1,5 +1,5 @@
 //! Outputs that other tools open: a rotation track on one rigid skeleton ([`rotations`]) at the
-//! motion's or an engine's frame rate ([`resample`]), BVH
+//! motion's or an engine's frame rate ([`resample`]), moving or in place ([`in_place`]), BVH
 //! ([`bvh`]), binary glTF with a skinned capsule body and the scene ([`gltf`]), a self-contained
 //! 3-D viewer page ([`viewer`]), and the scene primitives as solid boxes ([`scene`]) shared by the
 //! last two.
@@ -16,6 +16,7 @@ pub mod bvh;
 mod error;
 mod folder;
 pub mod gltf;
+pub mod in_place;
 mod outputs;
 pub mod resample;
 pub mod rotations;

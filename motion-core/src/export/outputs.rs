@@ -60,6 +60,8 @@ pub struct ExportInput<'a> {
     /// Frame rate of the BVH and GLB files, frames per second ([`RotationTrack::resampled`]);
     /// `None`: the motions' own.
     pub file_fps: Option<u32>,
+    /// Whether the files leave the root's horizontal motion out ([`RotationTrack::in_place`]).
+    pub in_place: bool,
 }
 
 /// One joint's position at one frame, by forward kinematics of the solved track.
@@ -102,6 +104,9 @@ pub struct ExportManifest {
     pub fps: f64,
     /// Frames per second of the motions (the files' rate unless resampled).
     pub motion_fps: f64,
+    /// Whether the files leave the root's horizontal motion out (the pelvis stays over its first
+    /// position on the floor; the probes are of the files).
+    pub in_place: bool,
     /// BVH length unit.
     pub bvh_unit: &'static str,
     /// The viewer page, relative to the output folder.
@@ -136,10 +141,13 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         report: input.report.clone(),
     };
     let mut samples = Vec::with_capacity(tracks.len());
-    let files = match input.file_fps {
+    let mut files = match input.file_fps {
         Some(fps) => tracks.iter().map(|t| t.resampled(fps)).collect::<Result<Vec<_>, _>>()?,
         None => tracks.clone(),
     };
+    if input.in_place {
+        files = files.iter().map(RotationTrack::in_place).collect();
+    }
     for (i, ((track, file), (label, poses))) in tracks.iter().zip(&files).zip(&input.samples).enumerate() {
         let (bvh, glb) = (format!("sample_{i}/motion.bvh"), format!("sample_{i}/motion.glb"));
         write_bvh(&out.join(&bvh), file, input.bvh_unit)?;
@@ -160,6 +168,7 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         axes: "metres; right-handed, y up, +z the direction the motion starts facing, +x the character's left (glTF's axes)",
         fps: input.file_fps.map_or(input.fps, f64::from),
         motion_fps: input.fps,
+        in_place: input.in_place,
         bvh_unit: input.bvh_unit.name(),
         viewer: "viewer.html",
         samples,
