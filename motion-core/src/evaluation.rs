@@ -531,6 +531,16 @@ fn cleanup_line(f: &mut fmt::Formatter<'_>, cleanup: &CleanupReport) -> fmt::Res
     let raised = cleanup.samples.iter().map(|s| s.raised_m).fold(0.0, f64::max);
     let held: usize = cleanup.samples.iter().map(|s| s.held_above_floor).sum();
     let penetration = before.max_scene_penetration_m.map_or("n/a".to_owned(), |p| format!("{p:.4} m"));
+    let undone: Vec<String> = cleanup
+        .samples
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| !s.undone_for.is_empty())
+        .map(|(i, s)| format!("sample {i} (it would break {})", s.undone_for.join(", ")))
+        .collect();
+    if !undone.is_empty() {
+        writeln!(f, "  foot clean-up undone for {}: the motion before it is kept", undone.join("; "))?;
+    }
     writeln!(
         f,
         "  foot clean-up: {locked} joint-frames locked ({shortened} sliding contacts cut to their steadiest \

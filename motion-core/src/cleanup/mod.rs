@@ -229,6 +229,11 @@ pub struct FootLockReport {
     pub skate_after: f64,
     /// Largest change of any bone's length in any frame, m (round-off only).
     pub max_bone_length_change_m: f64,
+    /// The program's constraints that the motion met before the clean-up and that the cleaned
+    /// motion would fail. When any is named, the clean-up is undone for this sample (its motion
+    /// is the one before it; the figures above are of the undone clean-up).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub undone_for: Vec<String>,
 }
 
 /// A cleaned motion and its report.
@@ -463,5 +468,6 @@ fn report(
         skate_before: foot_skate_ratio(before),
         skate_after: foot_skate_ratio(after),
         max_bone_length_change_m,
+        undone_for: Vec::new(),
     }
 }

@@ -44,8 +44,9 @@ pub fn finish(
     let (refined, refine) =
         refine_in_parallel(&raw_joints, compiled, &initial_joints, (&refine_config, config.schedule))?;
     ensure_finite(&refined, "the refinement's joint positions")?;
-    let (joints, foot_lock) = clean_up(&refined, &finishing_foot_lock(program, config))?;
-    ensure_finite(&joints, "the foot clean-up's joint positions")?;
+    let (cleaned, mut foot_lock) = clean_up(&refined, &finishing_foot_lock(program, config))?;
+    ensure_finite(&cleaned, "the foot clean-up's joint positions")?;
+    let joints = keep_what_was_met(compiled, &initial_joints, (&refined, cleaned), &mut foot_lock)?;
     Ok(Generated {
         features,
         joints,
@@ -56,6 +57,32 @@ pub fn finish(
         loss_history,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The cleaned motion `[B, T, 22, 3]`, except for each sample where the clean-up would fail a
+/// constraint of `compiled` that the motion before it met: that sample keeps the motion before,
+/// and its report names the constraints (`undone_for`). So the clean-up never breaks what was
+/// met (a balance held over one foot, a hand on its target), and the report says where it was
+/// given up.
+fn keep_what_was_met(
+    compiled: &CompiledProgram,
+    initial: &Tensor,
+    (before, cleaned): (&Tensor, Tensor),
+    reports: &mut [FootLockReport],
+) -> Result<Tensor, GenerationError> {
+    let (met, now) = (compiled.satisfaction(before, Some(initial))?, compiled.satisfaction(&cleaned, Some(initial))?);
+    let mut undone = vec![false; reports.len()];
+    for (b, report) in reports.iter_mut().enumerate() {
+        report.undone_for =
+            met.iter().zip(&now).filter(|(m, n)| m.pass[b] && !n.pass[b]).map(|(m, _)| m.id.clone()).collect();
+        undone[b] = !report.undone_for.is_empty();
+    }
+    if !undone.contains(&true) {
+        return Ok(cleaned);
+    }
+    let mask =
+        Tensor::from_vec(undone.iter().map(|&u| u8::from(u)).collect(), (undone.len(), 1, 1, 1), before.device())?;
+    Ok(mask.broadcast_as(before.shape())?.where_cond(before, &cleaned)?)
 }
 
 /// The clean-up a generation of `program` ends with: `config.foot_lock`, with its floor planting
@@ -128,4 +155,56 @@ fn has_raised_support(program: &TaskProgram) -> bool {
         Primitive::Ground(ground) => ground.height_m.abs() > 0.01,
         _ => false,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{DType, Device};
+    use glam::DVec3;
+
+    use super::*;
+    use crate::skeleton::{rest_pose, Joint, Pose};
+
+    /// 40 frames of a figure standing with its right foot under its centre of mass, sliding
+    /// along +x at `speed` m/frame, feet on the floor.
+    fn on_the_right_foot(speed: f64) -> Vec<Pose> {
+        let mut pose = rest_pose();
+        let lowest = pose.iter().map(|j| j.y).fold(f64::INFINITY, f64::min);
+        for j in pose.iter_mut() {
+            j.y -= lowest;
+        }
+        // The right foot joint (the toes) under the pelvis, the ankle behind it.
+        let (pelvis, foot) = (pose[Joint::Pelvis.index()], pose[Joint::RightFoot.index()]);
+        for joint in [Joint::RightAnkle, Joint::RightFoot] {
+            let p = pose[joint.index()];
+            pose[joint.index()] = DVec3::new(pelvis.x, p.y, pelvis.z + (p.z - foot.z));
+        }
+        (0..40).map(|t| pose.map(|p| p + DVec3::new(speed * t as f64, 0.0, 0.0))).collect()
+    }
+
+    #[test]
+    fn a_balance_the_motion_met_stays_met_where_the_clean_up_would_break_it() {
+        let device = Device::Cpu;
+        let program = TaskProgram::from_json(
+            r#"{"text": "stand on the right foot", "frames": 40, "constraints": [{"id": "c1", "expr": {"op": "equal",
+            "quantity": {"kind": "distance", "a": {"centre_of_mass": {}}, "b": {"joint": "right_foot"}, "axes": "xz"},
+            "target": [0.0]}}]}"#,
+        )
+        .unwrap();
+        let compiled = CompiledProgram::compile(&program, &device).unwrap();
+        let motions = [on_the_right_foot(0.004), on_the_right_foot(0.0)];
+        let joints = poses_to_tensor(&motions, DType::F32, &device).unwrap();
+        let met = |j: &Tensor| compiled.satisfaction(j, None).unwrap()[0].pass.clone();
+        assert_eq!(met(&joints), [true, true], "the motions keep the centre of mass over the right foot");
+        let (cleaned, mut reports) = clean_up(&joints, &FootLockConfig::default()).unwrap();
+        assert_eq!(met(&cleaned), [false, true], "locking the sliding foot alone breaks the balance");
+
+        let kept = keep_what_was_met(&compiled, &joints, (&joints, cleaned.clone()), &mut reports).unwrap();
+        assert_eq!(met(&kept), [true, true]);
+        assert_eq!(reports[0].undone_for, ["c1"]);
+        assert!(reports[1].undone_for.is_empty());
+        let row = |t: &Tensor, b: usize| t.get(b).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert_eq!(row(&kept, 0), row(&joints, 0), "sample 0 keeps the motion before the clean-up");
+        assert_eq!(row(&kept, 1), row(&cleaned, 1), "sample 1 keeps its clean-up");
+    }
 }
