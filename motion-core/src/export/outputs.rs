@@ -11,6 +11,7 @@
 //! file is written, so bad input writes nothing; each file is written whole
 //! ([`super::write_atomically`]).
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use serde::Serialize;
@@ -141,13 +142,7 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         report: input.report.clone(),
     };
     let mut samples = Vec::with_capacity(tracks.len());
-    let mut files = match input.file_fps {
-        Some(fps) => tracks.iter().map(|t| t.resampled(fps)).collect::<Result<Vec<_>, _>>()?,
-        None => tracks.clone(),
-    };
-    if input.in_place {
-        files = files.iter().map(RotationTrack::in_place).collect();
-    }
+    let files = tracks.iter().map(|track| file_track(track, input)).collect::<Result<Vec<_>, _>>()?;
     for (i, ((track, file), (label, poses))) in tracks.iter().zip(&files).zip(&input.samples).enumerate() {
         let (bvh, glb) = (format!("sample_{i}/motion.bvh"), format!("sample_{i}/motion.glb"));
         write_bvh(&out.join(&bvh), file, input.bvh_unit)?;
@@ -176,6 +171,19 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
     let json = serde_json::to_string_pretty(&manifest).map_err(|e| ExportError::Shape(e.to_string()))?;
     write_atomically(&out.join("export.json"), json.as_bytes())?;
     Ok(manifest)
+}
+
+/// The track a sample's files hold: the solved `track` itself, or resampled to the files' frame
+/// rate and held in place as `input` asks.
+fn file_track<'t>(track: &'t RotationTrack, input: &ExportInput<'_>) -> Result<Cow<'t, RotationTrack>, ExportError> {
+    let mut file = match input.file_fps {
+        Some(fps) => Cow::Owned(track.resampled(fps)?),
+        None => Cow::Borrowed(track),
+    };
+    if input.in_place {
+        file = Cow::Owned(file.in_place());
+    }
+    Ok(file)
 }
 
 /// [`PROBE_JOINTS`] of forward-kinematics poses `fk` at the first frame, a third, two thirds

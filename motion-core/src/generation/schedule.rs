@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::constraints::CompiledProgram;
-use crate::dno::DnoStep;
+use crate::dno::{DnoConfig, DnoStep};
 use crate::metrics::{foot_skate_ratio, max_acceleration};
 use crate::motion::tensor_to_poses;
 use crate::numeric::mean;
@@ -56,7 +56,7 @@ impl Schedule {
     /// `fixtures/results/issue59-fast-default/`).
     pub fn ddim_steps(self) -> usize {
         match self {
-            Schedule::Paper => 10,
+            Schedule::Paper => DnoConfig::default().ddim_steps,
             Schedule::UntilMet => 5,
         }
     }
