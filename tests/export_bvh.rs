@@ -52,7 +52,7 @@ fn a_sampled_motion_comes_back_from_bvh_as_solved() {
     let dir = tempfile::tempdir().unwrap();
     for (unit, read_as) in [(BvhUnit::Metres, LengthUnit::Metres), (BvhUnit::Centimetres, LengthUnit::Centimetres)] {
         let path = dir.path().join(format!("{unit:?}.bvh"));
-        write_bvh(&path, &track, unit).unwrap();
+        write_bvh(&path, &track.armature(), unit.into()).unwrap();
         let (clip, warnings) = BvhClip::read(&path, &BvhOptions::default()).unwrap();
         assert!(warnings.is_empty(), "{warnings:?}");
         assert_eq!((clip.rig(), clip.animation().unit(), clip.animation().frames()), (Rig::Smpl, read_as, FRAMES));

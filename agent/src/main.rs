@@ -97,7 +97,7 @@ enum BenchCommand {
     /// Denoiser forward, ddim sampling, unrolled DNO step at batch 1 and 8; peak memory.
     Prior(commands::bench::BenchArgs),
     /// Every shipped task × {unconstrained, IK, IK+Reg, DNO}: results table (markdown + JSON).
-    Tasks(commands::bench_tasks::BenchTasksArgs),
+    Tasks(Box<commands::bench_tasks::BenchTasksArgs>),
     /// Wall time of a full DNO run (500 steps) at batch 1 and 8.
     Dno(commands::bench_dno::BenchDnoArgs),
     /// RG-DNO's retrieval for one task over the whole retrieval database (by default the
@@ -179,7 +179,7 @@ fn run_command() -> anyhow::Result<()> {
         Command::Report(ReportCommand::Prior(args)) => commands::report::run(*args),
         Command::Report(ReportCommand::Loss(args)) => commands::report::run_loss(args),
         Command::Bench(BenchCommand::Prior(args)) => commands::bench::run(args),
-        Command::Bench(BenchCommand::Tasks(args)) => commands::bench_tasks::run_tasks(args),
+        Command::Bench(BenchCommand::Tasks(args)) => commands::bench_tasks::run_tasks(*args),
         Command::Bench(BenchCommand::Dno(args)) => commands::bench_dno::run(args),
         Command::Bench(BenchCommand::Retrieval(args)) => commands::bench_retrieval::run(args),
     }

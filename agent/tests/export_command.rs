@@ -133,6 +133,49 @@ fn files_at_an_engines_frame_rate_keep_the_duration_and_the_path() {
 }
 
 #[test]
+fn a_users_rig_gets_the_motion_in_its_own_unit_and_axes_and_a_rig_without_our_joints_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let npy = dir.path().join("joints.npy");
+    Tensor::from_vec(standing(2, 12), (2, 12, 22, 3), &Device::Cpu).unwrap().write_npy(&npy).unwrap();
+    let rigs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/rigs");
+    let out = dir.path().join("unreal");
+    let rig = rigs.join("unreal.bvh");
+    let args = ["export", &npy.display().to_string(), "--out", &out.display().to_string(), "--rig"];
+    let output = mogen(&[&args[..], &[rig.to_str().unwrap()]].concat());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("on the rig `unreal` (Unreal mannequin, 40 nodes"), "{stderr}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).unwrap()).unwrap();
+    for i in 0..2 {
+        let rig = &manifest["samples"][i]["rig"];
+        assert_eq!(
+            (rig["bvh"].as_str(), rig["z_up"].as_bool()),
+            (Some(format!("sample_{i}/unreal.bvh").as_str()), Some(true))
+        );
+        assert_eq!(rig["units_per_metre"], 100.0);
+        assert!(rig["report"]["contact_miss_max_m"].as_f64().unwrap() < 0.01, "{rig}");
+        let bvh = std::fs::read_to_string(out.join(format!("sample_{i}/unreal.bvh"))).unwrap();
+        // Unreal's own hierarchy, Z-up centimetres: the pelvis 96 cm over the root on the floor.
+        assert!(bvh.starts_with("HIERARCHY\nROOT root\n") && bvh.contains("JOINT pelvis\n"), "{bvh}");
+        assert!(bvh.contains("JOINT upperarm_twist_01_l") && bvh.contains("Frames: 12"), "{bvh}");
+    }
+    // The standing figure's pelvis, carried over, stands as high on the rig as it does in ours.
+    let pelvis = &manifest["samples"][0]["rig"]["probes"][0];
+    assert_eq!((pelvis["node"].as_str(), pelvis["joint"].as_str()), (Some("pelvis"), Some("pelvis")));
+
+    let broken = dir.path().join("no_toes.bvh");
+    std::fs::write(&broken, std::fs::read_to_string(&rig).unwrap().replace("ball_l", "toe_l")).unwrap();
+    let out = dir.path().join("refused");
+    let args = ["export", &npy.display().to_string(), "--out", &out.display().to_string(), "--rig"];
+    let output = mogen(&[&args[..], &[broken.to_str().unwrap()]].concat());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(stderr.contains("no_toes.bvh") && stderr.contains("lacks ball_l (left_foot)"), "{stderr}");
+    assert!(!out.exists(), "nothing is written");
+}
+
+#[test]
 fn bad_input_is_named_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");

@@ -1,6 +1,9 @@
 //! Whole-clip operations on joint-position motions: bone-length retargeting, mirroring,
 //! heading rotation and statistics, and the conversion between pose lists and joint tensors
-//! `[batch, frames, 22, 3]`. A motion is a `[Pose]` at 20 fps unless stated otherwise.
+//! `[batch, frames, 22, 3]`; two-bone leg IK ([`leg_ik`]), shared by the foot clean-up and the
+//! export's retargeting. A motion is a `[Pose]` at 20 fps unless stated otherwise.
+
+pub mod leg_ik;
 
 use candle_core::{DType, Device, Tensor};
 use glam::{DQuat, DVec3};

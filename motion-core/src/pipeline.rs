@@ -21,6 +21,7 @@ use candle_core::Device;
 use crate::constraints::checked::CheckedProgram;
 use crate::evaluation::{self, TaskReport};
 use crate::export::bvh::BvhUnit;
+use crate::export::retarget::TargetRig;
 use crate::export::{position_targets, write_outputs, ExportError, ExportInput, ExportManifest, OutputFolder};
 use crate::generation::method::{Generated, GenerationConfig, Method, Task};
 use crate::generation::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
@@ -111,7 +112,7 @@ pub fn run_task(
     on: impl FnMut(Event<'_>),
 ) -> Result<TaskOutcome, PipelineError> {
     let run = generate_task(prior, program, settings, device, on)?;
-    let exports = write_task(&folder, prior, program.program(), &run, settings.exports)?;
+    let exports = write_task(&folder, prior, program.program(), &run, &settings.exports)?;
     let folder = folder.commit()?;
     Ok(TaskOutcome { report: run.report, exports, folder })
 }
@@ -207,8 +208,9 @@ fn rg_dno_database(
     Ok(database)
 }
 
-/// Choices about the exported files (default: no GIF, BVH in metres, the motion's frame rate).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+/// Choices about the exported files (default: no GIF, BVH in metres, the motion's frame rate, no
+/// rig of the user's).
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct ExportOptions {
     /// Also write `motion.gif` (side and top views, animated).
     pub gif: bool,
@@ -220,6 +222,9 @@ pub struct ExportOptions {
     /// Leave the root's horizontal motion out of the BVH and GLB files
     /// ([`crate::export::RotationTrack::in_place`]).
     pub in_place: bool,
+    /// A rig of the user's to write every motion onto as well
+    /// ([`crate::export::retarget`]).
+    pub rig: Option<TargetRig>,
 }
 
 /// Writes a run into `folder` (committed by the caller): `features.npy` (de-normalised
@@ -230,7 +235,7 @@ fn write_task(
     prior: &Prior,
     program: &TaskProgram,
     run: &TaskRun,
-    options: ExportOptions,
+    options: &ExportOptions,
 ) -> Result<ExportManifest, PipelineError> {
     let (generated, report) = (&run.generated, &run.report);
     let config = &report.config;
@@ -276,7 +281,7 @@ pub fn write_exports(
     Motions { title, fps, poses, labels }: Motions<'_>,
     program: Option<&TaskProgram>,
     report: Option<serde_json::Value>,
-    options: ExportOptions,
+    options: &ExportOptions,
 ) -> Result<ExportManifest, PipelineError> {
     let input = ExportInput {
         title: title.to_owned(),
@@ -289,6 +294,7 @@ pub fn write_exports(
         bvh_unit: options.bvh_unit,
         file_fps: options.fps,
         in_place: options.in_place,
+        rig: options.rig.as_ref(),
     };
     let manifest = write_outputs(folder.path(), &input)?;
     if options.gif {

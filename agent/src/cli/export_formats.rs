@@ -1,14 +1,15 @@
 //! Choices about the exported files, as flags, and what was written.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 use motion_core::export::bvh::BvhUnit;
+use motion_core::export::retarget::TargetRig;
 use motion_core::export::ExportManifest;
 use motion_core::pipeline::ExportOptions;
 
 /// Choices about the exported files, shared by every command that writes them.
-#[derive(Debug, Clone, Copy, Default, Args)]
+#[derive(Debug, Clone, Default, Args)]
 pub struct ExportFormats {
     /// Also write motion.gif: the side and top views in world coordinates, animated at the
     /// motion's frame rate.
@@ -29,13 +30,27 @@ pub struct ExportFormats {
     /// keeps its height and every turn. The viewer, the strip and the npy files keep the path.
     #[arg(long)]
     pub in_place: bool,
+    /// Also write every motion onto your own rig: a BVH file whose skeleton (hierarchy and rest
+    /// offsets; any motion in it is ignored) follows the Mixamo, Unreal mannequin, Unity
+    /// humanoid, CMU or SMPL bone names (any case, any `name:` prefix). Written as
+    /// sample_<i>/<rig>.bvh in the rig's unit and up axis, the feet kept where the motion plants
+    /// them; export.json reports what carried over. Rigs to try: fixtures/rigs/.
+    #[arg(long, value_name = "FILE.bvh")]
+    pub rig: Option<PathBuf>,
+    /// With --rig: a JSON file naming the rig's node of each of our 22 joints
+    /// ({"pelvis": "Hips", "left_hip": "LeftUpLeg", ...}), for a rig whose names follow no
+    /// known convention.
+    #[arg(long, value_name = "FILE.json", requires = "rig")]
+    pub rig_map: Option<PathBuf>,
 }
 
 impl ExportFormats {
-    /// The library's export choices.
-    pub fn options(self) -> ExportOptions {
+    /// The library's export choices, the rig read and matched (so a rig that cannot be used
+    /// fails before any work).
+    pub fn options(&self) -> anyhow::Result<ExportOptions> {
         let bvh_unit = if self.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
-        ExportOptions { gif: self.gif, bvh_unit, fps: self.fps, in_place: self.in_place }
+        let rig = self.rig.as_deref().map(|path| TargetRig::read_bvh(path, self.rig_map.as_deref())).transpose()?;
+        Ok(ExportOptions { gif: self.gif, bvh_unit, fps: self.fps, in_place: self.in_place, rig })
     }
 }
 
@@ -52,5 +67,33 @@ pub fn print_exports(folder: &Path, manifest: &ExportManifest, gif: bool) {
     );
     if gif {
         eprintln!("wrote {}", folder.join("motion.gif").display());
+    }
+    for rig in manifest.samples.iter().filter_map(|s| s.rig.as_ref()) {
+        let r = &rig.report;
+        let unreached = match r.unreached_frames {
+            0 => String::new(),
+            n => format!("; in {n} frames an ankle target lay beyond the rig's legs"),
+        };
+        eprintln!(
+            "wrote {} on the rig `{}` ({}, {} nodes, legs {:.2}x ours): joints within {:.1} cm of ours scaled \
+             ({}), leg IK moved joints up to {:.1} cm, planted feet within {:.1} mm of their marks, foot skate {:.3} \
+             (ours {:.3}){unreached}",
+            folder.join(&rig.bvh).display(),
+            r.rig,
+            r.matched,
+            r.nodes,
+            r.leg_ratio,
+            r.from_ours_max_m * 100.0,
+            r.from_ours_joint,
+            r.leg_fix_max_m * 100.0,
+            r.contact_miss_max_m * 1000.0,
+            r.skate_rig,
+            r.skate_ours,
+        );
+    }
+    if manifest.samples.iter().filter_map(|s| s.rig.as_ref()).any(|r| r.report.from_ours_max_m > 0.03) {
+        eprintln!(
+            "  the rig's proportions differ from ours: a constraint on a joint's world position may not hold on it"
+        );
     }
 }

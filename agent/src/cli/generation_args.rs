@@ -175,19 +175,20 @@ fn parse_rg_dno_config(text: &str) -> Result<Box<RgDnoConfig>, String> {
 
 impl GenerationArgs {
     /// Everything a run of `method` needs: the generation settings, RG-DNO's stages (scaled to
-    /// `--steps` when given) and its database.
-    pub fn settings(&self, method: Method) -> TaskSettings {
+    /// `--steps` when given), its database and the export choices (a `--rig` that cannot be
+    /// used fails here, before any work).
+    pub fn settings(&self, method: Method) -> anyhow::Result<TaskSettings> {
         let rg_dno = match self.steps {
             Some(steps) => self.rg_dno.scaled_to(steps),
             None => (*self.rg_dno).clone(),
         };
-        TaskSettings {
+        Ok(TaskSettings {
             generation: self.config(method),
             rg_dno,
             database: retrieval_source(self.database.as_deref()),
             retry_unmet: self.retry_unmet.unwrap_or(Schedule::from(self.schedule).retries_unmet()),
-            exports: self.formats.options(),
-        }
+            exports: self.formats.options()?,
+        })
     }
 
     /// The generation settings for `method`.

@@ -113,7 +113,7 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
         let program = load_program(file, &device)?;
         for &method in &args.methods {
             let method = Method::from(method);
-            let settings = args.generation.settings(method);
+            let settings = args.generation.settings(method)?;
             match rows.iter().position(|r| r.row.task == task && r.row.report.config.method == method) {
                 Some(k) if rows[k].made_with(&settings, prior.identity.as_ref())? => continue,
                 Some(k) => {

@@ -34,6 +34,7 @@ pub struct ExportArgs {
 }
 
 pub fn run(args: ExportArgs) -> anyhow::Result<()> {
+    let exports = args.formats.options()?;
     let (joints, folder) = if args.input.is_dir() {
         (args.input.join("joints.npy"), args.input.clone())
     } else {
@@ -57,7 +58,7 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     let out = OutputFolder::create(&args.out.unwrap_or(folder))?;
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
     let motions = Motions { title: &title, fps: args.input_fps, poses: &motions, labels };
-    let manifest = write_exports(&out, motions, program, report, args.formats.options())
+    let manifest = write_exports(&out, motions, program, report, &exports)
         .with_context(|| format!("exporting into {}", out.target().display()))?;
     // The folder's other files (the run's npy, report, strip) stay.
     out.keep_existing()?;

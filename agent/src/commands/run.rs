@@ -34,7 +34,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let program = load_program(&args.program, &device)?;
     let folder = OutputFolder::create(&args.out)?;
     let prior = load_prior(&args.generation.prior, &device)?;
-    let settings = args.generation.settings(args.method.into());
+    let settings = args.generation.settings(args.method.into())?;
     let report = run_with_progress(&prior, &program, &settings, folder, &device)?;
     print!("{}", report.summary());
     Ok(())

@@ -58,6 +58,7 @@ pub struct SampleArgs {
 }
 
 pub fn run(args: SampleArgs) -> anyhow::Result<()> {
+    let exports = args.formats.options()?;
     let folder = OutputFolder::create(&args.out)?;
     let device = device()?;
     let mut prior = load_prior(&args.prior, &device)?;
@@ -123,7 +124,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
     motion_strip(&rows, 8, &[], &[], &args.prompt, &folder.path().join("strip.png"))?;
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
     let motions = Motions { title: &args.prompt, fps: FPS, poses: &poses, labels };
-    let manifest = write_exports(&folder, motions, None, None, args.formats.options())?;
+    let manifest = write_exports(&folder, motions, None, None, &exports)?;
     let out = folder.commit()?;
     print_exports(&out, &manifest, args.formats.gif);
     println!("wrote {}/{{joints.npy,features.npy,strip.png}}", out.display());

@@ -150,7 +150,7 @@ pub fn run(args: TaskArgs) -> anyhow::Result<()> {
     // RG-DNO, through the plan's relational parse and Algorithm 1's groups, falls back to DNO and
     // says why without them.
     let prior = load_prior(&args.generation.prior, &device)?;
-    let settings = args.generation.settings(args.method.into());
+    let settings = args.generation.settings(args.method.into())?;
     let report = run_with_progress(&prior, &planned.program, &settings, out, &device)?;
     print!("{}", report.summary());
     Ok(())

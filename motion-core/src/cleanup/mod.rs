@@ -20,8 +20,8 @@
 //!    vertical motion, such as a heel rising before the foot leaves); it eases back to its own
 //!    motion over [`FootLockConfig::blend_frames`] frames on either side, more for a large
 //!    offset ([`FootLockConfig::blend_speed_m_per_s`]), so nothing pops.
-//! 4. **Leg IK** ([`leg_ik::solve_leg`]): hip fixed, knee in its original bend plane (summed
-//!    over ±[`leg_ik::KNEE_BEND_FRAMES`] frames, [`leg_ik::knee_poles`]), thigh,
+//! 4. **Leg IK** ([`solve_leg`] in `motion::leg_ik`): hip fixed, knee in its original bend plane (summed
+//!    over ±[`KNEE_BEND_FRAMES`](crate::motion::leg_ik::KNEE_BEND_FRAMES) frames, [`knee_poles`]), thigh,
 //!    shin and foot lengths kept exactly; a free ankle follows its toe's correction (and a free
 //!    toe its ankle's), so the foot turns about the planted joint. A target out of the leg's
 //!    reach gives the closest point the leg reaches with the knee a little bent (soft reach,
@@ -45,7 +45,7 @@
 
 pub mod contact;
 pub mod foot_lock;
-pub mod leg_ik;
+
 #[cfg(test)]
 mod tests;
 
@@ -55,11 +55,11 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::metrics::foot_skate_ratio;
+use crate::motion::leg_ik::{knee_poles, solve_leg, Leg, LegSolution};
 use crate::skeleton::{bone_lengths, Joint, Pose, CONTACT_JOINTS, FPS, NUM_JOINTS};
 use crate::MotionError;
 use contact::{detect, floor_height, runs, sinking_lift, speeds, Hysteresis};
 use foot_lock::{corrections, steadiest, Correction, Easing, Lock};
-use leg_ik::{knee_poles, solve_leg, Leg, LegSolution};
 
 /// The clean-up raises no task constraint's error `E` by more than this fraction of `E` ...
 pub const CONSTRAINT_TOLERANCE_RELATIVE: f64 = 0.05;
@@ -119,7 +119,7 @@ pub struct FootLockConfig {
     /// (default 0.5, the skate metric's threshold): a foot held far from where it slid to is
     /// let go of gradually.
     pub blend_speed_m_per_s: f64,
-    /// Width of the soft zone below a leg's full reach, m (default 0.02; [`leg_ik::soft_reach`]):
+    /// Width of the soft zone below a leg's full reach, m (default 0.02; [`soft_reach`](crate::motion::leg_ik::soft_reach)):
     /// a held foot the hip pulls out of reach then follows it smoothly instead of snapping
     /// the knee straight. With 2 cm, generated walks keep their knees as bent as the shipped
     /// walks do (5 % of leg-frames under 9.1° against the clips' 5.7–9.8°, none under 4.5°

@@ -1,51 +1,51 @@
-//! BVH (Biovision hierarchy) text of a [`RotationTrack`].
+//! BVH (Biovision hierarchy) text of an [`ArmatureTrack`]: our 22 joints
+//! ([`RotationTrack::armature`](super::RotationTrack::armature)) or a user's rig
+//! ([`super::retarget`]).
 //!
 //! # What the file holds
-//! - **Hierarchy**: the 22 joints under their snake_case names, which are SMPL's (`pelvis`,
-//!   `left_hip`, …, `right_wrist`), `pelvis` the `ROOT`, children in joint-index order. Each
-//!   `OFFSET` is the track's [`RigSkeleton::offsets_m`](super::RigSkeleton) entry (the joint's
-//!   rest offset from its parent in the parent's rest frame; every rest frame is the world's);
-//!   the root's is `0 0 0`. The five end joints (head, wrists, feet) carry an `End Site`
-//!   [`END_SITE_M`] further along their own bone.
-//! - **Channels**: the root and the six joints with animated offsets
-//!   ([`ANIMATED_OFFSETS`]: hips, spine1, neck, collars) have `Xposition Yposition Zposition
-//!   Zrotation Xrotation Yrotation`, every other joint `Zrotation Xrotation Yrotation`. The
-//!   root's positions are the pelvis, world; the six joints' are their offsets from their
-//!   parents in the parent's frame at that frame ([`RotationTrack::offset_m`]), of their rest
-//!   length. As for the root, a joint's position channels **replace** its `OFFSET` for the
-//!   frame; Blender's importer (`io_anim_bvh`: pose location = channels − OFFSET, in the bone's
-//!   rest frame) and ours ([`crate::import::bvh`]) read them so. The root's `OFFSET` being zero,
-//!   readers that add it to the root's channels agree as well.
+//! - **Hierarchy**: the armature's nodes under their names, node 0 the `ROOT`, children in node
+//!   order. Each `OFFSET` is the node's rest offset from its parent in the parent's rest frame
+//!   (every rest frame is the world's). A node with an end ([`ArmatureNode::end_site_m`]) carries
+//!   it as an `End Site`. On our track the nodes are the 22 joints under their snake_case names,
+//!   which are SMPL's (`pelvis`, `left_hip`, …), `pelvis` the root, and the five end joints
+//!   (head, wrists, feet) end [`END_SITE_M`](super::armature::END_SITE_M) further along their
+//!   own bone.
+//! - **Channels**: translated nodes ([`ArmatureNode::translated`]: the root, and on our track
+//!   the six joints with animated offsets, hips, spine1, neck and collars) have `Xposition
+//!   Yposition Zposition Zrotation Xrotation Yrotation`, every other node `Zrotation Xrotation
+//!   Yrotation`. The root's positions are its world position; another node's are its offset from
+//!   its parent in the parent's frame at that frame. As for the root, a node's position channels
+//!   **replace** its `OFFSET` for the frame; Blender's importer (`io_anim_bvh`: pose location =
+//!   channels − OFFSET, in the bone's rest frame) and ours ([`crate::import::bvh`]) read them
+//!   so. The root's `OFFSET` being the rest position, readers that add it agree where it is zero.
 //! - **Rotations**: Euler angles in degrees, intrinsic, applied as BVH readers apply channels,
 //!   left to right: the local rotation is `L = Rz(z) · Rx(x) · Ry(y)` (column vectors; the same
-//!   rotation read extrinsically is y about the world y, then x, then z). A joint's world
+//!   rotation read extrinsically is y about the world y, then x, then z). A node's world
 //!   transform is `parent_world · Translate(OFFSET) · L`, with the frame's positions in place of
-//!   `OFFSET` where the joint has position channels (the root: `Translate(position) · L`). This
-//!   is the track's own forward kinematics, so a reader poses exactly its joints.
+//!   `OFFSET` where the node has position channels (the root: `Translate(position) · L`). This
+//!   is the armature's own forward kinematics, so a reader poses exactly its nodes.
 //! - **Continuity**: each frame's angles are, of the two Euler triples of the rotation (`(z, x, y)`
 //!   and `(z + 180, 180 − x, y + 180)`) shifted by whole turns, the one nearest the previous
 //!   frame's, so no channel jumps by about 360° between frames and keyframe interpolation (as in
 //!   Blender) never spins a joint the long way round. Angles may leave (−180°, 180°].
 //! - **Motion**: `Frames` = the track's frames, `Frame Time` = 1 / fps seconds.
-//! - **Axes**: the project's ([`crate::skeleton`]): right-handed, **y up**, the character starts
-//!   facing **+z**, **+x is its left**. Blender's BVH import with its defaults (forward −Z, up Y)
-//!   puts our `(x, y, z)` at Blender's `(x, −z, y)`: upright, facing −Y, left at +X.
-//! - **Units**: [`BvhUnit`]: metres (default) or centimetres, for offsets and positions.
-//!   Lengths are written with 6 decimals in metres (4 in centimetres), angles with 4; trailing
-//!   zeros are dropped.
+//! - **Axes** ([`BvhAxes`]): the project's by default: right-handed, **y up**, the character
+//!   starts facing **+z**, **+x is its left**. Blender's BVH import with its defaults (forward
+//!   −Z, up Y) puts our `(x, y, z)` at Blender's `(x, −z, y)`: upright, facing −Y, left at +X. A
+//!   Z-up file (a user's rig that is one) holds our `(x, y, z)` as `(x, −z, y)`, rotations
+//!   turned alike, as [`crate::import::bvh`] reads Z-up files.
+//! - **Units**: metres (default), centimetres ([`BvhUnit`]) or a rig's own unit, for offsets and
+//!   positions. Lengths are written to the micrometre (6 decimals in metres, 4 in centimetres),
+//!   angles with 4 decimals; trailing zeros are dropped.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use glam::{DQuat, DVec3, EulerRot};
 
+use super::armature::{ArmatureNode, ArmatureTrack};
 use super::error::{write_atomically, ExportError};
-use super::rotations::{RotationTrack, ANIMATED_OFFSETS};
-use crate::skeleton::{Joint, NUM_JOINTS};
-
-/// Length of each End Site along its joint's bone, m: about the head above the SMPL head joint,
-/// the hand beyond the wrist and the toes beyond the ball of the foot.
-pub const END_SITE_M: f64 = 0.1;
+use crate::import::bvh::UpAxis;
 
 /// Decimals of angles, degrees (1e-4° moves a point 1 m away by 2 µm).
 const ANGLE_DECIMALS: usize = 4;
@@ -80,111 +80,126 @@ impl BvhUnit {
             BvhUnit::Centimetres => "centimetres",
         }
     }
+}
 
-    /// Decimals of a length in this unit: micrometre precision.
-    fn decimals(self) -> usize {
-        match self {
-            BvhUnit::Metres => 6,
-            BvhUnit::Centimetres => 4,
-        }
+/// How a BVH file measures: its length unit and up axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BvhAxes {
+    /// File units per metre (positive).
+    pub per_metre: f64,
+    /// The file's up axis; a Z-up file holds our `(x, y, z)` as `(x, −z, y)`.
+    pub up: UpAxis,
+}
+
+impl From<BvhUnit> for BvhAxes {
+    fn from(unit: BvhUnit) -> Self {
+        BvhAxes { per_metre: unit.per_metre(), up: UpAxis::Y }
     }
 }
 
-/// The BVH text of `track` in `unit` (see the module doc for every convention), for a track as
-/// [`RotationTrack::solve`] makes it: at least one frame, a root position and animated offsets
-/// per frame ([`write_bvh`] checks them).
-pub fn bvh_text(track: &RotationTrack, unit: BvhUnit) -> String {
-    let order = hierarchy_order();
+impl BvhAxes {
+    /// Decimals of a length: micrometre precision (6 in metres, 4 in centimetres).
+    fn decimals(self) -> usize {
+        (6.0 - self.per_metre.log10()).round().clamp(0.0, 9.0) as usize
+    }
+
+    /// The file's axes turned from ours: `Rx(90°)` for a Z-up file, else the identity.
+    fn turn(self) -> DQuat {
+        match self.up {
+            UpAxis::Y => DQuat::IDENTITY,
+            UpAxis::Z => DQuat::from_rotation_x(std::f64::consts::FRAC_PI_2),
+        }
+    }
+
+    /// A length vector in metres, our axes, as three numbers in the file's unit and axes.
+    fn vector(self, v_m: DVec3) -> String {
+        (self.turn() * v_m * self.per_metre).to_array().map(|c| number(c, self.decimals())).join(" ")
+    }
+}
+
+/// The BVH text of `track` in `axes` (see the module doc for every convention), for a track whose
+/// [`ArmatureTrack::inconsistency`] is `None` ([`write_bvh`] checks it).
+pub fn bvh_text(track: &ArmatureTrack, axes: BvhAxes) -> String {
+    let order = hierarchy_order(&track.nodes);
     let mut out = String::from("HIERARCHY\n");
-    write_joint(&mut out, track, unit, Joint::Pelvis, 0);
+    write_node(&mut out, &track.nodes, axes, 0, 0);
     let frame_time = number(1.0 / track.fps, FRAME_TIME_DECIMALS);
     let _ = write!(out, "MOTION\nFrames: {}\nFrame Time: {frame_time}\n", track.frames());
-    let mut previous: Option<[DVec3; NUM_JOINTS]> = None;
-    for (t, local) in track.local.iter().enumerate() {
-        let angles: [DVec3; NUM_JOINTS] = std::array::from_fn(|j| euler_zxy_near(local[j], previous.map(|p| p[j])));
-        previous = Some(angles);
-        let mut values: Vec<String> = Vec::with_capacity(3 * NUM_JOINTS + 3 * (1 + ANIMATED_OFFSETS.len()));
-        for &j in &order {
-            if has_position_channels(j) {
-                let position = if j == Joint::Pelvis { track.root_m[t] } else { track.offset_m(t, j) };
-                values.extend((position * unit.per_metre()).to_array().map(|v| number(v, unit.decimals())));
+    // Where each translated node's translation sits in a frame's list.
+    let mut slot = vec![None; track.nodes.len()];
+    for (k, i) in (0..track.nodes.len()).filter(|i| track.nodes[*i].translated).enumerate() {
+        slot[i] = Some(k);
+    }
+    let turn = axes.turn();
+    let mut previous: Option<Vec<DVec3>> = None;
+    for (local, translations) in track.local.iter().zip(&track.translations_m) {
+        let angles: Vec<DVec3> = local
+            .iter()
+            .enumerate()
+            .map(|(i, q)| euler_zxy_near(turn * *q * turn.conjugate(), previous.as_ref().map(|p| p[i])))
+            .collect();
+        let mut values: Vec<String> = Vec::with_capacity(6 * track.nodes.len());
+        for &i in &order {
+            if let Some(k) = slot[i] {
+                values.push(axes.vector(translations[k]));
             }
-            values.extend(angles[j.index()].to_array().map(|a| number(a.to_degrees(), ANGLE_DECIMALS)));
+            values.extend(angles[i].to_array().map(|a| number(a.to_degrees(), ANGLE_DECIMALS)));
         }
+        previous = Some(angles);
         out.push_str(&values.join(" "));
         out.push('\n');
     }
     out
 }
 
-/// Writes [`bvh_text`] to `path` atomically. Fails on a track without frames or whose root
-/// positions, animated offsets and rotations differ in length, and when writing fails.
-pub fn write_bvh(path: &Path, track: &RotationTrack, unit: BvhUnit) -> Result<(), ExportError> {
-    let frames = track.frames();
-    if frames == 0 || track.root_m.len() != frames || track.animated_offsets_m.len() != frames {
-        return Err(ExportError::Shape(format!(
-            "{}: a BVH needs at least one frame and a root position and animated offsets per frame, found {} \
-             rotation, {} root and {} offset frames",
-            path.display(),
-            frames,
-            track.root_m.len(),
-            track.animated_offsets_m.len()
-        )));
+/// Writes [`bvh_text`] to `path` atomically. Fails on a track that is not consistent
+/// ([`ArmatureTrack::inconsistency`]: no frames, rotations and translations of different
+/// lengths) and when writing fails.
+pub fn write_bvh(path: &Path, track: &ArmatureTrack, axes: BvhAxes) -> Result<(), ExportError> {
+    if let Some(what) = track.inconsistency() {
+        return Err(ExportError::Shape(format!("{}: {what}", path.display())));
     }
-    write_atomically(path, bvh_text(track, unit).as_bytes())
+    write_atomically(path, bvh_text(track, axes).as_bytes())
 }
 
-/// Whether `joint` has position channels: the root and the [`ANIMATED_OFFSETS`] joints.
-fn has_position_channels(joint: Joint) -> bool {
-    joint.parent().is_none() || ANIMATED_OFFSETS.contains(&joint)
+/// The children of node `i` in index order.
+fn children(nodes: &[ArmatureNode], i: usize) -> impl Iterator<Item = usize> + '_ {
+    (0..nodes.len()).filter(move |c| nodes[*c].parent == Some(i))
 }
 
-/// The children of `joint` in index order.
-fn children(joint: Joint) -> impl Iterator<Item = Joint> {
-    Joint::ALL.into_iter().filter(move |c| c.parent() == Some(joint))
-}
-
-/// Joints depth first from the pelvis, children in index order: the order of the hierarchy and
+/// Nodes depth first from the root, children in index order: the order of the hierarchy and
 /// of the channels on a motion line.
-fn hierarchy_order() -> Vec<Joint> {
-    let mut order = Vec::with_capacity(NUM_JOINTS);
-    let mut stack = vec![Joint::Pelvis];
-    while let Some(j) = stack.pop() {
-        order.push(j);
-        let mut kids: Vec<Joint> = children(j).collect();
+fn hierarchy_order(nodes: &[ArmatureNode]) -> Vec<usize> {
+    let mut order = Vec::with_capacity(nodes.len());
+    let mut stack = vec![0];
+    while let Some(i) = stack.pop() {
+        order.push(i);
+        let mut kids: Vec<usize> = children(nodes, i).collect();
         kids.reverse();
         stack.extend(kids);
     }
     order
 }
 
-/// Appends the block of `joint` and its descendants, indented by `depth` levels.
-fn write_joint(out: &mut String, track: &RotationTrack, unit: BvhUnit, joint: Joint, depth: usize) {
+/// Appends the block of node `i` and its descendants, indented by `depth` levels.
+fn write_node(out: &mut String, nodes: &[ArmatureNode], axes: BvhAxes, i: usize, depth: usize) {
     let pad = "  ".repeat(depth);
-    let offset = track.skeleton.offsets_m[joint.index()];
-    let keyword = if joint.parent().is_none() { "ROOT" } else { "JOINT" };
-    let channels = if has_position_channels(joint) {
+    let node = &nodes[i];
+    let keyword = if node.parent.is_none() { "ROOT" } else { "JOINT" };
+    let channels = if node.translated {
         "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"
     } else {
         "CHANNELS 3 Zrotation Xrotation Yrotation"
     };
-    let _ = writeln!(out, "{pad}{keyword} {}\n{pad}{{", joint.name());
-    let _ = writeln!(out, "{pad}  OFFSET {}\n{pad}  {channels}", vector(offset, unit));
-    let mut kids = children(joint).peekable();
-    if kids.peek().is_none() {
-        let direction = offset.try_normalize().unwrap_or(joint.raw_offset());
-        let tip = vector(direction * END_SITE_M, unit);
-        let _ = writeln!(out, "{pad}  End Site\n{pad}  {{\n{pad}    OFFSET {tip}\n{pad}  }}");
+    let _ = writeln!(out, "{pad}{keyword} {}\n{pad}{{", node.name);
+    let _ = writeln!(out, "{pad}  OFFSET {}\n{pad}  {channels}", axes.vector(node.offset_m));
+    if let Some(tip) = node.end_site_m {
+        let _ = writeln!(out, "{pad}  End Site\n{pad}  {{\n{pad}    OFFSET {}\n{pad}  }}", axes.vector(tip));
     }
-    for kid in kids {
-        write_joint(out, track, unit, kid, depth + 1);
+    for kid in children(nodes, i) {
+        write_node(out, nodes, axes, kid, depth + 1);
     }
     let _ = writeln!(out, "{pad}}}");
-}
-
-/// A length vector in metres as three numbers in `unit`.
-fn vector(v_m: DVec3, unit: BvhUnit) -> String {
-    (v_m * unit.per_metre()).to_array().map(|c| number(c, unit.decimals())).join(" ")
 }
 
 /// `v` with `decimals` places, trailing zeros dropped and `-0` written `0`.
@@ -218,10 +233,13 @@ mod tests {
 
     use super::*;
     use crate::database::catalog::SourceFormat;
+    use crate::export::armature::END_SITE_M;
     use crate::export::rotations::tests::shipped_clips;
+    use crate::export::rotations::{RotationTrack, ANIMATED_OFFSETS};
     use crate::import::bvh::{Bvh, BvhClip, BvhOptions, LengthUnit, Rig};
     use crate::import::{deepmimic, resample};
     use crate::skeleton::Pose;
+    use crate::skeleton::{Joint, NUM_JOINTS};
 
     fn mocap(name: &str) -> PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mocap").join(name)
@@ -254,7 +272,7 @@ mod tests {
     /// largest distance from `poses` (its [`SolveFit`](super::super::SolveFit)), m.
     fn round_trip(poses: &[Pose], unit: BvhUnit) -> [f64; 3] {
         let track = RotationTrack::solve(poses, 20.0, 0).unwrap();
-        let clip = import(&bvh_text(&track, unit));
+        let clip = import(&bvh_text(&track.armature(), unit.into()));
         let expected_unit = match unit {
             BvhUnit::Metres => LengthUnit::Metres,
             BvhUnit::Centimetres => LengthUnit::Centimetres,
@@ -296,10 +314,21 @@ mod tests {
         track
     }
 
+    /// Whether `joint` of our track has position channels: the root and the animated offsets.
+    fn has_position_channels(joint: Joint) -> bool {
+        joint.parent().is_none() || ANIMATED_OFFSETS.contains(&joint)
+    }
+
+    /// Our joints in the order of the hierarchy and of a motion line.
+    fn joint_order() -> Vec<Joint> {
+        let track = RotationTrack::solve(&[crate::skeleton::rest_pose()], 20.0, 0).unwrap();
+        hierarchy_order(&track.armature().nodes).into_iter().map(|i| Joint::ALL[i]).collect()
+    }
+
     /// The values of `joint` on a motion line: 6 with position channels, else 3.
     fn joint_values(values: &[f64], joint: Joint) -> &[f64] {
         let width = |j: Joint| if has_position_channels(j) { 6 } else { 3 };
-        let order = hierarchy_order();
+        let order = joint_order();
         let start: usize = order.iter().take_while(|j| **j != joint).map(|j| width(*j)).sum();
         &values[start..start + width(joint)]
     }
@@ -317,7 +346,7 @@ mod tests {
         local[Joint::LeftElbow.index()] = DQuat::from_rotation_x(-60f64.to_radians());
         local[Joint::RightHip.index()] = DQuat::from_euler(EulerRot::ZXY, 0.3, -0.4, 0.5);
         let track = one_frame(local, DVec3::new(1.0, 0.9, -2.0));
-        let text = bvh_text(&track, BvhUnit::Metres);
+        let text = bvh_text(&track.armature(), BvhUnit::Metres.into());
         let lines: Vec<&str> = text.lines().map(str::trim).collect();
         assert_eq!(
             lines[..5],
@@ -333,7 +362,7 @@ mod tests {
         assert_eq!(lines.iter().filter(|l| **l == "End Site").count(), 5);
         assert!(text.contains("Frames: 1\nFrame Time: 0.05\n"), "{text}");
         // Depth first: pelvis, left leg (4 joints), right leg, then the spine.
-        let order = hierarchy_order();
+        let order = joint_order();
         assert_eq!(
             order[..6],
             [Joint::Pelvis, Joint::LeftHip, Joint::LeftKnee, Joint::LeftAnkle, Joint::LeftFoot, Joint::RightHip]
@@ -373,10 +402,13 @@ mod tests {
         let rest = track.skeleton.offsets_m[Joint::LeftCollar.index()];
         track.animated_offsets_m[0][collar] = DQuat::from_rotation_z(0.5) * rest;
         let moved = track.forward_kinematics()[0];
-        let text = bvh_text(&track, BvhUnit::Centimetres);
+        let text = bvh_text(&track.armature(), BvhUnit::Centimetres.into());
         // The OFFSET line keeps the rest offset; the frame's position channels hold the moved one.
         let block = &text[text.find("JOINT left_collar").unwrap()..];
-        assert_eq!(block.lines().nth(2).unwrap().trim(), format!("OFFSET {}", vector(rest, BvhUnit::Centimetres)));
+        assert_eq!(
+            block.lines().nth(2).unwrap().trim(),
+            format!("OFFSET {}", BvhAxes::from(BvhUnit::Centimetres).vector(rest))
+        );
         let written = joint_values(&motion_line(&text, 0), Joint::LeftCollar)[..3].to_vec();
         let expected = (track.offset_m(0, Joint::LeftCollar) * 100.0).to_array().map(|v| (v * 1e4).round() / 1e4);
         assert_eq!(written, expected);
@@ -404,7 +436,7 @@ mod tests {
         track.root_m = vec![DVec3::ZERO; frames.len()];
         track.local = frames;
         track.animated_offsets_m = vec![track.animated_offsets_m[0]; track.frames()];
-        let text = bvh_text(&track, BvhUnit::Metres);
+        let text = bvh_text(&track.armature(), BvhUnit::Metres.into());
         for k in 1..track.frames() {
             let (a, b) = (motion_line(&text, k - 1), motion_line(&text, k));
             assert!((b[5] - a[5] - 29.0).abs() < 1e-3, "root y, frame {k}: {} → {}", a[5], b[5]);
@@ -423,10 +455,13 @@ mod tests {
         let (clip, _) = deepmimic::DeepMimicClip::read(&path).unwrap();
         let poses = resample(&clip, 1.0, None);
         let track = RotationTrack::solve(&poses, 20.0, 0).unwrap();
-        let (metres, centimetres) = (bvh_text(&track, BvhUnit::Metres), bvh_text(&track, BvhUnit::Centimetres));
+        let (metres, centimetres) = (
+            bvh_text(&track.armature(), BvhUnit::Metres.into()),
+            bvh_text(&track.armature(), BvhUnit::Centimetres.into()),
+        );
         let hip = track.skeleton.offsets_m[Joint::LeftHip.index()];
-        assert!(metres.contains(&format!("OFFSET {}", vector(hip, BvhUnit::Metres))));
-        assert!(centimetres.contains(&format!("OFFSET {}", vector(hip, BvhUnit::Centimetres))));
+        assert!(metres.contains(&format!("OFFSET {}", BvhAxes::from(BvhUnit::Metres).vector(hip))));
+        assert!(centimetres.contains(&format!("OFFSET {}", BvhAxes::from(BvhUnit::Centimetres).vector(hip))));
         assert_eq!(
             motion_line(&centimetres, 3)[..3],
             (track.root_m[3] * 100.0).to_array().map(|v| (v * 1e4).round() / 1e4)
@@ -452,18 +487,18 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("a").join("motion.bvh");
         let track = one_frame([DQuat::IDENTITY; NUM_JOINTS], DVec3::Y);
-        write_bvh(&path, &track, BvhUnit::Centimetres).unwrap();
-        assert_eq!(std::fs::read_to_string(&path).unwrap(), bvh_text(&track, BvhUnit::Centimetres));
-        let mut ragged = track.clone();
-        ragged.root_m.push(DVec3::ZERO);
-        let err = write_bvh(&path, &ragged, BvhUnit::Metres).unwrap_err().to_string();
-        assert!(err.contains("motion.bvh") && err.contains("1 rotation, 2 root and 1 offset"), "{err}");
-        let mut ragged = track.clone();
-        ragged.animated_offsets_m.clear();
-        let err = write_bvh(&path, &ragged, BvhUnit::Metres).unwrap_err().to_string();
-        assert!(err.contains("1 rotation, 1 root and 0 offset"), "{err}");
-        let empty = RotationTrack { root_m: vec![], local: vec![], animated_offsets_m: vec![], ..track };
-        assert!(write_bvh(&dir.path().join("b.bvh"), &empty, BvhUnit::Metres).is_err());
+        write_bvh(&path, &track.armature(), BvhUnit::Centimetres.into()).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), bvh_text(&track.armature(), BvhUnit::Centimetres.into()));
+        let mut ragged = track.armature();
+        ragged.translations_m.push(vec![DVec3::ZERO; 7]);
+        let err = write_bvh(&path, &ragged, BvhUnit::Metres.into()).unwrap_err().to_string();
+        assert!(err.contains("motion.bvh") && err.contains("1 frames of rotations for 22 nodes and 2 frames"), "{err}");
+        let mut ragged = track.armature();
+        ragged.translations_m[0].pop();
+        let err = write_bvh(&path, &ragged, BvhUnit::Metres.into()).unwrap_err().to_string();
+        assert!(err.contains("translations for 7 nodes do not agree"), "{err}");
+        let empty = ArmatureTrack { local: vec![], translations_m: vec![], ..track.armature() };
+        assert!(write_bvh(&dir.path().join("b.bvh"), &empty, BvhUnit::Metres.into()).is_err());
         assert!(!dir.path().join("b.bvh").exists());
     }
 }

@@ -22,6 +22,10 @@ pub enum ExportError {
     /// Nothing to export, or samples of different lengths where one length is needed.
     #[error("cannot export: {0}")]
     Shape(String),
+    /// A rig to retarget onto cannot be read or matched to our joints (the message names the
+    /// file).
+    #[error("cannot retarget: {0}")]
+    Rig(String),
     /// An input file is unreadable, malformed or over a limit.
     #[error(transparent)]
     File(#[from] crate::files::FileError),

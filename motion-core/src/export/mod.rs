@@ -12,6 +12,7 @@
 //! Every writer builds its file in memory and writes it with [`write_atomically`]: a failure
 //! leaves no half-written file behind.
 
+pub mod armature;
 pub mod bvh;
 mod error;
 mod folder;
@@ -19,12 +20,16 @@ pub mod gltf;
 pub mod in_place;
 mod outputs;
 pub mod resample;
+pub mod retarget;
 pub mod rotations;
 pub mod scene;
 pub mod viewer;
 
+pub use armature::{ArmatureNode, ArmatureTrack};
 pub use error::{write_atomically, ExportError};
 pub use folder::OutputFolder;
-pub use outputs::{read_joints_npy, write_outputs, ExportInput, ExportManifest, ExportedSample, Probe};
+pub use outputs::{
+    read_joints_npy, write_outputs, ExportInput, ExportManifest, ExportedSample, Probe, RigFile, RigProbe,
+};
 pub use rotations::{RigSkeleton, RotationTrack, SolveFit, ANIMATED_OFFSETS};
 pub use scene::{position_targets, scene_boxes, PositionTarget, SceneBox, SceneExtent, SceneRole};

@@ -19,10 +19,12 @@ use serde::Serialize;
 use super::bvh::{write_bvh, BvhUnit};
 use super::error::{write_atomically, ExportError};
 use super::gltf::write_glb;
+use super::retarget::{retarget, RetargetReport, Retargeted, TargetRig};
 use super::rotations::{RotationTrack, SolveFit};
 use super::scene::{scene_boxes, PositionTarget, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
 use crate::files::FileError;
+use crate::import::bvh::UpAxis;
 use crate::program::{Carry, Primitive};
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
@@ -63,6 +65,9 @@ pub struct ExportInput<'a> {
     pub file_fps: Option<u32>,
     /// Whether the files leave the root's horizontal motion out ([`RotationTrack::in_place`]).
     pub in_place: bool,
+    /// A rig of the user's to write each motion onto as well ([`retarget`]), in its own unit and
+    /// up axis.
+    pub rig: Option<&'a TargetRig>,
 }
 
 /// One joint's position at one frame, by forward kinematics of the solved track.
@@ -94,6 +99,38 @@ pub struct ExportedSample {
     pub fit_max_m: f64,
     /// Positions to check imports against.
     pub probes: Vec<Probe>,
+    /// The motion on the user's rig, when one was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rig: Option<RigFile>,
+}
+
+/// One sample's motion on the user's rig.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RigFile {
+    /// BVH file on the rig, relative to the output folder.
+    pub bvh: String,
+    /// The rig file's units per metre (its lengths are written in them).
+    pub units_per_metre: f64,
+    /// Whether the file is Z-up (as the rig is).
+    pub z_up: bool,
+    /// What carried over.
+    pub report: RetargetReport,
+    /// The rig's nodes of some of our joints at a few frames, m, our axes (y up), to check
+    /// imports against.
+    pub probes: Vec<RigProbe>,
+}
+
+/// One rig node's position at one frame.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RigProbe {
+    /// The rig's node name.
+    pub node: String,
+    /// Our joint it carries.
+    pub joint: &'static str,
+    /// Frame of the file, from 0.
+    pub frame: usize,
+    /// Position, m, our axes.
+    pub position_m: [f64; 3],
 }
 
 /// `export.json`.
@@ -143,9 +180,15 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
     };
     let mut samples = Vec::with_capacity(tracks.len());
     let files = tracks.iter().map(|track| file_track(track, input)).collect::<Result<Vec<_>, _>>()?;
-    for (i, ((track, file), (label, poses))) in tracks.iter().zip(&files).zip(&input.samples).enumerate() {
+    let retargeted = match input.rig {
+        Some(rig) => files.iter().map(|file| retarget(file, rig).map(Some)).collect::<Result<Vec<_>, _>>()?,
+        None => vec![None; files.len()],
+    };
+    for (i, (((track, file), (label, poses)), on_rig)) in
+        tracks.iter().zip(&files).zip(&input.samples).zip(retargeted).enumerate()
+    {
         let (bvh, glb) = (format!("sample_{i}/motion.bvh"), format!("sample_{i}/motion.glb"));
-        write_bvh(&out.join(&bvh), file, input.bvh_unit)?;
+        write_bvh(&out.join(&bvh), &file.armature(), input.bvh_unit.into())?;
         write_glb(&out.join(&glb), label, file, &boxes)?;
         let SolveFit { mean_m, max_m } = track.fit(poses);
         samples.push(ExportedSample {
@@ -156,6 +199,10 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
             fit_mean_m: mean_m,
             fit_max_m: max_m,
             probes: probes(&file.forward_kinematics()),
+            rig: match (on_rig, input.rig) {
+                (Some(on_rig), Some(rig)) => Some(rig_file(out, i, on_rig, rig)?),
+                _ => None,
+            },
         });
     }
     write_viewer(&out.join("viewer.html"), &viewer)?;
@@ -184,6 +231,31 @@ fn file_track<'t>(track: &'t RotationTrack, input: &ExportInput<'_>) -> Result<C
         file = Cow::Owned(file.in_place());
     }
     Ok(file)
+}
+
+/// Writes sample `i`'s motion on `rig` as `sample_<i>/<rig name>.bvh` and describes it.
+fn rig_file(out: &Path, i: usize, on_rig: Retargeted, rig: &TargetRig) -> Result<RigFile, ExportError> {
+    let bvh = format!("sample_{i}/{}.bvh", rig.name());
+    write_bvh(&out.join(&bvh), &on_rig.track, rig.axes)?;
+    let probes = probes(&on_rig.poses)
+        .into_iter()
+        .map(|p| {
+            let joint = Joint::ALL.into_iter().find(|j| j.name() == p.joint).unwrap_or(Joint::Pelvis);
+            RigProbe {
+                node: rig.nodes[rig.map[joint.index()]].name.clone(),
+                joint: p.joint,
+                frame: p.frame,
+                position_m: p.position_m,
+            }
+        })
+        .collect();
+    Ok(RigFile {
+        bvh,
+        units_per_metre: rig.axes.per_metre,
+        z_up: rig.axes.up == UpAxis::Z,
+        report: on_rig.report,
+        probes,
+    })
 }
 
 /// [`PROBE_JOINTS`] of forward-kinematics poses `fk` at the first frame, a third, two thirds

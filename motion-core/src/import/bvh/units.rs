@@ -65,7 +65,7 @@ pub enum UpAxis {
 
 impl UpAxis {
     /// A file-axes vector in our axes.
-    pub(super) fn to_ours(self, v: DVec3) -> DVec3 {
+    pub fn to_ours(self, v: DVec3) -> DVec3 {
         match self {
             UpAxis::Y => v,
             UpAxis::Z => DVec3::new(v.x, v.z, -v.y),

@@ -1,0 +1,15 @@
+//! Motions on the user's own rig: a skeleton read from a BVH file ([`TargetRig`]), its nodes
+//! matched to our 22 joints by the bone names of the common conventions or an explicit map
+//! ([`names`]), and the motion carried onto it with its feet kept where the motion plants them
+//! ([`transfer`]), written in the rig's own unit and up axis.
+
+pub mod names;
+pub mod rig;
+pub mod transfer;
+
+#[cfg(test)]
+mod tests;
+
+pub use names::{Convention, Matched};
+pub use rig::TargetRig;
+pub use transfer::{retarget, RetargetReport, Retargeted};

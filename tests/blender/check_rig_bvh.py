@@ -1,0 +1,145 @@
+"""Checks the motions an export folder wrote onto a user's rig (`mogen ... --rig RIG.bvh`) in
+Blender.
+
+Run:
+
+    blender -b --factory-startup --python tests/blender/check_rig_bvh.py -- <export_dir> <rig.bvh>
+
+`<export_dir>/export.json` gives per sample a `rig` entry: the BVH on the rig (`bvh`), its unit
+(`units_per_metre`), whether it is Z-up (`z_up`), and probes: the rig node carrying one of our
+joints at a few frames, `position_m` in our axes (metres, y up, facing +z, +x the character's
+left).
+
+Each file is imported with Blender's own BVH importer, scaled to metres, with axes that put our
+(x, y, z) at Blender's (x, -z, y) whatever the file's up axis: forward -Z, up Y for a Y-up file
+(the importer's defaults), forward Y, up Z (no turn) for a Z-up one, whose file axes already are
+(x, -z, y). The script checks that the armature's bones are the rig's nodes under the same names
+with the same parents (its hierarchy as `<rig.bvh>` declares it), that the action is keyed on
+every frame, and that every probed bone's head is within 1 cm of its probe. It exits 1 with one
+line per failure, or prints a summary and exits 0.
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import bpy
+
+sys.path.insert(0, str(Path(__file__).parent))
+from check_bvh import TOLERANCE_M, open_without_universal_newlines, to_blender  # noqa: E402
+
+
+def hierarchy(path):
+    """{node name: parent name or None} of a BVH file's HIERARCHY (End Sites left out)."""
+    parents, stack, pending = {}, [], None
+    for line in Path(path).read_text().splitlines():
+        words = line.split()
+        if not words:
+            continue
+        if words[0] == "MOTION":
+            break
+        if words[0] in ("ROOT", "JOINT"):
+            pending = words[1]
+            parents[pending] = stack[-1] if stack else None
+        elif words[0] == "End":
+            pending = None
+        elif words[0] == "{":
+            stack.append(pending)
+        elif words[0] == "}":
+            stack.pop()
+    return parents
+
+
+def import_rig_bvh(path, metres_per_unit, z_up):
+    from io_anim_bvh import import_bvh as importer
+
+    before = set(bpy.data.objects)
+    with open_without_universal_newlines(importer):
+        result = bpy.ops.import_anim.bvh(
+            filepath=str(path),
+            target="ARMATURE",
+            global_scale=metres_per_unit,
+            frame_start=1,
+            use_fps_scale=False,
+            update_scene_fps=True,
+            update_scene_duration=True,
+            rotate_mode="NATIVE",
+            axis_forward="Y" if z_up else "-Z",
+            axis_up="Z" if z_up else "Y",
+        )
+    if result != {"FINISHED"}:
+        raise RuntimeError(f"{path}: the BVH importer returned {result}")
+    armatures = [o for o in set(bpy.data.objects) - before if o.type == "ARMATURE"]
+    if len(armatures) != 1:
+        raise RuntimeError(f"{path}: expected one new armature, found {len(armatures)}")
+    return armatures[0]
+
+
+def check_sample(root, sample, rig_tree):
+    rig = sample.get("rig")
+    if rig is None:
+        return [f"sample {sample['bvh']}: export.json has no rig entry"], 0.0
+    where = rig["bvh"]
+    arm = import_rig_bvh(root / rig["bvh"], 1.0 / rig["units_per_metre"], rig["z_up"])
+    failures = []
+    bones = {b.name: (b.parent.name if b.parent else None) for b in arm.data.bones}
+    if bones != rig_tree:
+        missing = sorted(set(rig_tree) - set(bones))
+        extra = sorted(set(bones) - set(rig_tree))
+        moved = sorted(n for n in set(bones) & set(rig_tree) if bones[n] != rig_tree[n])
+        failures.append(f"{where}: bones differ from the rig's nodes (missing {missing}, extra {extra}, "
+                        f"other parent {moved})")
+    frames = sample["frames"]
+    action = arm.animation_data.action if arm.animation_data else None
+    keys = [k.co[0] for c in action.fcurves for k in c.keyframe_points] if action else []
+    if not keys or (min(keys), max(keys)) != (1.0, float(frames)):
+        failures.append(f"{where}: keyed on frames {keys and (min(keys), max(keys))}, expected 1..{frames}")
+    worst = 0.0
+    for probe in rig["probes"]:
+        bone = arm.pose.bones.get(probe["node"])
+        if bone is None:
+            failures.append(f"{where}: no bone {probe['node']!r}")
+            continue
+        bpy.context.scene.frame_set(probe["frame"] + 1)
+        error = ((arm.matrix_world @ bone.head) - to_blender(probe["position_m"])).length
+        worst = max(worst, error)
+        if error > TOLERANCE_M:
+            failures.append(f"{where}: {probe['node']} ({probe['joint']}) at frame {probe['frame']} is "
+                            f"{error * 100:.2f} cm from the probe")
+    return failures, worst
+
+
+def main(argv):
+    args = argv[argv.index("--") + 1:] if "--" in argv else []
+    if len(args) != 2:
+        print("usage: blender -b --factory-startup --python tests/blender/check_rig_bvh.py -- <export_dir> <rig.bvh>",
+              file=sys.stderr)
+        return 2
+    root, rig_file = Path(args[0]), Path(args[1])
+    rig_tree = hierarchy(rig_file)
+    samples = json.loads((root / "export.json").read_text())["samples"]
+    failures, lines = [], []
+    for sample in samples:
+        sample_failures, worst = check_sample(root, sample, rig_tree)
+        failures += sample_failures
+        lines.append(f"  {sample.get('rig', {}).get('bvh')}: {sample['frames']} frames, largest probe error "
+                     f"{worst * 1000:.3f} mm")
+    if failures:
+        print("\n".join(f"FAIL: {f}" for f in failures), file=sys.stderr)
+        return 1
+    print(f"OK: {len(samples)} samples on the rig {rig_file.name} ({len(rig_tree)} bones, its names and parents) "
+          f"import into Blender {bpy.app.version_string}; every probe within {TOLERANCE_M * 100:g} cm:")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        code = main(sys.argv)
+    except Exception as e:  # Blender would print the traceback and exit 0.
+        import traceback
+
+        traceback.print_exc()
+        print(f"FAIL: {type(e).__name__}: {e}", file=sys.stderr)
+        code = 1
+    sys.exit(code)
