@@ -65,8 +65,8 @@ fn our_own_skeleton_as_the_target_reproduces_our_joints() {
     assert!(read_back(&done, &rig) < 1e-4);
 }
 
-/// The README's main command's motion (the shipped prior's, committed in
-/// `fixtures/results/session35-main/`): a walk through a gap, on the prior's skeleton, whose
+/// The README's main command's motion (the shipped prior's, committed with that command's
+/// results under `fixtures/results/`): a walk through a gap, on the prior's skeleton, whose
 /// trunk and shoulder shape the shipped rigs follow.
 fn main_command_motion() -> RotationTrack {
     let motions = crate::export::read_joints_npy(&fixture("results/session35-main/joints.npy")).unwrap();
