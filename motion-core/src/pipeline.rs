@@ -21,7 +21,7 @@ use candle_core::Device;
 use crate::constraints::checked::CheckedProgram;
 use crate::evaluation::{self, TaskReport};
 use crate::export::bvh::BvhUnit;
-use crate::export::retarget::TargetRig;
+use crate::export::retarget::{RigJudge, TargetRig};
 use crate::export::{position_targets, write_outputs, ExportError, ExportInput, ExportManifest, OutputFolder};
 use crate::generation::method::{Generated, GenerationConfig, Method, Task};
 use crate::generation::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
@@ -112,7 +112,7 @@ pub fn run_task(
     on: impl FnMut(Event<'_>),
 ) -> Result<TaskOutcome, PipelineError> {
     let run = generate_task(prior, program, settings, device, on)?;
-    let exports = write_task(&folder, prior, program.program(), &run, &settings.exports)?;
+    let exports = write_task(&folder, prior, program, &run, &settings.exports)?;
     let folder = folder.commit()?;
     Ok(TaskOutcome { report: run.report, exports, folder })
 }
@@ -233,10 +233,11 @@ pub struct ExportOptions {
 fn write_task(
     folder: &OutputFolder,
     prior: &Prior,
-    program: &TaskProgram,
+    checked: &CheckedProgram,
     run: &TaskRun,
     options: &ExportOptions,
 ) -> Result<ExportManifest, PipelineError> {
+    let program = checked.program();
     let (generated, report) = (&run.generated, &run.report);
     let config = &report.config;
     folder.write_npy("features.npy", &prior.to_features(&generated.features)?)?;
@@ -256,8 +257,9 @@ fn write_task(
     motion_strip(&rows, 8, &scene, &carried, &program.text, &folder.path().join("strip.png"))?;
     folder.write("program.json", (serde_json::to_string_pretty(program)? + "\n").as_bytes())?;
     let report_json = Some(serde_json::to_value(report)?);
-    let motions = Motions { title: &program.text, fps: FPS, poses: &poses, labels };
-    write_exports(folder, motions, Some(program), report_json, options)
+    let initial = tensor_to_poses(&generated.initial_joints)?;
+    let motions = Motions { title: &program.text, fps: FPS, poses: &poses, labels, initial: Some(&initial) };
+    write_exports(folder, motions, Some(checked), report_json, options)
 }
 
 /// Motions to write: a title, their frame rate (fps), the poses and a label for each.
@@ -271,18 +273,23 @@ pub struct Motions<'a> {
     pub poses: &'a [Vec<Pose>],
     /// One label per motion.
     pub labels: Vec<String>,
+    /// Per motion, the unoptimised motion its task's `stay_near_initial` constraints compare
+    /// with, when known (the constraints are judged again on a `--rig`).
+    pub initial: Option<&'a [Vec<Pose>]>,
 }
 
 /// Writes the BVH and GLB of every motion, the viewer page, `export.json` and, when asked,
-/// `motion.gif` into `folder` (committed by the caller). `program`'s scene, position targets
-/// and carried objects are drawn; `report` is shown by the viewer.
+/// `motion.gif` into `folder` (committed by the caller). `checked`'s scene, position targets
+/// and carried objects are drawn, and its constraints judged again on a `--rig`; `report` is
+/// shown by the viewer.
 pub fn write_exports(
     folder: &OutputFolder,
-    Motions { title, fps, poses, labels }: Motions<'_>,
-    program: Option<&TaskProgram>,
+    Motions { title, fps, poses, labels, initial }: Motions<'_>,
+    checked: Option<&CheckedProgram>,
     report: Option<serde_json::Value>,
     options: &ExportOptions,
 ) -> Result<ExportManifest, PipelineError> {
+    let program = checked.map(CheckedProgram::program);
     let input = ExportInput {
         title: title.to_owned(),
         fps,
@@ -295,6 +302,7 @@ pub fn write_exports(
         file_fps: options.fps,
         in_place: options.in_place,
         rig: options.rig.as_ref(),
+        judge: checked.map(|c| RigJudge { compiled: c.compiled(), device: c.device(), initial }),
     };
     let manifest = write_outputs(folder.path(), &input)?;
     if options.gif {

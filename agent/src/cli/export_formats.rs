@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 use motion_core::export::bvh::BvhUnit;
-use motion_core::export::retarget::TargetRig;
+use motion_core::export::retarget::{RigConstraint, TargetRig};
 use motion_core::export::ExportManifest;
 use motion_core::pipeline::ExportOptions;
 
@@ -90,6 +90,19 @@ pub fn print_exports(folder: &Path, manifest: &ExportManifest, gif: bool) {
             r.skate_rig,
             r.skate_ours,
         );
+        if !rig.constraints.is_empty() {
+            let count = |met: fn(&RigConstraint) -> bool| rig.constraints.iter().filter(|c| met(c)).count();
+            let lost: Vec<&str> =
+                rig.constraints.iter().filter(|c| c.ours && !c.on_rig).map(|c| c.id.as_str()).collect();
+            eprintln!(
+                "  the task's {} constraints on the rig: {} met where it stands, {} at our scale (ours: {}){}",
+                rig.constraints.len(),
+                count(|c| c.on_rig),
+                count(|c| c.at_our_scale),
+                count(|c| c.ours),
+                if lost.is_empty() { String::new() } else { format!("; not carried over: {}", lost.join(", ")) }
+            );
+        }
     }
     if manifest.samples.iter().filter_map(|s| s.rig.as_ref()).any(|r| r.report.from_ours_max_m > 0.03) {
         eprintln!(

@@ -57,8 +57,8 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
     let title = program.map_or_else(|| joints.display().to_string(), |p| p.text.clone());
     let out = OutputFolder::create(&args.out.unwrap_or(folder))?;
     let labels = (0..motions.len()).map(|i| format!("sample {i}")).collect();
-    let motions = Motions { title: &title, fps: args.input_fps, poses: &motions, labels };
-    let manifest = write_exports(&out, motions, program, report, &exports)
+    let motions = Motions { title: &title, fps: args.input_fps, poses: &motions, labels, initial: None };
+    let manifest = write_exports(&out, motions, checked.as_ref(), report, &exports)
         .with_context(|| format!("exporting into {}", out.target().display()))?;
     // The folder's other files (the run's npy, report, strip) stay.
     out.keep_existing()?;

@@ -123,7 +123,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
         .collect();
     motion_strip(&rows, 8, &[], &[], &args.prompt, &folder.path().join("strip.png"))?;
     let labels = (0..poses.len()).map(|i| format!("sample {i} (seed {})", args.seed)).collect();
-    let motions = Motions { title: &args.prompt, fps: FPS, poses: &poses, labels };
+    let motions = Motions { title: &args.prompt, fps: FPS, poses: &poses, labels, initial: None };
     let manifest = write_exports(&folder, motions, None, None, &exports)?;
     let out = folder.commit()?;
     print_exports(&out, &manifest, args.formats.gif);

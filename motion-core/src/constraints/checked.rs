@@ -20,6 +20,7 @@ use crate::program::{Problem, ProgramError, RelationalParse, TaskProgram};
 pub struct CheckedProgram {
     program: TaskProgram,
     compiled: CompiledProgram,
+    device: Device,
 }
 
 impl CheckedProgram {
@@ -42,7 +43,7 @@ impl CheckedProgram {
         let check =
             probed.map_err(|error| vec![inconsistent("constraints", format!("cannot be evaluated: {error}"))])?;
         if check.passes() {
-            return Ok(CheckedProgram { program, compiled });
+            return Ok(CheckedProgram { program, compiled, device: device.clone() });
         }
         let mut problems: Vec<ProgramError> = check
             .stalled
@@ -79,13 +80,18 @@ impl CheckedProgram {
         &self.compiled
     }
 
+    /// The device the program was compiled on (its motions' tensors must live there).
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
     /// The program with `parse` as its relational parse, checked against the program's ids (the
     /// compiled loss does not depend on the parse).
     pub fn with_relational_parse(self, parse: Option<RelationalParse>) -> Result<Self, Vec<ProgramError>> {
-        let CheckedProgram { mut program, compiled } = self;
+        let CheckedProgram { mut program, compiled, device } = self;
         program.relational_parse = parse;
         program.validate()?;
-        Ok(CheckedProgram { program, compiled })
+        Ok(CheckedProgram { program, compiled, device })
     }
 }
 

@@ -19,7 +19,7 @@ use serde::Serialize;
 use super::bvh::{write_bvh, BvhUnit};
 use super::error::{write_atomically, ExportError};
 use super::gltf::write_glb;
-use super::retarget::{retarget, RetargetReport, Retargeted, TargetRig};
+use super::retarget::{judge_on_rig, retarget, RetargetReport, Retargeted, RigConstraint, RigJudge, TargetRig};
 use super::rotations::{RotationTrack, SolveFit};
 use super::scene::{scene_boxes, PositionTarget, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
@@ -68,6 +68,8 @@ pub struct ExportInput<'a> {
     /// A rig of the user's to write each motion onto as well ([`retarget`]), in its own unit and
     /// up axis.
     pub rig: Option<&'a TargetRig>,
+    /// The task's constraints, judged again on the rig's motion when a rig is given.
+    pub judge: Option<RigJudge<'a>>,
 }
 
 /// One joint's position at one frame, by forward kinematics of the solved track.
@@ -115,6 +117,11 @@ pub struct RigFile {
     pub z_up: bool,
     /// What carried over.
     pub report: RetargetReport,
+    /// The task's constraints judged on the rig's motion at the motion's frame rate, moving
+    /// (empty without a task, or when a constraint compares with an unoptimised motion that is
+    /// not known).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub constraints: Vec<RigConstraint>,
     /// The rig's nodes of some of our joints at a few frames, m, our axes (y up), to check
     /// imports against.
     pub probes: Vec<RigProbe>,
@@ -200,7 +207,13 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
             fit_max_m: max_m,
             probes: probes(&file.forward_kinematics()),
             rig: match (on_rig, input.rig) {
-                (Some(on_rig), Some(rig)) => Some(rig_file(out, i, on_rig, rig)?),
+                (Some(on_rig), Some(rig)) => {
+                    let constraints = match &input.judge {
+                        Some(judge) => judged_on_rig(judge, i, track, matches!(file, Cow::Borrowed(_)), &on_rig, rig)?,
+                        None => Vec::new(),
+                    };
+                    Some(rig_file(out, i, on_rig, rig, constraints)?)
+                }
                 _ => None,
             },
         });
@@ -234,7 +247,13 @@ fn file_track<'t>(track: &'t RotationTrack, input: &ExportInput<'_>) -> Result<C
 }
 
 /// Writes sample `i`'s motion on `rig` as `sample_<i>/<rig name>.bvh` and describes it.
-fn rig_file(out: &Path, i: usize, on_rig: Retargeted, rig: &TargetRig) -> Result<RigFile, ExportError> {
+fn rig_file(
+    out: &Path,
+    i: usize,
+    on_rig: Retargeted,
+    rig: &TargetRig,
+    constraints: Vec<RigConstraint>,
+) -> Result<RigFile, ExportError> {
     let bvh = format!("sample_{i}/{}.bvh", rig.name());
     write_bvh(&out.join(&bvh), &on_rig.track, rig.axes)?;
     let probes = probes(&on_rig.poses)
@@ -254,8 +273,28 @@ fn rig_file(out: &Path, i: usize, on_rig: Retargeted, rig: &TargetRig) -> Result
         units_per_metre: rig.axes.per_metre,
         z_up: rig.axes.up == UpAxis::Z,
         report: on_rig.report,
+        constraints,
         probes,
     })
+}
+
+/// Sample `i`'s constraints judged on `rig`: on `on_rig` when the files hold the motion itself
+/// (`files_are_the_motion`), else (resampled or in place) on the solved `track` carried over
+/// anew, since the program's frames are the motion's and its positions move with it.
+fn judged_on_rig(
+    judge: &RigJudge<'_>,
+    i: usize,
+    track: &RotationTrack,
+    files_are_the_motion: bool,
+    on_rig: &Retargeted,
+    rig: &TargetRig,
+) -> Result<Vec<RigConstraint>, ExportError> {
+    let ours = track.forward_kinematics();
+    if files_are_the_motion {
+        return judge_on_rig(judge, i, &ours, &on_rig.poses, on_rig.report.leg_ratio);
+    }
+    let moving = retarget(track, rig)?;
+    judge_on_rig(judge, i, &ours, &moving.poses, moving.report.leg_ratio)
 }
 
 /// [`PROBE_JOINTS`] of forward-kinematics poses `fk` at the first frame, a third, two thirds

@@ -3,6 +3,7 @@
 //! ([`names`]), and the motion carried onto it with its feet kept where the motion plants them
 //! ([`transfer`]), written in the rig's own unit and up axis.
 
+pub mod judge;
 pub mod names;
 pub mod rig;
 pub mod transfer;
@@ -10,6 +11,7 @@ pub mod transfer;
 #[cfg(test)]
 mod tests;
 
+pub use judge::{judge_on_rig, RigConstraint, RigJudge};
 pub use names::{Convention, Matched};
 pub use rig::TargetRig;
 pub use transfer::{retarget, RetargetReport, Retargeted};

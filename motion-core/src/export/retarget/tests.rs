@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use super::{retarget, Convention, Matched, Retargeted, TargetRig};
+use super::{judge_on_rig, retarget, Convention, Matched, Retargeted, RigJudge, TargetRig};
 use crate::export::bvh::bvh_text;
 use crate::export::rotations::RotationTrack;
 use crate::import::bvh::{Bvh, BvhAnimation, LengthUnit, UpAxis};
@@ -95,6 +95,12 @@ fn every_shipped_rig_carries_the_walk_with_the_feet_where_it_plants_them() {
         }
         assert!(r.contact_miss_max_m < 0.01, "{file}: a planted foot is {} m off", r.contact_miss_max_m);
         assert!(
+            r.from_ours_on_rig_bones_max_m < 0.03,
+            "{file}: {} m from ours on the rig's bones ({})",
+            r.from_ours_on_rig_bones_max_m,
+            r.from_ours_on_rig_bones_joint
+        );
+        assert!(
             r.skate_rig <= r.skate_ours * 1.1 + 1e-9,
             "{file}: skate {} against ours {}",
             r.skate_rig,
@@ -149,4 +155,30 @@ fn a_rig_that_cannot_be_matched_is_refused_naming_what_it_lacks() {
     assert!(err.contains("map.json: a joint map is a JSON object"), "{err}");
     let missing = TargetRig::read_bvh(&dir.path().join("none.bvh"), None).unwrap_err().to_string();
     assert!(missing.contains("none.bvh"), "{missing}");
+}
+
+#[test]
+fn the_tasks_constraints_are_judged_again_where_the_rig_stands_and_at_our_scale() {
+    let text = std::fs::read_to_string(fixture("results/session35-main/program.json")).unwrap();
+    let program = crate::program::TaskProgram::from_json(&text).unwrap();
+    let checked = crate::constraints::checked::CheckedProgram::check(program, &candle_core::Device::Cpu).unwrap();
+    let judge = RigJudge { compiled: checked.compiled(), device: checked.device(), initial: None };
+    let track = main_command_motion();
+    let ours = track.forward_kinematics();
+    let verdicts = |file: &str| {
+        let rig = TargetRig::read_bvh(&fixture("rigs").join(file), None).unwrap();
+        let done = retarget(&track, &rig).unwrap();
+        let judged = judge_on_rig(&judge, 0, &ours, &done.poses, done.report.leg_ratio).unwrap();
+        judged.into_iter().map(|c| (c.id, [c.ours, c.on_rig, c.at_our_scale])).collect::<Vec<_>>()
+    };
+    // Our size: every constraint holds on the rig as on ours.
+    let same = verdicts("a_pose.bvh");
+    assert_eq!(same, ["c1", "c2", "c3"].map(|id| (id.to_owned(), [true; 3])), "{same:?}");
+    // 1.05 times our size: the pelvis ends 5.25 m ahead, so the 5 m target holds only at our
+    // scale; the gap and the standing feet hold on the rig.
+    let larger = verdicts("mixamo.bvh");
+    assert_eq!(larger[1], ("c2".to_owned(), [true, false, true]), "{larger:?}");
+    assert_eq!((larger[0].1, larger[2].1), ([true; 3], [true; 3]), "{larger:?}");
+    // The wrong frame count judges nothing.
+    assert!(judge_on_rig(&judge, 0, &ours[..50], &ours[..50], 1.0).unwrap().is_empty());
 }

@@ -38,6 +38,7 @@ use crate::export::error::ExportError;
 use crate::export::rotations::RotationTrack;
 use crate::metrics::{foot_skate_ratio, SKATE_CONTACT_HEIGHT_M};
 use crate::motion::leg_ik::{knee_bend, solve_leg, Leg};
+use crate::motion::retarget_bone_lengths;
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
 /// Width of the soft zone below the rig's full leg reach, m ([`solve_leg`]).
@@ -82,6 +83,14 @@ pub struct RetargetReport {
     pub from_ours_max_m: f64,
     /// The joint of that distance.
     pub from_ours_joint: &'static str,
+    /// Largest distance over frames of a rig joint above the knees from ours with the rig's bone
+    /// lengths (every bone's direction kept, the pelvis path scaled by the leg ratio and lifted
+    /// as the rig stands: [`retarget_bone_lengths`]), m: how faithfully the bones were turned,
+    /// whatever the proportions. The knees, ankles and toes are the leg IK's
+    /// ([`RetargetReport::leg_fix_max_m`], [`RetargetReport::contact_miss_max_m`]).
+    pub from_ours_on_rig_bones_max_m: f64,
+    /// The joint of that distance.
+    pub from_ours_on_rig_bones_joint: &'static str,
     /// Largest distance the leg IK moved a knee, ankle or toe from where the transfer put it, m.
     pub leg_fix_max_m: f64,
     /// Largest distance of a rig ankle or toe from its scaled target at the frames where our foot
@@ -198,7 +207,16 @@ pub fn retarget(track: &RotationTrack, rig: &TargetRig) -> Result<Retargeted, Ex
         }
         out.translations_m.push(translations);
     }
-    let (from_ours_max_m, from_ours_joint) = farthest(&poses, &ours, s);
+    let (from_ours_max_m, from_ours_joint) = farthest(&poses, &ours, s, &Joint::ALL);
+    let rig_bones = Joint::ALL.map(|j| j.parent().map_or(0.0, |parent| at(j).distance(at(parent))));
+    let on_rig_bones: Vec<Pose> = retarget_bone_lengths(&ours, &rig_bones)
+        .into_iter()
+        .map(|pose| pose.map(|v| v + DVec3::Y * lift(Joint::Pelvis)))
+        .collect();
+    let above_knees: Vec<Joint> =
+        Joint::ALL.into_iter().filter(|j| !LEGS.iter().any(|leg| leg[1..].contains(j))).collect();
+    let (from_ours_on_rig_bones_max_m, from_ours_on_rig_bones_joint) =
+        farthest(&poses, &on_rig_bones, 1.0, &above_knees);
     let scaled: Vec<Pose> = poses.iter().map(|pose| pose.map(|v| v / s)).collect();
     let report = RetargetReport {
         rig: rig.name(),
@@ -208,6 +226,8 @@ pub fn retarget(track: &RotationTrack, rig: &TargetRig) -> Result<Retargeted, Ex
         leg_ratio: s,
         from_ours_max_m,
         from_ours_joint,
+        from_ours_on_rig_bones_max_m,
+        from_ours_on_rig_bones_joint,
         leg_fix_max_m: leg_fix,
         contact_miss_max_m: contact_miss,
         unreached_frames: unreached,
@@ -293,11 +313,12 @@ fn positions(rig: &TargetRig, d: &[DQuat], root_at: DVec3, pelvis: usize, pelvis
     out
 }
 
-/// The largest distance between `rig` joints divided by `s` and `ours`, m, and its joint.
-fn farthest(rig: &[Pose], ours: &[Pose], s: f64) -> (f64, &'static str) {
+/// The largest distance over `joints` between `rig` joints divided by `s` and `ours`, m, and its
+/// joint.
+fn farthest(rig: &[Pose], ours: &[Pose], s: f64, joints: &[Joint]) -> (f64, &'static str) {
     let mut worst = (0.0, Joint::Pelvis.name());
     for (a, b) in rig.iter().zip(ours) {
-        for j in Joint::ALL {
+        for &j in joints {
             let distance = (a[j.index()] / s).distance(b[j.index()]);
             if distance > worst.0 {
                 worst = (distance, j.name());
