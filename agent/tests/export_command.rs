@@ -160,9 +160,20 @@ fn a_users_rig_gets_the_motion_in_its_own_unit_and_axes_and_a_rig_without_our_jo
         assert!(bvh.starts_with("HIERARCHY\nROOT root\n") && bvh.contains("JOINT pelvis\n"), "{bvh}");
         assert!(bvh.contains("JOINT upperarm_twist_01_l") && bvh.contains("Frames: 12"), "{bvh}");
     }
-    // The standing figure's pelvis, carried over, stands as high on the rig as it does in ours.
-    let pelvis = &manifest["samples"][0]["rig"]["probes"][0];
-    assert_eq!((pelvis["node"].as_str(), pelvis["joint"].as_str()), (Some("pelvis"), Some("pelvis")));
+    assert!(out.join("rig_strip.png").is_file(), "the picture of ours and the rig");
+    // The rig (our size) puts its right toe (`ball_r`) where ours is on every probed frame.
+    let toe = |probes: &serde_json::Value| -> Vec<serde_json::Value> {
+        probes.as_array().unwrap().iter().filter(|p| p["joint"] == "right_foot").cloned().collect()
+    };
+    let (on_rig, ours) = (toe(&manifest["samples"][0]["rig"]["probes"]), toe(&manifest["samples"][0]["probes"]));
+    assert_eq!((on_rig.len(), on_rig[0]["node"].as_str()), (4, Some("ball_r")));
+    for (a, b) in on_rig.iter().zip(&ours) {
+        let distance = (0..3)
+            .map(|k| (a["position_m"][k].as_f64().unwrap() - b["position_m"][k].as_f64().unwrap()).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(distance < 0.005, "{a} against {b}");
+    }
 
     let broken = dir.path().join("no_toes.bvh");
     std::fs::write(&broken, std::fs::read_to_string(&rig).unwrap().replace("ball_l", "toe_l")).unwrap();

@@ -305,6 +305,30 @@ pub fn write_exports(
         judge: checked.map(|c| RigJudge { compiled: c.compiled(), device: c.device(), initial }),
     };
     let manifest = write_outputs(folder.path(), &input)?;
+    if let Some(rig) = &options.rig {
+        // Each sample on our skeleton and, below it, on the rig (its nodes of our joints).
+        let rows: Vec<StripRow<'_>> = input
+            .samples
+            .iter()
+            .zip(&manifest.samples)
+            .filter_map(|((label, poses), sample)| Some((label, poses, sample.rig.as_ref()?)))
+            .flat_map(|(label, poses, on_rig)| {
+                [
+                    StripRow { label: format!("{label}: ours"), poses },
+                    StripRow {
+                        label: format!(
+                            "{label}: on the rig `{}` (legs {:.2}x ours)",
+                            rig.name(),
+                            on_rig.report.leg_ratio
+                        ),
+                        poses: &on_rig.motion_poses,
+                    },
+                ]
+            })
+            .collect();
+        let path = folder.path().join("rig_strip.png");
+        motion_strip(&rows, 8, &input.scene, &input.carried, title, &path)?;
+    }
     if options.gif {
         let rows: Vec<StripRow<'_>> =
             input.samples.iter().map(|(label, poses)| StripRow { label: label.clone(), poses }).collect();

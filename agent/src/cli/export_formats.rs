@@ -104,6 +104,9 @@ pub fn print_exports(folder: &Path, manifest: &ExportManifest, gif: bool) {
             );
         }
     }
+    if manifest.samples.iter().any(|s| s.rig.is_some()) {
+        eprintln!("wrote {} (each sample on our skeleton and on the rig)", folder.join("rig_strip.png").display());
+    }
     if manifest.samples.iter().filter_map(|s| s.rig.as_ref()).any(|r| r.report.from_ours_max_m > 0.03) {
         eprintln!(
             "  the rig's proportions differ from ours: a constraint on a joint's world position may not hold on it"

@@ -125,6 +125,10 @@ pub struct RigFile {
     /// The rig's nodes of some of our joints at a few frames, m, our axes (y up), to check
     /// imports against.
     pub probes: Vec<RigProbe>,
+    /// The rig's nodes of our 22 joints at the motion's own frames, moving, m, our axes: what the
+    /// pictures draw (not in `export.json`).
+    #[serde(skip)]
+    pub motion_poses: Vec<Pose>,
 }
 
 /// One rig node's position at one frame.
@@ -208,11 +212,8 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
             probes: probes(&file.forward_kinematics()),
             rig: match (on_rig, input.rig) {
                 (Some(on_rig), Some(rig)) => {
-                    let constraints = match &input.judge {
-                        Some(judge) => judged_on_rig(judge, i, track, matches!(file, Cow::Borrowed(_)), &on_rig, rig)?,
-                        None => Vec::new(),
-                    };
-                    Some(rig_file(out, i, on_rig, rig, constraints)?)
+                    let files_are_the_motion = matches!(file, Cow::Borrowed(_));
+                    Some(rig_file(out, (i, track, files_are_the_motion), on_rig, rig, input.judge.as_ref())?)
                 }
                 _ => None,
             },
@@ -246,16 +247,25 @@ fn file_track<'t>(track: &'t RotationTrack, input: &ExportInput<'_>) -> Result<C
     Ok(file)
 }
 
-/// Writes sample `i`'s motion on `rig` as `sample_<i>/<rig name>.bvh` and describes it.
+/// Writes sample `i`'s motion on `rig` as `sample_<i>/<rig name>.bvh` and describes it, with the
+/// task's constraints judged again on the rig (`judge`). `track` is the sample's solved track;
+/// `files_are_the_motion` is false when the files are resampled or in place, and the motion is
+/// then carried over again as it is (the program's frames are the motion's, and its positions
+/// move with it).
 fn rig_file(
     out: &Path,
-    i: usize,
+    (i, track, files_are_the_motion): (usize, &RotationTrack, bool),
     on_rig: Retargeted,
     rig: &TargetRig,
-    constraints: Vec<RigConstraint>,
+    judge: Option<&RigJudge<'_>>,
 ) -> Result<RigFile, ExportError> {
     let bvh = format!("sample_{i}/{}.bvh", rig.name());
     write_bvh(&out.join(&bvh), &on_rig.track, rig.axes)?;
+    let motion_poses = if files_are_the_motion { on_rig.poses.clone() } else { retarget(track, rig)?.poses };
+    let constraints = match judge {
+        Some(judge) => judge_on_rig(judge, i, &track.forward_kinematics(), &motion_poses, on_rig.report.leg_ratio)?,
+        None => Vec::new(),
+    };
     let probes = probes(&on_rig.poses)
         .into_iter()
         .map(|p| {
@@ -275,26 +285,8 @@ fn rig_file(
         report: on_rig.report,
         constraints,
         probes,
+        motion_poses,
     })
-}
-
-/// Sample `i`'s constraints judged on `rig`: on `on_rig` when the files hold the motion itself
-/// (`files_are_the_motion`), else (resampled or in place) on the solved `track` carried over
-/// anew, since the program's frames are the motion's and its positions move with it.
-fn judged_on_rig(
-    judge: &RigJudge<'_>,
-    i: usize,
-    track: &RotationTrack,
-    files_are_the_motion: bool,
-    on_rig: &Retargeted,
-    rig: &TargetRig,
-) -> Result<Vec<RigConstraint>, ExportError> {
-    let ours = track.forward_kinematics();
-    if files_are_the_motion {
-        return judge_on_rig(judge, i, &ours, &on_rig.poses, on_rig.report.leg_ratio);
-    }
-    let moving = retarget(track, rig)?;
-    judge_on_rig(judge, i, &ours, &moving.poses, moving.report.leg_ratio)
 }
 
 /// [`PROBE_JOINTS`] of forward-kinematics poses `fk` at the first frame, a third, two thirds
