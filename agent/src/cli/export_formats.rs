@@ -74,10 +74,14 @@ pub fn print_exports(folder: &Path, manifest: &ExportManifest, gif: bool) {
             0 => String::new(),
             n => format!("; in {n} frames an ankle target lay beyond the rig's legs"),
         };
+        let lowered = match r.pelvis_lowered_max_m {
+            0.0 => String::new(),
+            m => format!(", the pelvis lowered up to {:.1} cm for the rig's legs to reach", m * 100.0),
+        };
         eprintln!(
             "wrote {} on the rig `{}` ({}, {} nodes, legs {:.2}x ours): joints within {:.1} cm of ours scaled \
              ({}), leg IK moved joints up to {:.1} cm, planted feet within {:.1} mm of their marks, foot skate {:.3} \
-             (ours {:.3}){unreached}",
+             (ours {:.3}){lowered}{unreached}",
             folder.join(&rig.bvh).display(),
             r.rig,
             r.matched,

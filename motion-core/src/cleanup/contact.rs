@@ -46,9 +46,7 @@ pub fn floor_height(poses: &[Pose], standing_m: &[f64; 4]) -> f64 {
 pub fn sinking_lift(poses: &[Pose], radius: usize) -> Vec<f64> {
     let depth: Vec<f64> =
         poses.iter().map(|p| p.iter().map(|v| -v.y).filter(|d| d.is_finite()).fold(0.0, f64::max)).collect();
-    let window = |t: usize| t.saturating_sub(radius)..(t + radius + 1).min(depth.len());
-    let dilated: Vec<f64> = (0..depth.len()).map(|t| depth[window(t)].iter().copied().fold(0.0, f64::max)).collect();
-    (0..depth.len()).map(|t| crate::numeric::mean(dilated[window(t)].iter().copied())).collect()
+    crate::numeric::eased_envelope(&depth, radius)
 }
 
 /// Speed of a joint per frame, m/s: central differences, one-sided at the ends (0 for one frame).

@@ -107,7 +107,10 @@ fn every_shipped_rig_carries_the_walk_with_the_feet_where_it_plants_them() {
             r.skate_ours
         );
         if same_proportions {
-            assert_eq!(r.unreached_frames, 0, "{file}");
+            assert_eq!((r.unreached_frames, r.pelvis_lowered_max_m), (0, 0.0), "{file}");
+        } else {
+            // Strides our legs reach are too long for the rig's: the pelvis comes down a little.
+            assert!(r.pelvis_lowered_max_m > 0.0 && r.pelvis_lowered_max_m < 0.03, "{file}: {r:?}");
         }
         let back = read_back(&done, &rig);
         assert!(back < 1e-4, "{file}: read back {back} m off");

@@ -19,11 +19,14 @@
 //! 3. **Root.** The pelvis node is at `s · p(t) + (0, h'_pelvis − s · h_pelvis, 0)`, `s` the
 //!    ratio of the rig's legs (hip → knee → ankle) to ours and `h` each skeleton's rest height
 //!    above its toes; a node above the pelvis (Unreal's `root`) moves on the floor under it.
-//! 4. **Feet.** Each leg is solved ([`solve_leg`]) so that its ankle and toe are at ours scaled
-//!    the same way, `s · p_j(t) + (0, h'_j − s · h_j, 0)` (on the floor at contact when ours is),
-//!    the knee bending as it bends; the thigh, shin and foot turn by the arc from where the
-//!    transfer put them. On a rig of our proportions this moves nothing; on other proportions
-//!    it keeps the feet planted where a bone-direction copy would slide or sink them.
+//! 4. **Feet.** Each leg is solved ([`solve_leg`]) so that its toe is at ours scaled the same
+//!    way, `s · p_toe(t) + (0, h'_toe − s · h_toe, 0)` (on the floor at contact when ours is),
+//!    and its ankle a rig foot behind it, turned as our foot is; the knee bends as it bends, and
+//!    the thigh, shin and foot turn by the arc from where the transfer put them. On a rig of our
+//!    proportions this moves nothing; on other proportions it keeps the feet planted where a
+//!    bone-direction copy would slide or sink them. Where a stride asks more than the rig's legs
+//!    reach (shorter legs under the same trunk), the pelvis first comes down by what is missing,
+//!    eased over [`DROP_EASE_S`] either side ([`eased_envelope`]).
 //!
 //! What cannot carry over exactly is reported, not hidden ([`RetargetReport`]): a rig of other
 //! proportions puts a hand elsewhere than ours scaled (a world-position constraint on the hand
@@ -39,6 +42,7 @@ use crate::export::rotations::RotationTrack;
 use crate::metrics::{foot_skate_ratio, SKATE_CONTACT_HEIGHT_M};
 use crate::motion::leg_ik::{knee_bend, solve_leg, Leg};
 use crate::motion::retarget_bone_lengths;
+use crate::numeric::eased_envelope;
 use crate::skeleton::{Joint, Pose, NUM_JOINTS};
 
 /// Width of the soft zone below the rig's full leg reach, m ([`solve_leg`]).
@@ -46,6 +50,13 @@ const SOFT_REACH_M: f64 = 0.005;
 
 /// A leg whose ankle and toe are this near their targets is left as the transfer put it, m.
 const AT_GOAL_M: f64 = 1e-4;
+
+/// The pelvis comes down over this many seconds before and after a frame that needs it (the
+/// ease of [`eased_envelope`]).
+const DROP_EASE_S: f64 = 0.15;
+
+/// The pelvis comes down at most this fraction of the rig's leg reach.
+const MAX_DROP_OF_LEG: f64 = 0.15;
 
 /// A rig bone shorter than this has no direction to transfer, m: it turns with its parent.
 const NO_LENGTH_M: f64 = 1e-3;
@@ -91,6 +102,9 @@ pub struct RetargetReport {
     pub from_ours_on_rig_bones_max_m: f64,
     /// The joint of that distance.
     pub from_ours_on_rig_bones_joint: &'static str,
+    /// Largest distance the pelvis came down so that the rig's legs reach the ankle targets, m
+    /// (eased over [`DROP_EASE_S`] either side; 0 on a rig of our proportions).
+    pub pelvis_lowered_max_m: f64,
     /// Largest distance the leg IK moved a knee, ankle or toe from where the transfer put it, m.
     pub leg_fix_max_m: f64,
     /// Largest distance of a rig ankle or toe from its scaled target at the frames where our foot
@@ -120,57 +134,167 @@ pub fn retarget(track: &RotationTrack, rig: &TargetRig) -> Result<Retargeted, Ex
     if track.frames() == 0 {
         return Err(ExportError::Shape("a motion without frames cannot be retargeted".into()));
     }
-    let map = rig.map;
-    let rest_rig = rig.rest_positions();
-    let rest_ours = track.skeleton.rest_positions(DVec3::ZERO);
-    let at = |j: Joint| rest_rig[map[j.index()]];
-    let leg = |pos: &dyn Fn(Joint) -> DVec3| {
-        LEGS.iter().map(|[h, k, a, _]| pos(*h).distance(pos(*k)) + pos(*k).distance(pos(*a))).sum::<f64>()
-    };
-    let s = leg(&at) / leg(&|j: Joint| rest_ours[j.index()]);
-    if !(s.is_finite() && s > 0.0) {
-        return Err(ExportError::Rig(format!("{}: the rig's legs have no length", rig.path.display())));
-    }
-    // Heights above the toes at rest, and the lift that puts the rig's joint over the floor
-    // where ours scaled is.
-    let toes = |pos: &dyn Fn(Joint) -> DVec3| 0.5 * (pos(Joint::LeftFoot).y + pos(Joint::RightFoot).y);
-    let (toe_rig, toe_ours) = (toes(&at), toes(&|j: Joint| rest_ours[j.index()]));
-    let lift = |j: Joint| (at(j).y - toe_rig) - s * (rest_ours[j.index()].y - toe_ours);
-    let drives = drives(rig, &rest_rig, &rest_ours);
-    let pelvis = map[Joint::Pelvis.index()];
+    let carrier = Carrier::new(track, rig)?;
+    let ours = track.forward_kinematics();
+    let globals: Vec<[DQuat; NUM_JOINTS]> = (0..ours.len()).map(|t| track.global_rotations(t)).collect();
+    let needed: Vec<f64> = ours.iter().zip(&globals).map(|(p, g)| carrier.drop_needed(p, g)).collect();
+    let drops = eased_envelope(&needed, (DROP_EASE_S * track.fps).round() as usize);
+    let (map, pelvis) = (rig.map, carrier.pelvis);
     let mut nodes = rig.nodes.clone();
     nodes[0].translated = true;
     nodes[pelvis].translated = true;
-    let chain = rest_rig[pelvis] - rest_rig[0];
-    let ours = track.forward_kinematics();
     let mut out = ArmatureTrack { nodes, fps: track.fps, local: Vec::new(), translations_m: Vec::new() };
     let mut poses = Vec::with_capacity(ours.len());
-    let (mut leg_fix, mut contact_miss, mut unreached) = (0.0_f64, 0.0_f64, 0);
-    for (t, p) in ours.iter().enumerate() {
-        let g = track.global_rotations(t);
-        let mut d = turns(rig, &drives, &g);
-        let pelvis_at = s * p[0] + DVec3::Y * lift(Joint::Pelvis);
-        let root_at =
-            if pelvis == 0 { pelvis_at } else { DVec3::new(pelvis_at.x - chain.x, 0.0, pelvis_at.z - chain.z) };
+    let mut fixes = LegFix::default();
+    for ((p, g), drop) in ours.iter().zip(&globals).zip(&drops) {
+        let (mut d, pelvis_at, root_at) = carrier.start(p, g, *drop);
         let before = positions(rig, &d, root_at, pelvis, pelvis_at);
+        fixes.merge(carrier.fix_legs(p, g, &mut d, &before));
+        let after = positions(rig, &d, root_at, pelvis, pelvis_at);
+        for j in LEGS.iter().flatten() {
+            fixes.moved_m = fixes.moved_m.max(after[map[j.index()]].distance(before[map[j.index()]]));
+        }
+        poses.push(Joint::ALL.map(|j| after[map[j.index()]]));
+        let parent_turn = |n: usize| rig.nodes[n].parent.map_or(DQuat::IDENTITY, |q| d[q]);
+        out.local.push((0..rig.nodes.len()).map(|n| (parent_turn(n).conjugate() * d[n]).normalize()).collect());
+        let mut translations = vec![root_at];
+        if let Some(parent) = rig.nodes[pelvis].parent {
+            translations.push(d[parent].conjugate() * (pelvis_at - after[parent]));
+        }
+        out.translations_m.push(translations);
+    }
+    let report = carrier.report(&ours, &poses, &fixes, drops.iter().copied().fold(0.0, f64::max));
+    Ok(Retargeted { track: out, poses, report })
+}
+
+/// What the leg IK did over the frames.
+#[derive(Debug, Default)]
+struct LegFix {
+    /// Largest distance it moved a knee, ankle or toe, m.
+    moved_m: f64,
+    /// Largest distance of an ankle or toe from its target at our contact frames, m.
+    contact_miss_m: f64,
+    /// Frames with an ankle target beyond the leg's reach.
+    unreached: usize,
+}
+
+impl LegFix {
+    fn merge(&mut self, other: LegFix) {
+        self.moved_m = self.moved_m.max(other.moved_m);
+        self.contact_miss_m = self.contact_miss_m.max(other.contact_miss_m);
+        self.unreached += other.unreached;
+    }
+}
+
+/// What every frame of one retarget shares: the rig, its alignment to our skeleton and the
+/// scale between them.
+struct Carrier<'a> {
+    rig: &'a TargetRig,
+    drives: Vec<Drive>,
+    /// The rig's rest positions per node, m.
+    rest_rig: Vec<DVec3>,
+    /// Our skeleton's rest positions, m.
+    rest_ours: Pose,
+    /// Leg-length ratio, rig / ours.
+    s: f64,
+    /// The pelvis node.
+    pelvis: usize,
+    /// The pelvis node's rest offset from the root node, m.
+    chain: DVec3,
+}
+
+impl<'a> Carrier<'a> {
+    fn new(track: &RotationTrack, rig: &'a TargetRig) -> Result<Self, ExportError> {
+        let rest_rig = rig.rest_positions();
+        let rest_ours = track.skeleton.rest_positions(DVec3::ZERO);
+        let leg = |pos: &dyn Fn(Joint) -> DVec3| {
+            LEGS.iter().map(|[h, k, a, _]| pos(*h).distance(pos(*k)) + pos(*k).distance(pos(*a))).sum::<f64>()
+        };
+        let s = leg(&|j: Joint| rest_rig[rig.map[j.index()]]) / leg(&|j: Joint| rest_ours[j.index()]);
+        if !(s.is_finite() && s > 0.0) {
+            return Err(ExportError::Rig(format!("{}: the rig's legs have no length", rig.path.display())));
+        }
+        let pelvis = rig.map[Joint::Pelvis.index()];
+        let chain = rest_rig[pelvis] - rest_rig[0];
+        let drives = drives(rig, &rest_rig, &rest_ours);
+        Ok(Carrier { rig, drives, rest_rig, rest_ours, s, pelvis, chain })
+    }
+
+    /// The rig's rest position of `joint`'s node, m.
+    fn at(&self, joint: Joint) -> DVec3 {
+        self.rest_rig[self.rig.map[joint.index()]]
+    }
+
+    /// How far the rig's `joint` stands above where ours scaled by `s` does, both at rest and
+    /// measured from the toes, m: what puts the rig's joint over the floor where ours is.
+    fn lift(&self, joint: Joint) -> f64 {
+        let toes = |y: &dyn Fn(Joint) -> f64| 0.5 * (y(Joint::LeftFoot) + y(Joint::RightFoot));
+        let rig_toes = toes(&|j| self.at(j).y);
+        let our_toes = toes(&|j| self.rest_ours[j.index()].y);
+        (self.at(joint).y - rig_toes) - self.s * (self.rest_ours[joint.index()].y - our_toes)
+    }
+
+    /// At a frame with our joints `p` and turns `g`, the pelvis lowered by `drop` m: every node's
+    /// turn, the pelvis node's position and the root's, m.
+    fn start(&self, p: &Pose, g: &[DQuat; NUM_JOINTS], drop: f64) -> (Vec<DQuat>, DVec3, DVec3) {
+        let d = turns(self.rig, &self.drives, g);
+        let pelvis_at = self.s * p[0] + DVec3::Y * (self.lift(Joint::Pelvis) - drop);
+        let root_at = if self.pelvis == 0 {
+            pelvis_at
+        } else {
+            DVec3::new(pelvis_at.x - self.chain.x, 0.0, pelvis_at.z - self.chain.z)
+        };
+        (d, pelvis_at, root_at)
+    }
+
+    /// Where the ankle and toe of a leg go at a frame with our joints `p` and node turns `d`, m:
+    /// the toe at ours scaled, the ankle a rig foot behind it, turned as our foot is.
+    fn goals(&self, p: &Pose, d: &[DQuat], [_, _, ankle, toe]: [Joint; 4]) -> (DVec3, DVec3) {
+        let toe_goal = self.s * p[toe.index()] + DVec3::Y * self.lift(toe);
+        let foot = self.at(toe) - self.at(ankle);
+        (toe_goal - d[self.rig.map[ankle.index()]] * foot, toe_goal)
+    }
+
+    /// How far the pelvis must come down at a frame for both ankle targets to lie within the
+    /// rig's legs' full reach, m (0 where they do; a target within reach is the IK's); at most
+    /// [`MAX_DROP_OF_LEG`] of the leg.
+    fn drop_needed(&self, p: &Pose, g: &[DQuat; NUM_JOINTS]) -> f64 {
+        let (d, pelvis_at, root_at) = self.start(p, g, 0.0);
+        let at = positions(self.rig, &d, root_at, self.pelvis, pelvis_at);
+        let mut drop = 0.0_f64;
+        for leg in LEGS {
+            let [hip, knee, ankle, _] = leg.map(|j| self.at(j));
+            let reach = hip.distance(knee) + knee.distance(ankle);
+            let to_goal = self.goals(p, &d, leg).0 - at[self.rig.map[leg[0].index()]];
+            let across = DVec3::new(to_goal.x, 0.0, to_goal.z).length();
+            let down = if across < reach { (reach * reach - across * across).sqrt() } else { 0.0 };
+            drop = drop.max((-to_goal.y - down).clamp(0.0, MAX_DROP_OF_LEG * reach));
+        }
+        drop
+    }
+
+    /// Solves both legs at a frame (our joints `p`, turns `g`, node turns `d` turned in place,
+    /// node positions `before`), and says what it did at this frame.
+    fn fix_legs(&self, p: &Pose, g: &[DQuat; NUM_JOINTS], d: &mut [DQuat], before: &[DVec3]) -> LegFix {
+        let map = self.rig.map;
+        let node = |j: Joint| map[j.index()];
         let forward = g[0] * DVec3::Z;
-        let mut was_unreached = false;
-        for [hip, knee, ankle, toe] in LEGS {
-            let node = |j: Joint| map[j.index()];
+        let mut fix = LegFix::default();
+        let mut unreached = false;
+        for leg_joints in LEGS {
+            let [hip, knee, ankle, toe] = leg_joints;
             let leg = Leg {
                 hip: before[node(hip)],
                 knee: before[node(knee)],
                 ankle: before[node(ankle)],
                 toe: before[node(toe)],
             };
-            let toe_goal = s * p[toe.index()] + DVec3::Y * lift(toe);
-            let foot = rest_rig[node(toe)] - rest_rig[node(ankle)];
-            let ankle_goal = toe_goal - d[node(ankle)] * foot;
+            let (ankle_goal, toe_goal) = self.goals(p, d, leg_joints);
             if leg.toe.distance(toe_goal).max(leg.ankle.distance(ankle_goal)) < AT_GOAL_M {
                 continue;
             }
             let solved = solve_leg(&leg, ankle_goal, toe_goal, knee_bend(&leg, forward), SOFT_REACH_M);
-            was_unreached |= !solved.reached;
+            unreached |= !solved.reached;
             let new = solved.leg;
             for (j, from, to) in [
                 (hip, leg.knee - leg.hip, new.knee - new.hip),
@@ -182,59 +306,52 @@ pub fn retarget(track: &RotationTrack, rig: &TargetRig) -> Result<Retargeted, Ex
                 }
             }
             if p[toe.index()].y < SKATE_CONTACT_HEIGHT_M {
-                contact_miss = contact_miss.max(new.toe.distance(toe_goal)).max(new.ankle.distance(ankle_goal));
+                fix.contact_miss_m =
+                    fix.contact_miss_m.max(new.toe.distance(toe_goal)).max(new.ankle.distance(ankle_goal));
             }
         }
-        unreached += usize::from(was_unreached);
+        fix.unreached = usize::from(unreached);
         // Nodes that turn with a leg bone follow its new turn.
-        for (n, drive) in drives.iter().enumerate() {
-            if let (Drive::Parent, Some(parent)) = (drive, rig.nodes[n].parent) {
+        for (n, drive) in self.drives.iter().enumerate() {
+            if let (Drive::Parent, Some(parent)) = (drive, self.rig.nodes[n].parent) {
                 d[n] = d[parent];
             }
         }
-        let after = positions(rig, &d, root_at, pelvis, pelvis_at);
-        for [hip, knee, ankle, toe] in LEGS {
-            for j in [hip, knee, ankle, toe] {
-                leg_fix = leg_fix.max(after[map[j.index()]].distance(before[map[j.index()]]));
-            }
-        }
-        poses.push(Joint::ALL.map(|j| after[map[j.index()]]));
-        let parent_turn = |n: usize| rig.nodes[n].parent.map_or(DQuat::IDENTITY, |q| d[q]);
-        out.local.push((0..rig.nodes.len()).map(|n| (parent_turn(n).conjugate() * d[n]).normalize()).collect());
-        let mut translations = vec![root_at];
-        if let Some(parent) = rig.nodes[pelvis].parent {
-            translations.push(d[parent].conjugate() * (pelvis_at - after[parent]));
-        }
-        out.translations_m.push(translations);
+        fix
     }
-    let (from_ours_max_m, from_ours_joint) = farthest(&poses, &ours, s, &Joint::ALL);
-    let rig_bones = Joint::ALL.map(|j| j.parent().map_or(0.0, |parent| at(j).distance(at(parent))));
-    let on_rig_bones: Vec<Pose> = retarget_bone_lengths(&ours, &rig_bones)
-        .into_iter()
-        .map(|pose| pose.map(|v| v + DVec3::Y * lift(Joint::Pelvis)))
-        .collect();
-    let above_knees: Vec<Joint> =
-        Joint::ALL.into_iter().filter(|j| !LEGS.iter().any(|leg| leg[1..].contains(j))).collect();
-    let (from_ours_on_rig_bones_max_m, from_ours_on_rig_bones_joint) =
-        farthest(&poses, &on_rig_bones, 1.0, &above_knees);
-    let scaled: Vec<Pose> = poses.iter().map(|pose| pose.map(|v| v / s)).collect();
-    let report = RetargetReport {
-        rig: rig.name(),
-        matched: rig.matched.name(),
-        nodes: rig.nodes.len(),
-        unmatched_nodes: rig.nodes.len() - NUM_JOINTS,
-        leg_ratio: s,
-        from_ours_max_m,
-        from_ours_joint,
-        from_ours_on_rig_bones_max_m,
-        from_ours_on_rig_bones_joint,
-        leg_fix_max_m: leg_fix,
-        contact_miss_max_m: contact_miss,
-        unreached_frames: unreached,
-        skate_ours: foot_skate_ratio(&ours),
-        skate_rig: foot_skate_ratio(&scaled),
-    };
-    Ok(Retargeted { track: out, poses, report })
+
+    /// The report of a retarget of `ours` that gave the rig's joints `poses`.
+    fn report(&self, ours: &[Pose], poses: &[Pose], fixes: &LegFix, pelvis_lowered_m: f64) -> RetargetReport {
+        let (rig, s) = (self.rig, self.s);
+        let (from_ours_max_m, from_ours_joint) = farthest(poses, ours, s, &Joint::ALL);
+        let rig_bones = Joint::ALL.map(|j| j.parent().map_or(0.0, |parent| self.at(j).distance(self.at(parent))));
+        let on_rig_bones: Vec<Pose> = retarget_bone_lengths(ours, &rig_bones)
+            .into_iter()
+            .map(|pose| pose.map(|v| v + DVec3::Y * self.lift(Joint::Pelvis)))
+            .collect();
+        let above_knees: Vec<Joint> =
+            Joint::ALL.into_iter().filter(|j| !LEGS.iter().any(|leg| leg[1..].contains(j))).collect();
+        let (from_ours_on_rig_bones_max_m, from_ours_on_rig_bones_joint) =
+            farthest(poses, &on_rig_bones, 1.0, &above_knees);
+        let scaled: Vec<Pose> = poses.iter().map(|pose| pose.map(|v| v / s)).collect();
+        RetargetReport {
+            rig: rig.name(),
+            matched: rig.matched.name(),
+            nodes: rig.nodes.len(),
+            unmatched_nodes: rig.nodes.len() - NUM_JOINTS,
+            leg_ratio: s,
+            from_ours_max_m,
+            from_ours_joint,
+            from_ours_on_rig_bones_max_m,
+            from_ours_on_rig_bones_joint,
+            pelvis_lowered_max_m: pelvis_lowered_m,
+            leg_fix_max_m: fixes.moved_m,
+            contact_miss_max_m: fixes.contact_miss_m,
+            unreached_frames: fixes.unreached,
+            skate_ours: foot_skate_ratio(ours),
+            skate_rig: foot_skate_ratio(&scaled),
+        }
+    }
 }
 
 /// How each rig node turns ([`Drive`]), from the two rest poses (`rest_rig` per node,
