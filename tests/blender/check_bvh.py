@@ -71,8 +71,11 @@ def open_without_universal_newlines(module):
             del module.open
 
 
-def import_bvh(path, metres_per_unit):
-    """Imports `path` as an armature at the file's frame rate; returns the new armature object."""
+def import_bvh(path, metres_per_unit, z_up=False):
+    """Imports `path` as an armature at the file's frame rate; returns the new armature object.
+    Our (x, y, z) lands at Blender's (x, -z, y) either way: a Y-up file with the importer's
+    defaults (forward -Z, up Y), a Z-up one, whose axes already are (x, -z, y), unturned (forward
+    Y, up Z)."""
     from io_anim_bvh import import_bvh as importer
 
     before = set(bpy.data.objects)
@@ -86,8 +89,8 @@ def import_bvh(path, metres_per_unit):
             update_scene_fps=True,
             update_scene_duration=True,
             rotate_mode="NATIVE",
-            axis_forward="-Z",
-            axis_up="Y",
+            axis_forward="Y" if z_up else "-Z",
+            axis_up="Z" if z_up else "Y",
         )
     if result != {"FINISHED"}:
         raise RuntimeError(f"{path}: the BVH importer returned {result}")

@@ -26,7 +26,7 @@ from pathlib import Path
 import bpy
 
 sys.path.insert(0, str(Path(__file__).parent))
-from check_bvh import TOLERANCE_M, open_without_universal_newlines, to_blender  # noqa: E402
+from check_bvh import TOLERANCE_M, import_bvh, to_blender  # noqa: E402
 
 
 def hierarchy(path):
@@ -50,37 +50,12 @@ def hierarchy(path):
     return parents
 
 
-def import_rig_bvh(path, metres_per_unit, z_up):
-    from io_anim_bvh import import_bvh as importer
-
-    before = set(bpy.data.objects)
-    with open_without_universal_newlines(importer):
-        result = bpy.ops.import_anim.bvh(
-            filepath=str(path),
-            target="ARMATURE",
-            global_scale=metres_per_unit,
-            frame_start=1,
-            use_fps_scale=False,
-            update_scene_fps=True,
-            update_scene_duration=True,
-            rotate_mode="NATIVE",
-            axis_forward="Y" if z_up else "-Z",
-            axis_up="Z" if z_up else "Y",
-        )
-    if result != {"FINISHED"}:
-        raise RuntimeError(f"{path}: the BVH importer returned {result}")
-    armatures = [o for o in set(bpy.data.objects) - before if o.type == "ARMATURE"]
-    if len(armatures) != 1:
-        raise RuntimeError(f"{path}: expected one new armature, found {len(armatures)}")
-    return armatures[0]
-
-
 def check_sample(root, sample, rig_tree):
     rig = sample.get("rig")
     if rig is None:
         return [f"sample {sample['bvh']}: export.json has no rig entry"], 0.0
     where = rig["bvh"]
-    arm = import_rig_bvh(root / rig["bvh"], 1.0 / rig["units_per_metre"], rig["z_up"])
+    arm = import_bvh(root / rig["bvh"], 1.0 / rig["units_per_metre"], rig["z_up"])
     failures = []
     bones = {b.name: (b.parent.name if b.parent else None) for b in arm.data.bones}
     if bones != rig_tree:

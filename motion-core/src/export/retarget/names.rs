@@ -117,30 +117,19 @@ impl Convention {
                 "LeftHand",
                 "RightHand",
             ],
-            Convention::Cmu => [
-                "Hips",
-                "LeftUpLeg",
-                "RightUpLeg",
-                "LowerBack",
-                "LeftLeg",
-                "RightLeg",
-                "Spine",
-                "LeftFoot",
-                "RightFoot",
-                "Spine1",
-                "LeftToeBase",
-                "RightToeBase",
-                "Neck1",
-                "LeftShoulder",
-                "RightShoulder",
-                "Head",
-                "LeftArm",
-                "RightArm",
-                "LeftForeArm",
-                "RightForeArm",
-                "LeftHand",
-                "RightHand",
-            ],
+            // Mixamo's names on another spine: LowerBack, Spine, Spine1, then Neck1 at the neck.
+            Convention::Cmu => {
+                let mut names = Convention::Mixamo.table();
+                for (joint, name) in [
+                    (Joint::Spine1, "LowerBack"),
+                    (Joint::Spine2, "Spine"),
+                    (Joint::Spine3, "Spine1"),
+                    (Joint::Neck, "Neck1"),
+                ] {
+                    names[joint.index()] = name;
+                }
+                names
+            }
         }
     }
 
