@@ -178,22 +178,34 @@ def main(argv):
             f"  {sample.get('label', sample['bvh'])}: {sample['frames']} frames, {len(sample['probes'])} probes, "
             f"largest error {worst * 1000:.3f} mm"
         )
+    return finish(failures, f"OK: {len(samples)} BVH samples in {root} import into Blender "
+                            f"{bpy.app.version_string} at {fps:g} fps with {BONES} bones; every probe within "
+                            f"{TOLERANCE_M * 100:g} cm:", lines)
+
+
+def finish(failures, summary, lines):
+    """Prints one line per failure and returns 1, or the summary and its lines and returns 0."""
     if failures:
         print("\n".join(f"FAIL: {f}" for f in failures), file=sys.stderr)
         return 1
-    print(f"OK: {len(samples)} BVH samples in {root} import into Blender {bpy.app.version_string} at {fps:g} fps "
-          f"with {BONES} bones; every probe within {TOLERANCE_M * 100:g} cm:")
+    print(summary)
     print("\n".join(lines))
     return 0
 
 
-if __name__ == "__main__":
+def exit_with(main):
+    """Exits with `main(sys.argv)`'s code; an exception is a failure (Blender would print the
+    traceback and exit 0)."""
     try:
         code = main(sys.argv)
-    except Exception as e:  # Blender would print the traceback and exit 0.
+    except Exception as e:
         import traceback
 
         traceback.print_exc()
         print(f"FAIL: {type(e).__name__}: {e}", file=sys.stderr)
         code = 1
     sys.exit(code)
+
+
+if __name__ == "__main__":
+    exit_with(main)

@@ -26,7 +26,7 @@ from pathlib import Path
 import bpy
 
 sys.path.insert(0, str(Path(__file__).parent))
-from check_bvh import TOLERANCE_M, import_bvh, to_blender  # noqa: E402
+from check_bvh import TOLERANCE_M, exit_with, finish, import_bvh, to_blender  # noqa: E402
 
 
 def hierarchy(path):
@@ -99,22 +99,10 @@ def main(argv):
         failures += sample_failures
         lines.append(f"  {sample.get('rig', {}).get('bvh')}: {sample['frames']} frames, largest probe error "
                      f"{worst * 1000:.3f} mm")
-    if failures:
-        print("\n".join(f"FAIL: {f}" for f in failures), file=sys.stderr)
-        return 1
-    print(f"OK: {len(samples)} samples on the rig {rig_file.name} ({len(rig_tree)} bones, its names and parents) "
-          f"import into Blender {bpy.app.version_string}; every probe within {TOLERANCE_M * 100:g} cm:")
-    print("\n".join(lines))
-    return 0
+    return finish(failures, f"OK: {len(samples)} samples on the rig {rig_file.name} ({len(rig_tree)} bones, its "
+                            f"names and parents) import into Blender {bpy.app.version_string}; every probe within "
+                            f"{TOLERANCE_M * 100:g} cm:", lines)
 
 
 if __name__ == "__main__":
-    try:
-        code = main(sys.argv)
-    except Exception as e:  # Blender would print the traceback and exit 0.
-        import traceback
-
-        traceback.print_exc()
-        print(f"FAIL: {type(e).__name__}: {e}", file=sys.stderr)
-        code = 1
-    sys.exit(code)
+    exit_with(main)
