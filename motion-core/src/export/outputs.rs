@@ -3,7 +3,8 @@
 //! other tools' imports are checked against.
 //!
 //! Layout under the output folder:
-//! - `sample_<i>/motion.bvh`, `sample_<i>/motion.glb` (i from 0);
+//! - `sample_<i>/motion.bvh`, `sample_<i>/motion.glb` (i from 0), and with a rig
+//!   `sample_<i>/<rig>.bvh` and `sample_<i>/<rig>.glb`;
 //! - `viewer.html`;
 //! - `export.json` ([`ExportManifest`]).
 //!
@@ -16,12 +17,13 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use super::armature::our_joint_nodes;
 use super::bvh::{write_bvh, BvhUnit};
 use super::error::{write_atomically, ExportError};
 use super::gltf::write_glb;
 use super::retarget::{retarget, RetargetReport, Retargeted, TargetRig};
 use super::rotations::{RotationTrack, SolveFit};
-use super::scene::{scene_boxes, PositionTarget, SceneExtent};
+use super::scene::{scene_boxes, PositionTarget, SceneBox, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
 use crate::files::FileError;
 use crate::import::bvh::UpAxis;
@@ -109,6 +111,9 @@ pub struct ExportedSample {
 pub struct RigFile {
     /// BVH file on the rig, relative to the output folder.
     pub bvh: String,
+    /// GLB file on the rig (metres, y up, whatever the rig's unit and up axis), relative to the
+    /// output folder.
+    pub glb: String,
     /// The rig file's units per metre (its lengths are written in them).
     pub units_per_metre: f64,
     /// Whether the file is Z-up (as the rig is).
@@ -188,8 +193,9 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         tracks.iter().zip(&files).zip(&input.samples).zip(retargeted).enumerate()
     {
         let (bvh, glb) = (format!("sample_{i}/motion.bvh"), format!("sample_{i}/motion.glb"));
-        write_bvh(&out.join(&bvh), &file.armature(), input.bvh_unit.into())?;
-        write_glb(&out.join(&glb), label, file, &boxes)?;
+        let armature = file.armature();
+        write_bvh(&out.join(&bvh), &armature, input.bvh_unit.into())?;
+        write_glb(&out.join(&glb), label, &armature, &our_joint_nodes(), &boxes)?;
         let SolveFit { mean_m, max_m } = track.fit(poses);
         samples.push(ExportedSample {
             label: label.clone(),
@@ -200,7 +206,7 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
             fit_max_m: max_m,
             probes: probes(&file.forward_kinematics()),
             rig: match (on_rig, input.rig) {
-                (Some(on_rig), Some(rig)) => Some(rig_file(out, i, on_rig, rig)?),
+                (Some(on_rig), Some(rig)) => Some(rig_file(out, i, label, on_rig, rig, &boxes)?),
                 _ => None,
             },
         });
@@ -233,10 +239,19 @@ fn file_track<'t>(track: &'t RotationTrack, input: &ExportInput<'_>) -> Result<C
     Ok(file)
 }
 
-/// Writes sample `i`'s motion on `rig` as `sample_<i>/<rig name>.bvh` and describes it.
-fn rig_file(out: &Path, i: usize, on_rig: Retargeted, rig: &TargetRig) -> Result<RigFile, ExportError> {
-    let bvh = format!("sample_{i}/{}.bvh", rig.name());
+/// Writes sample `i`'s motion on `rig` as `sample_<i>/<rig name>.bvh` and, with the scene's
+/// `boxes`, `.glb`, and describes it.
+fn rig_file(
+    out: &Path,
+    i: usize,
+    label: &str,
+    on_rig: Retargeted,
+    rig: &TargetRig,
+    boxes: &[SceneBox],
+) -> Result<RigFile, ExportError> {
+    let (bvh, glb) = (format!("sample_{i}/{}.bvh", rig.name()), format!("sample_{i}/{}.glb", rig.name()));
     write_bvh(&out.join(&bvh), &on_rig.track, rig.axes)?;
+    write_glb(&out.join(&glb), label, &on_rig.track, &rig.map, boxes)?;
     let probes = probes(&on_rig.poses)
         .into_iter()
         .map(|p| {
@@ -251,6 +266,7 @@ fn rig_file(out: &Path, i: usize, on_rig: Retargeted, rig: &TargetRig) -> Result
         .collect();
     Ok(RigFile {
         bvh,
+        glb,
         units_per_metre: rig.axes.per_metre,
         z_up: rig.axes.up == UpAxis::Z,
         report: on_rig.report,
