@@ -154,6 +154,8 @@ fn a_users_rig_gets_the_motion_in_its_own_unit_and_axes_and_a_rig_without_our_jo
             (Some(format!("sample_{i}/unreal.bvh").as_str()), Some(true))
         );
         assert_eq!(rig["units_per_metre"], 100.0);
+        assert_eq!(rig["glb"].as_str(), Some(format!("sample_{i}/unreal.glb").as_str()));
+        assert!(std::fs::read(out.join(format!("sample_{i}/unreal.glb"))).unwrap().starts_with(b"glTF"));
         assert!(rig["report"]["contact_miss_max_m"].as_f64().unwrap() < 0.01, "{rig}");
         let bvh = std::fs::read_to_string(out.join(format!("sample_{i}/unreal.bvh"))).unwrap();
         // Unreal's own hierarchy, Z-up centimetres: the pelvis 96 cm over the root on the floor.

@@ -69,24 +69,52 @@ def glb_rest_joints(path):
     return {nodes[j]["name"]: position(j) for j in gltf["skins"][0]["joints"]}
 
 
+def import_glb(path, fps):
+    """Imports the GLB `path` with Blender's glTF importer into an empty scene running at the
+    export's `fps`; returns its one armature and the scene frames per export frame. The importer
+    puts time t (s) at scene frame t * the scene's integer `render.fps`, so export frame k is
+    scene frame k at a whole rate."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.fps = round(fps)
+    scene.render.fps_base = 1.0
+    result = bpy.ops.import_scene.gltf(filepath=str(path), bone_heuristic="TEMPERANCE")
+    if "FINISHED" not in result:
+        raise RuntimeError(f"importing {path} failed: {result}")
+    armatures = [o for o in scene.objects if o.type == "ARMATURE"]
+    if len(armatures) != 1:
+        raise RuntimeError(f"{len(armatures)} armatures in {path}, expected 1")
+    return armatures[0], scene.render.fps / fps
+
+
+def animation_span(armature, frames, frame_per_export_frame):
+    """The scene frames `armature`'s action spans and a failure (or None) unless it spans the
+    export's `frames` frames."""
+    action = armature.animation_data.action if armature.animation_data else None
+    if action is None:
+        return None, "the armature has no animation"
+    start, end = action.frame_range
+    expected_end = (frames - 1) * frame_per_export_frame
+    if abs(start) > 1e-3 or abs(end - expected_end) > 1e-3:
+        return (start, end), f"animation spans scene frames {start:g}-{end:g}, expected 0-{expected_end:g} ({frames} frames)"
+    return (start, end), None
+
+
+def go_to_export_frame(frame, frame_per_export_frame):
+    """Sets the scene to export frame `frame` (from 0), between scene frames where it falls there."""
+    at = frame * frame_per_export_frame
+    bpy.context.scene.frame_set(int(math.floor(at)), subframe=at - math.floor(at))
+
+
 def check_sample(export_dir, fps, sample):
     """Failures (strings) and a summary line of one sample."""
     label = sample["label"]
     path = export_dir / sample["glb"]
     failures = []
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.fps = round(fps)
-    scene.render.fps_base = 1.0
-    # The importer converts seconds with the integer `render.fps`; exact only for a whole rate.
-    frame_per_export_frame = scene.render.fps / fps
-    result = bpy.ops.import_scene.gltf(filepath=str(path), bone_heuristic="TEMPERANCE")
-    if "FINISHED" not in result:
-        return [f"{label}: importing {path} failed: {result}"], ""
-    armatures = [o for o in scene.objects if o.type == "ARMATURE"]
-    if len(armatures) != 1:
-        return [f"{label}: {len(armatures)} armatures in {path}, expected 1"], ""
-    armature = armatures[0]
+    try:
+        armature, frame_per_export_frame = import_glb(path, fps)
+    except RuntimeError as error:
+        return [f"{label}: {error}"], ""
     bones = armature.data.bones
     if len(bones) != JOINTS:
         failures.append(f"{label}: {len(bones)} bones, expected {JOINTS}")
@@ -102,18 +130,13 @@ def check_sample(export_dir, fps, sample):
     if rest_error > TOLERANCE_M:
         failures.append(f"{label}: rest bone heads are up to {rest_error:.4f} m from the file's joints")
 
-    action = armature.animation_data.action if armature.animation_data else None
-    if action is None:
-        failures.append(f"{label}: the armature has no animation")
-        return failures, ""
-    start, end = action.frame_range
     frames = sample["frames"]
-    expected_end = (frames - 1) * frame_per_export_frame
-    if abs(start) > 1e-3 or abs(end - expected_end) > 1e-3:
-        failures.append(
-            f"{label}: animation spans scene frames {start:g}-{end:g}, expected 0-{expected_end:g} "
-            f"({frames} frames at {fps:g} fps)"
-        )
+    span, failure = animation_span(armature, frames, frame_per_export_frame)
+    if span is None:
+        return failures + [f"{label}: {failure}"], ""
+    if failure:
+        failures.append(f"{label}: {failure} at {fps:g} fps")
+    start, end = span
 
     probe_error = 0.0
     for probe in sample["probes"]:
@@ -121,8 +144,7 @@ def check_sample(export_dir, fps, sample):
         if bone is None:
             failures.append(f"{label}: no pose bone `{probe['joint']}`")
             continue
-        at = probe["frame"] * frame_per_export_frame
-        scene.frame_set(int(math.floor(at)), subframe=at - math.floor(at))
+        go_to_export_frame(probe["frame"], frame_per_export_frame)
         head = armature.matrix_world @ bone.head
         error = distance(head, to_blender(probe["position_m"]))
         probe_error = max(probe_error, error)
@@ -164,10 +186,11 @@ def main():
         print("  " + line)
 
 
-try:
-    main()
-except SystemExit:
-    raise
-except Exception as error:  # Blender exits 0 after an uncaught script error; make it fail.
-    print(f"GLB check FAILED: {type(error).__name__}: {error}")
-    sys.exit(1)
+if __name__ == "__main__":
+    try:
+        main()
+    except SystemExit:
+        raise
+    except Exception as error:  # Blender exits 0 after an uncaught script error; make it fail.
+        print(f"GLB check FAILED: {type(error).__name__}: {error}")
+        sys.exit(1)

@@ -50,38 +50,50 @@ def hierarchy(path):
     return parents
 
 
-def check_sample(root, sample, rig_tree):
-    rig = sample.get("rig")
-    if rig is None:
-        return [f"sample {sample['bvh']}: export.json has no rig entry"], 0.0
-    where = rig["bvh"]
-    arm = import_bvh(root / rig["bvh"], 1.0 / rig["units_per_metre"], rig["z_up"])
-    failures = []
+def bone_tree_failures(where, arm, rig_tree):
+    """A failure (a list of at most one) unless the bones of `arm` are the nodes of `rig_tree`
+    ({name: parent name}) under the same names with the same parents."""
     bones = {b.name: (b.parent.name if b.parent else None) for b in arm.data.bones}
-    if bones != rig_tree:
-        missing = sorted(set(rig_tree) - set(bones))
-        extra = sorted(set(bones) - set(rig_tree))
-        moved = sorted(n for n in set(bones) & set(rig_tree) if bones[n] != rig_tree[n])
-        failures.append(f"{where}: bones differ from the rig's nodes (missing {missing}, extra {extra}, "
-                        f"other parent {moved})")
-    frames = sample["frames"]
-    action = arm.animation_data.action if arm.animation_data else None
-    keys = [k.co[0] for c in action.fcurves for k in c.keyframe_points] if action else []
-    if not keys or (min(keys), max(keys)) != (1.0, float(frames)):
-        failures.append(f"{where}: keyed on frames {keys and (min(keys), max(keys))}, expected 1..{frames}")
-    worst = 0.0
-    for probe in rig["probes"]:
+    if bones == rig_tree:
+        return []
+    missing = sorted(set(rig_tree) - set(bones))
+    extra = sorted(set(bones) - set(rig_tree))
+    moved = sorted(n for n in set(bones) & set(rig_tree) if bones[n] != rig_tree[n])
+    return [f"{where}: bones differ from the rig's nodes (missing {missing}, extra {extra}, other parent {moved})"]
+
+
+def probe_failures(where, arm, probes, go_to_frame):
+    """Failures of the rig probes whose bone head in `arm` is over 1 cm from `position_m` (our
+    axes) at the probe's frame, which `go_to_frame(frame)` sets; and the largest distance, m."""
+    failures, worst = [], 0.0
+    for probe in probes:
         bone = arm.pose.bones.get(probe["node"])
         if bone is None:
             failures.append(f"{where}: no bone {probe['node']!r}")
             continue
-        bpy.context.scene.frame_set(probe["frame"] + 1)
+        go_to_frame(probe["frame"])
         error = ((arm.matrix_world @ bone.head) - to_blender(probe["position_m"])).length
         worst = max(worst, error)
         if error > TOLERANCE_M:
             failures.append(f"{where}: {probe['node']} ({probe['joint']}) at frame {probe['frame']} is "
                             f"{error * 100:.2f} cm from the probe")
     return failures, worst
+
+
+def check_sample(root, sample, rig_tree):
+    rig = sample.get("rig")
+    if rig is None:
+        return [f"sample {sample['bvh']}: export.json has no rig entry"], 0.0
+    where = rig["bvh"]
+    arm = import_bvh(root / rig["bvh"], 1.0 / rig["units_per_metre"], rig["z_up"])
+    failures = bone_tree_failures(where, arm, rig_tree)
+    frames = sample["frames"]
+    action = arm.animation_data.action if arm.animation_data else None
+    keys = [k.co[0] for c in action.fcurves for k in c.keyframe_points] if action else []
+    if not keys or (min(keys), max(keys)) != (1.0, float(frames)):
+        failures.append(f"{where}: keyed on frames {keys and (min(keys), max(keys))}, expected 1..{frames}")
+    found, worst = probe_failures(where, arm, rig["probes"], lambda frame: bpy.context.scene.frame_set(frame + 1))
+    return failures + found, worst
 
 
 def main(argv):

@@ -33,8 +33,9 @@ pub struct ExportFormats {
     /// Also write every motion onto your own rig: a BVH file whose skeleton (hierarchy and rest
     /// offsets; any motion in it is ignored) follows the Mixamo, Unreal mannequin, Unity
     /// humanoid, CMU or SMPL bone names (any case, any `name:` prefix). Written as
-    /// sample_<i>/<rig>.bvh in the rig's unit and up axis, the feet kept where the motion plants
-    /// them; export.json reports what carried over. Rigs to try: fixtures/rigs/.
+    /// sample_<i>/<rig>.bvh in the rig's unit and up axis and sample_<i>/<rig>.glb (metres, y
+    /// up, a skinned body and the scene), the feet kept where the motion plants them;
+    /// export.json reports what carried over. Rigs to try: fixtures/rigs/.
     #[arg(long, value_name = "FILE.bvh")]
     pub rig: Option<PathBuf>,
     /// With --rig: a JSON file naming the rig's node of each of our 22 joints
@@ -79,10 +80,11 @@ pub fn print_exports(folder: &Path, manifest: &ExportManifest, gif: bool) {
             m => format!(", the pelvis lowered up to {:.1} cm for the rig's legs to reach", m * 100.0),
         };
         eprintln!(
-            "wrote {} on the rig `{}` ({}, {} nodes, legs {:.2}x ours): joints within {:.1} cm of ours scaled \
+            "wrote {} and {} on the rig `{}` ({}, {} nodes, legs {:.2}x ours): joints within {:.1} cm of ours scaled \
              ({}), leg IK moved joints up to {:.1} cm, planted feet within {:.1} mm of their marks, foot skate {:.3} \
              (ours {:.3}){lowered}{unreached}",
             folder.join(&rig.bvh).display(),
+            folder.join(&rig.glb).display(),
             r.rig,
             r.matched,
             r.nodes,

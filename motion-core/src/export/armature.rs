@@ -11,7 +11,7 @@
 use glam::{DQuat, DVec3};
 
 use super::rotations::{RotationTrack, ANIMATED_OFFSETS};
-use crate::skeleton::Joint;
+use crate::skeleton::{Joint, NUM_JOINTS};
 
 /// Length of each End Site of our track along its joint's bone, m: about the head above the SMPL
 /// head joint, the hand beyond the wrist and the toes beyond the ball of the foot.
@@ -46,6 +46,18 @@ pub struct ArmatureTrack {
     /// m: the root's world position, any other node's offset from its parent in the parent's
     /// frame (it replaces the rest offset for the frame).
     pub translations_m: Vec<Vec<DVec3>>,
+}
+
+/// Each node's rest position, m: the root at `root_m` (in place of its offset, as its
+/// translation replaces it), every other node at its parent's plus its [`ArmatureNode::offset_m`]
+/// (rest frames are the world's). `nodes` lists parents before children.
+pub fn rest_positions(nodes: &[ArmatureNode], root_m: DVec3) -> Vec<DVec3> {
+    let mut rest: Vec<DVec3> = Vec::with_capacity(nodes.len());
+    for node in nodes {
+        let at = node.parent.map_or(root_m, |p| rest[p] + node.offset_m);
+        rest.push(at);
+    }
+    rest
 }
 
 impl ArmatureTrack {
@@ -97,6 +109,12 @@ impl ArmatureTrack {
         }
         out
     }
+}
+
+/// The node of each of our joints ([`Joint`] order) in [`RotationTrack::armature`], which lists
+/// the joints in index order: joint `i` is node `i`.
+pub fn our_joint_nodes() -> [usize; NUM_JOINTS] {
+    Joint::ALL.map(Joint::index)
 }
 
 impl RotationTrack {

@@ -3,7 +3,8 @@
 //! other tools' imports are checked against.
 //!
 //! Layout under the output folder:
-//! - `sample_<i>/motion.bvh`, `sample_<i>/motion.glb` (i from 0);
+//! - `sample_<i>/motion.bvh`, `sample_<i>/motion.glb` (i from 0), and with a rig
+//!   `sample_<i>/<rig>.bvh` and `sample_<i>/<rig>.glb`;
 //! - `viewer.html`;
 //! - `export.json` ([`ExportManifest`]).
 //!
@@ -16,12 +17,13 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use super::armature::our_joint_nodes;
 use super::bvh::{write_bvh, BvhUnit};
 use super::error::{write_atomically, ExportError};
 use super::gltf::write_glb;
 use super::retarget::{judge_on_rig, retarget, RetargetReport, Retargeted, RigConstraint, RigJudge, TargetRig};
 use super::rotations::{RotationTrack, SolveFit};
-use super::scene::{scene_boxes, PositionTarget, SceneExtent};
+use super::scene::{scene_boxes, PositionTarget, SceneBox, SceneExtent};
 use super::viewer::{write_viewer, ViewerInput, ViewerSample};
 use crate::files::FileError;
 use crate::import::bvh::UpAxis;
@@ -111,6 +113,9 @@ pub struct ExportedSample {
 pub struct RigFile {
     /// BVH file on the rig, relative to the output folder.
     pub bvh: String,
+    /// GLB file on the rig (metres, y up, whatever the rig's unit and up axis), relative to the
+    /// output folder.
+    pub glb: String,
     /// The rig file's units per metre (its lengths are written in them).
     pub units_per_metre: f64,
     /// Whether the file is Z-up (as the rig is).
@@ -199,8 +204,9 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         tracks.iter().zip(&files).zip(&input.samples).zip(retargeted).enumerate()
     {
         let (bvh, glb) = (format!("sample_{i}/motion.bvh"), format!("sample_{i}/motion.glb"));
-        write_bvh(&out.join(&bvh), &file.armature(), input.bvh_unit.into())?;
-        write_glb(&out.join(&glb), label, file, &boxes)?;
+        let armature = file.armature();
+        write_bvh(&out.join(&bvh), &armature, input.bvh_unit.into())?;
+        write_glb(&out.join(&glb), label, &armature, &our_joint_nodes(), &boxes)?;
         let SolveFit { mean_m, max_m } = track.fit(poses);
         samples.push(ExportedSample {
             label: label.clone(),
@@ -213,7 +219,8 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
             rig: match (on_rig, input.rig) {
                 (Some(on_rig), Some(rig)) => {
                     let files_are_the_motion = matches!(file, Cow::Borrowed(_));
-                    Some(rig_file(out, (i, track, files_are_the_motion), on_rig, rig, input.judge.as_ref())?)
+                    let sample = (i, label.as_str(), track, files_are_the_motion);
+                    Some(rig_file(out, sample, on_rig, rig, input.judge.as_ref(), &boxes)?)
                 }
                 _ => None,
             },
@@ -247,20 +254,22 @@ fn file_track<'t>(track: &'t RotationTrack, input: &ExportInput<'_>) -> Result<C
     Ok(file)
 }
 
-/// Writes sample `i`'s motion on `rig` as `sample_<i>/<rig name>.bvh` and describes it, with the
-/// task's constraints judged again on the rig (`judge`). `track` is the sample's solved track;
-/// `files_are_the_motion` is false when the files are resampled or in place, and the motion is
-/// then carried over again as it is (the program's frames are the motion's, and its positions
-/// move with it).
+/// Writes sample `i`'s motion (labelled `label`) on `rig` as `sample_<i>/<rig name>.bvh` and,
+/// with the scene's `boxes`, `.glb`, and describes it, with the task's constraints judged again
+/// on the rig (`judge`). `track` is the sample's solved track; `files_are_the_motion` is false
+/// when the files are resampled or in place, and the motion is then carried over again as it is
+/// (the program's frames are the motion's, and its positions move with it).
 fn rig_file(
     out: &Path,
-    (i, track, files_are_the_motion): (usize, &RotationTrack, bool),
+    (i, label, track, files_are_the_motion): (usize, &str, &RotationTrack, bool),
     on_rig: Retargeted,
     rig: &TargetRig,
     judge: Option<&RigJudge<'_>>,
+    boxes: &[SceneBox],
 ) -> Result<RigFile, ExportError> {
-    let bvh = format!("sample_{i}/{}.bvh", rig.name());
+    let (bvh, glb) = (format!("sample_{i}/{}.bvh", rig.name()), format!("sample_{i}/{}.glb", rig.name()));
     write_bvh(&out.join(&bvh), &on_rig.track, rig.axes)?;
+    write_glb(&out.join(&glb), label, &on_rig.track, &rig.map, boxes)?;
     let motion_poses = if files_are_the_motion { on_rig.poses.clone() } else { retarget(track, rig)?.poses };
     let constraints = match judge {
         Some(judge) => judge_on_rig(judge, i, &track.forward_kinematics(), &motion_poses, on_rig.report.leg_ratio)?,
@@ -280,6 +289,7 @@ fn rig_file(
         .collect();
     Ok(RigFile {
         bvh,
+        glb,
         units_per_metre: rig.axes.per_metre,
         z_up: rig.axes.up == UpAxis::Z,
         report: on_rig.report,

@@ -5,7 +5,8 @@ use std::f64::consts::{FRAC_PI_2, TAU};
 
 use glam::DVec3;
 
-use crate::skeleton::{Joint, Pose};
+use crate::export::armature::ArmatureNode;
+use crate::skeleton::{Joint, NUM_JOINTS};
 
 /// Vertices round a capsule's axis.
 const SEGMENTS: usize = 10;
@@ -13,6 +14,9 @@ const SEGMENTS: usize = 10;
 const CAP_RINGS: usize = 3;
 /// Below this bone length (m) a capsule is drawn as a sphere.
 const SPHERE_M: f64 = 1e-6;
+/// Radius of the thin capsule round a bone that carries none of our joints (a finger, a twist
+/// bone), m.
+const EXTRA_BONE_M: f64 = 0.012;
 
 /// Radius of the capsule round the bone from `joint`'s parent to `joint`, m.
 fn bone_radius_m(joint: Joint) -> f64 {
@@ -111,33 +115,52 @@ impl Geometry {
     }
 }
 
-/// The body in the bind pose `bind` (joint positions, m) and, per vertex, its skin joints
-/// (`JOINTS_0`: the bound joint's index, then three unused zeros).
-pub(super) fn body(bind: &Pose) -> (Geometry, Vec<u8>) {
+/// The body round an armature in the bind pose `bind` (each node's position, m), with
+/// `joint_nodes` the node of each of our joints, and per vertex its skin joints (`JOINTS_0`: the
+/// bound node's index, then three unused zeros; skin joint `i` is node `i`).
+///
+/// Between the nodes of a joint and its parent joint runs a capsule of that joint's radius, bound
+/// to the parent joint's node, and the head and hands get spheres bound to their own nodes. Every
+/// other bone (from a node no joint names to its parent) below the pelvis node, such as a finger
+/// or a twist bone, gets a thin capsule ([`EXTRA_BONE_M`]) bound to its parent; nodes
+/// outside the pelvis's subtree (a `root` on the floor, IK targets under it) get none.
+pub(super) fn body(bind: &[DVec3], nodes: &[ArmatureNode], joint_nodes: &[usize; NUM_JOINTS]) -> (Geometry, Vec<u16>) {
+    let mut pieces: Vec<(DVec3, DVec3, f64, usize)> = Vec::new();
+    for joint in Joint::ALL {
+        let node = joint_nodes[joint.index()];
+        if let Some(parent) = joint.parent() {
+            let from = joint_nodes[parent.index()];
+            pieces.push((bind[from], bind[node], bone_radius_m(joint), from));
+        }
+        pieces.extend(end_sphere_m(joint).map(|radius| (bind[node], bind[node], radius, node)));
+    }
+    let pelvis = joint_nodes[Joint::Pelvis.index()];
+    let mut in_body = vec![false; nodes.len()];
+    for (n, node) in nodes.iter().enumerate() {
+        in_body[n] = n == pelvis || node.parent.is_some_and(|p| in_body[p]);
+        let extra =
+            node.parent.filter(|p| in_body[n] && !joint_nodes.contains(&n) && bind[*p].distance(bind[n]) > SPHERE_M);
+        pieces.extend(extra.map(|p| (bind[p], bind[n], EXTRA_BONE_M, p)));
+    }
     let mut geometry = Geometry::default();
     let mut bound_to = Vec::new();
-    for joint in Joint::ALL {
-        let at = bind[joint.index()];
-        let mut pieces = Vec::new();
-        if let Some(parent) = joint.parent() {
-            pieces.push((bind[parent.index()], bone_radius_m(joint), parent));
-        }
-        pieces.extend(end_sphere_m(joint).map(|radius| (at, radius, joint)));
-        for (from, radius, bound) in pieces {
-            let before = geometry.positions.len();
-            geometry.capsule(from, at, radius);
-            for _ in before..geometry.positions.len() {
-                bound_to.extend([bound.index() as u8, 0, 0, 0]);
-            }
-        }
+    for (from, to, radius, bound) in pieces {
+        let before = geometry.positions.len();
+        geometry.capsule(from, to, radius);
+        // Skin joints fit in a u16: the writer refuses armatures of more nodes.
+        bound_to.extend((before..geometry.positions.len()).flat_map(|_| [bound as u16, 0, 0, 0]));
     }
     (geometry, bound_to)
 }
 
 #[cfg(test)]
 mod tests {
+    use std::path::Path;
+
     use super::*;
-    use crate::skeleton::{rest_pose, NUM_JOINTS};
+    use crate::export::armature::our_joint_nodes;
+    use crate::export::retarget::TargetRig;
+    use crate::skeleton::rest_pose;
 
     /// Every triangle's face normal points the way of its vertices' normals.
     fn assert_outward(geometry: &Geometry) {
@@ -172,19 +195,50 @@ mod tests {
     #[test]
     fn every_body_vertex_is_bound_to_one_joint() {
         let rest = rest_pose();
-        let (body, bound_to) = body(&rest);
+        let nodes: Vec<ArmatureNode> = Joint::ALL
+            .map(|j| ArmatureNode {
+                name: j.name().into(),
+                parent: j.parent().map(Joint::index),
+                offset_m: DVec3::ZERO,
+                end_site_m: None,
+                translated: false,
+            })
+            .into();
+        let (body, bound_to) = body(&rest, &nodes, &our_joint_nodes());
         assert_outward(&body);
         assert_eq!(bound_to.len(), 4 * body.positions.len());
-        assert!(bound_to.chunks(4).all(|j| (j[0] as usize) < NUM_JOINTS && j[1..] == [0, 0, 0]));
+        assert!(bound_to.chunks(4).all(|j| usize::from(j[0]) < NUM_JOINTS && j[1..] == [0, 0, 0]));
         // The head's sphere moves with the head; the forearm with the elbow.
         let head = rest[Joint::Head.index()];
         let bound = |joint: Joint, p: DVec3| {
-            bound_to[4 * body.positions.iter().position(|q| *q == p).unwrap()] == joint.index() as u8
+            bound_to[4 * body.positions.iter().position(|q| *q == p).unwrap()] == joint.index() as u16
         };
         assert!(bound(Joint::Head, head + DVec3::Y * 0.1));
         let wrist = rest[Joint::LeftWrist.index()];
         let elbow = rest[Joint::LeftElbow.index()];
         let down = (wrist - elbow).normalize();
         assert!(bound(Joint::LeftElbow, elbow - down * bone_radius_m(Joint::LeftWrist)));
+    }
+
+    #[test]
+    fn a_rigs_extra_bones_below_the_pelvis_get_thin_capsules() {
+        let rig = TargetRig::read_bvh(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/rigs/unreal.bvh"), None)
+            .unwrap();
+        let rest = rig.rest_positions();
+        let (body, bound_to) = body(&rest, &rig.nodes, &rig.map);
+        assert_outward(&body);
+        let node = |name: &str| rig.nodes.iter().position(|n| n.name == name).unwrap() as u16;
+        let bound: Vec<u16> = bound_to.chunks(4).map(|j| j[0]).collect();
+        assert!(bound.iter().all(|&n| usize::from(n) < rig.nodes.len()));
+        // The fingers are drawn, each phalanx moving with the one before; the root on the floor
+        // and the IK bones under it are not.
+        for (finger, parent) in [("index_02_l", "index_01_l"), ("index_01_r", "hand_r")] {
+            let tip = rest[usize::from(node(finger))];
+            let mut near = body.positions.iter().zip(&bound).filter(|(p, _)| p.distance(tip) < EXTRA_BONE_M + 1e-9);
+            assert!(near.any(|(_, b)| *b == node(parent)), "{finger}");
+        }
+        for unbound in ["root", "ik_foot_root", "ik_foot_l", "ik_foot_r"] {
+            assert!(!bound.contains(&node(unbound)), "{unbound}");
+        }
     }
 }

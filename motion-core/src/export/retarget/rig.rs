@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 
 use super::names::{match_nodes, Matched};
-use crate::export::armature::ArmatureNode;
+use crate::export::armature::{rest_positions, ArmatureNode};
 use crate::export::bvh::BvhAxes;
 use crate::export::error::ExportError;
 use crate::files::read_bytes;
@@ -65,11 +65,7 @@ impl TargetRig {
         let names: Vec<String> = nodes.iter().map(|n| n.name.clone()).collect();
         let (matched, map) = match_nodes(&names, explicit.as_ref()).map_err(&fail)?;
         // The rest positions in file axes and units, to find the up axis and the unit.
-        let mut rest = Vec::with_capacity(nodes.len());
-        for node in &nodes {
-            let at = node.parent.map_or(DVec3::ZERO, |p| rest[p]) + node.offset_m;
-            rest.push(at);
-        }
+        let rest = rest_from_origin(&nodes);
         let rise = rest[map[Joint::Head.index()]] - rest[map[Joint::Pelvis.index()]];
         let up = if rise.z.abs() > rise.y.abs() { UpAxis::Z } else { UpAxis::Y };
         let unit =
@@ -87,15 +83,15 @@ impl TargetRig {
         self.path.file_stem().map_or_else(|| "rig".into(), |s| s.to_string_lossy().into_owned())
     }
 
-    /// Each node's rest position, m, our axes.
+    /// Each node's rest position, m, our axes, the root at its offset from the origin.
     pub fn rest_positions(&self) -> Vec<DVec3> {
-        let mut rest: Vec<DVec3> = Vec::with_capacity(self.nodes.len());
-        for node in &self.nodes {
-            let at = node.parent.map_or(DVec3::ZERO, |p| rest[p]) + node.offset_m;
-            rest.push(at);
-        }
-        rest
+        rest_from_origin(&self.nodes)
     }
+}
+
+/// The rest positions of BVH nodes, the root at its offset from the origin (as BVH places it).
+fn rest_from_origin(nodes: &[ArmatureNode]) -> Vec<DVec3> {
+    rest_positions(nodes, nodes.first().map_or(DVec3::ZERO, |root| root.offset_m))
 }
 
 /// Reads a joint map: a JSON object of our joint names to node names.
