@@ -163,6 +163,8 @@ fn a_users_rig_gets_the_motion_in_its_own_unit_and_axes_and_a_rig_without_our_jo
         assert!(bvh.contains("JOINT upperarm_twist_01_l") && bvh.contains("Frames: 12"), "{bvh}");
     }
     assert!(out.join("rig_strip.png").is_file(), "the picture of ours and the rig");
+    let page = std::fs::read_to_string(out.join("viewer.html")).unwrap();
+    assert_eq!(page.matches("\"glb_base64\":").count(), 2, "the viewer plays each sample on the rig");
     // The rig (our size) puts its right toe (`ball_r`) where ours is on every probed frame.
     let toe = |probes: &serde_json::Value| -> Vec<serde_json::Value> {
         probes.as_array().unwrap().iter().filter(|p| p["joint"] == "right_foot").cloned().collect()

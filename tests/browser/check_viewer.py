@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """Opens a mogen viewer page (motion-core/src/export/viewer.rs) from disk in headless Chromium
 and checks that it works: no console errors or uncaught exceptions, WebGL running, a 3-D view
-that is not blank, and an animation that moves.
+that is not blank, an animation that moves, and (`--rigs N`) N samples on a user's rig played
+from their skinned GLBs.
 
-    python3 tests/browser/check_viewer.py path/to/viewer.html [--screenshot out.png]
+    python3 tests/browser/check_viewer.py path/to/viewer.html [--screenshot out.png] [--rigs N]
 
 Needs only Python 3 (standard library) and a Chromium: `chromium-headless-shell`, `chromium`
 or `google-chrome` on PATH, or --chromium PATH. It drives the browser through the DevTools
@@ -230,6 +231,7 @@ PAGE_STATE = """JSON.stringify((() => {
     error: error && getComputedStyle(error).display !== 'none' ? error.textContent : null,
     readout: (document.getElementById('readout') || {}).textContent || null,
     reportRows: document.querySelectorAll('#report tr').length,
+    rigs: window.mogenRigsShown === undefined ? null : window.mogenRigsShown,
   };
 })())"""
 
@@ -327,8 +329,9 @@ def find_chromium(given):
     return None
 
 
-def check(page, chromium, screenshot_path):
-    """Runs the checks; returns (failures, facts)."""
+def check(page, chromium, screenshot_path, rigs):
+    """Runs the checks (`rigs`: the samples on a user's rig the page must show); returns
+    (failures, facts)."""
     failures, facts = [], {}
     with tempfile.TemporaryDirectory(prefix="mogen-viewer-check-") as scratch:
         log_path = pathlib.Path(scratch) / "chromium.log"
@@ -370,6 +373,9 @@ def check(page, chromium, screenshot_path):
     facts["webgl"] = first_state["webgl"]
     facts["readouts"] = [first_state["readout"], second_state["readout"]]
     facts["report rows"] = first_state["reportRows"]
+    facts["rigs shown"] = first_state["rigs"]
+    if first_state["rigs"] != rigs:
+        failures.append(f"the page shows {first_state['rigs']} samples on a rig, expected {rigs}")
     if first_state["error"]:
         failures.append(f"the page shows an error: {first_state['error']}")
     if not first_state["canvas"]:
@@ -404,6 +410,8 @@ def main():
     parser.add_argument("page", type=pathlib.Path, help="the viewer page (.html)")
     parser.add_argument("--screenshot", help="write the first screenshot (PNG) here")
     parser.add_argument("--chromium", help="the browser binary (default: found on PATH)")
+    parser.add_argument("--rigs", type=int, default=0,
+                        help="how many samples on a user's rig (--rig) the page must play from their GLBs")
     args = parser.parse_args()
 
     page = args.page.resolve()
@@ -415,7 +423,7 @@ def main():
         print("FAIL: no Chromium found (install chromium-headless-shell or pass --chromium)", file=sys.stderr)
         return 2
     try:
-        failures, facts = check(page, chromium, args.screenshot)
+        failures, facts = check(page, chromium, args.screenshot, args.rigs)
     except (BrowserError, OSError, ValueError) as e:
         print(f"FAIL: could not run the browser check: {e}", file=sys.stderr)
         return 2

@@ -1,7 +1,7 @@
 #!/bin/sh
-# Rebuilds three.min.js, the three.js bundle inlined into every viewer page: three.js and its
-# OrbitControls from npm, bundled by esbuild into one minified IIFE that defines the global
-# `THREE` (a classic script, since pages opened from file:// cannot import modules). Needs node
+# Rebuilds three.min.js, the three.js bundle inlined into every viewer page: three.js, its
+# OrbitControls and its GLTFLoader from npm, bundled by esbuild into one minified IIFE that
+# defines the global `THREE` (a classic script, since pages opened from file:// cannot import modules). Needs node
 # and npm; works in a scratch folder and writes only three.min.js and three.LICENSE here.
 set -eu
 THREE_VERSION=0.187.0

@@ -5,7 +5,11 @@
 // Data (written by motion-core/src/export/viewer.rs):
 //   { title, fps, joints: [22 names], parents: [22 parent indices, null for the pelvis],
 //     samples: [{ label, frames: [frame][22][x, y, z] }], scene: [SceneBox],
-//     carried: [{ hands: [joint, joint], diameter_m }], report: TaskReport|null }
+//     carried: [{ hands: [joint, joint], diameter_m }], report: TaskReport|null,
+//     rigs: [{ label, glb_base64 }] }
+// A rig is a sample on the user's rig (`--rig`): its GLB is read by THREE.GLTFLoader and its
+// skinned body played by an AnimationMixer at the page's time (the GLB's scene boxes are left
+// hidden: the page draws its own). `window.mogenRigsShown` counts the rigs on stage.
 // Axes are the project's and three.js's own: metres, y up, the character starts facing +z and
 // +x is its left, so positions go in unchanged.
 'use strict';
@@ -232,6 +236,47 @@
     });
     return { sample, index, group, jointMeshes, boneMeshes, balls, label, positions, colour: mid };
   });
+
+  // Each sample on the user's rig, where the rig stands.
+  const mixers = [];
+  window.mogenRigsShown = 0;
+  for (const rig of data.rigs || []) {
+    const bytes = Uint8Array.from(atob(rig.glb_base64), (c) => c.charCodeAt(0));
+    new THREE.GLTFLoader().parse(
+      bytes.buffer,
+      '',
+      (gltf) => {
+        gltf.scene.traverse((object) => {
+          if (object.isSkinnedMesh) {
+            object.castShadow = true;
+            object.frustumCulled = false; // the skin moves the body far from its bind box
+          } else if (object.isMesh) {
+            object.visible = false;
+          }
+        });
+        const label = textSprite(rig.label, 0.12, '#555555');
+        gltf.scene.add(label);
+        scene.add(gltf.scene);
+        const mixer = new THREE.AnimationMixer(gltf.scene);
+        gltf.animations.forEach((clip) => mixer.clipAction(clip).play());
+        mixers.push({ mixer, label, root: gltf.scene.getObjectByProperty('type', 'Bone') });
+        window.mogenRigsShown += 1;
+      },
+      (error) => fail(`the GLB of ${rig.label} cannot be read (${error && error.message ? error.message : error})`),
+    );
+  }
+  const rigLabelAt = new THREE.Vector3();
+  const RIG_LABEL_M = 2.1; // above a person-sized rig and the sample's own label
+  /** Poses every rig at `frame` (the GLB's time is the motion's: frame / fps seconds). */
+  function poseRigs(frame) {
+    for (const { mixer, label, root } of mixers) {
+      mixer.setTime(frame / data.fps);
+      if (root) {
+        root.getWorldPosition(rigLabelAt);
+        label.position.set(rigLabelAt.x, RIG_LABEL_M, rigLabelAt.z);
+      }
+    }
+  }
 
   const direction = new THREE.Vector3();
   /** Poses a figure at `frame` (fractional: joint positions interpolated linearly). */
@@ -463,6 +508,7 @@
       scrub.value = String(Math.round(state.frame));
     }
     figures.forEach((f) => pose(f, state.frame));
+    poseRigs(state.frame);
     const shownFrame = Math.round(state.frame);
     readout.textContent = `frame ${shownFrame} / ${lastFrame} · ${seconds(shownFrame)} s / ${seconds(lastFrame)} s`;
     controls.update();

@@ -20,11 +20,11 @@ use serde::Serialize;
 use super::armature::our_joint_nodes;
 use super::bvh::{write_bvh, BvhUnit};
 use super::error::{write_atomically, ExportError};
-use super::gltf::write_glb;
+use super::gltf::{glb_bytes, write_glb};
 use super::retarget::{judge_on_rig, retarget, RetargetReport, Retargeted, RigConstraint, RigJudge, TargetRig};
 use super::rotations::{RotationTrack, SolveFit};
 use super::scene::{scene_boxes, PositionTarget, SceneBox, SceneExtent};
-use super::viewer::{write_viewer, ViewerInput, ViewerSample};
+use super::viewer::{write_viewer, ViewerInput, ViewerRig, ViewerSample};
 use crate::files::FileError;
 use crate::import::bvh::UpAxis;
 use crate::program::{Carry, Primitive};
@@ -182,7 +182,7 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         .collect::<Result<Vec<_>, _>>()?;
     let extent = SceneExtent::of(input.samples.iter().map(|(_, poses)| *poses));
     let boxes = scene_boxes(&input.scene, &input.targets, extent);
-    let viewer = ViewerInput {
+    let mut viewer = ViewerInput {
         title: input.title.clone(),
         fps: input.fps,
         samples: input
@@ -193,6 +193,7 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
         scene: boxes.clone(),
         carried: input.carried.clone(),
         report: input.report.clone(),
+        rigs: Vec::new(),
     };
     let mut samples = Vec::with_capacity(tracks.len());
     let files = tracks.iter().map(|track| file_track(track, input)).collect::<Result<Vec<_>, _>>()?;
@@ -220,7 +221,9 @@ pub fn write_outputs(out: &Path, input: &ExportInput<'_>) -> Result<ExportManife
                 (Some(on_rig), Some(rig)) => {
                     let files_are_the_motion = matches!(file, Cow::Borrowed(_));
                     let sample = (i, label.as_str(), track, files_are_the_motion);
-                    Some(rig_file(out, sample, on_rig, rig, input.judge.as_ref(), &boxes)?)
+                    let (file, glb) = rig_file(out, sample, on_rig, rig, input.judge.as_ref(), &boxes)?;
+                    viewer.rigs.push(ViewerRig { label: format!("{label} on the rig {}", rig.name()), glb });
+                    Some(file)
                 }
                 _ => None,
             },
@@ -266,10 +269,11 @@ fn rig_file(
     rig: &TargetRig,
     judge: Option<&RigJudge<'_>>,
     boxes: &[SceneBox],
-) -> Result<RigFile, ExportError> {
+) -> Result<(RigFile, Vec<u8>), ExportError> {
     let (bvh, glb) = (format!("sample_{i}/{}.bvh", rig.name()), format!("sample_{i}/{}.glb", rig.name()));
     write_bvh(&out.join(&bvh), &on_rig.track, rig.axes)?;
-    write_glb(&out.join(&glb), label, &on_rig.track, &rig.map, boxes)?;
+    let glb_file = glb_bytes(label, &on_rig.track, &rig.map, boxes)?;
+    write_atomically(&out.join(&glb), &glb_file)?;
     let motion_poses = if files_are_the_motion { on_rig.poses.clone() } else { retarget(track, rig)?.poses };
     let constraints = match judge {
         Some(judge) => judge_on_rig(judge, i, &track.forward_kinematics(), &motion_poses, on_rig.report.leg_ratio)?,
@@ -287,7 +291,7 @@ fn rig_file(
             }
         })
         .collect();
-    Ok(RigFile {
+    let file = RigFile {
         bvh,
         glb,
         units_per_metre: rig.axes.per_metre,
@@ -296,7 +300,8 @@ fn rig_file(
         constraints,
         probes,
         motion_poses,
-    })
+    };
+    Ok((file, glb_file))
 }
 
 /// [`PROBE_JOINTS`] of forward-kinematics poses `fk` at the first frame, a third, two thirds

@@ -4,12 +4,15 @@
 //! The page ([`VIEWER_JS`] on [`TEMPLATE`]) draws each sample as capsules (joints as spheres,
 //! bones as cylinders; left limbs blue, right red, as in the strips), the scene boxes, a ground
 //! grid with metre labels, the pelvis and foot paths, playback controls and the per-constraint
-//! report. three.js is the npm package bundled into one script (`assets/viewer/README.md` says
+//! report, and each sample on the user's rig from its GLB (`--rig`: the skinned body played by
+//! three.js's GLTFLoader and AnimationMixer at the page's time). three.js is the npm package
+//! bundled into one script (`assets/viewer/README.md` says
 //! how to rebuild it). Positions go in unchanged: the project's axes (m, y up, the character
 //! starts facing +z, +x is its left) are three.js's own.
 
 use std::path::Path;
 
+use base64::Engine as _;
 use serde::Serialize;
 
 use super::error::{write_atomically, ExportError};
@@ -60,6 +63,18 @@ pub struct ViewerInput {
     /// The run's `report.json` ([`crate::evaluation::TaskReport`]) for the constraint table;
     /// `None` for motions without a task.
     pub report: Option<serde_json::Value>,
+    /// The samples on the user's rig (`--rig`): each one's GLB, played by the page.
+    pub rigs: Vec<ViewerRig>,
+}
+
+/// One sample on the user's rig, as the page plays it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewerRig {
+    /// Drawn above the rig, e.g. `sample 0 on the rig mixamo`.
+    pub label: String,
+    /// The sample's GLB on the rig ([`super::gltf::glb_bytes`]): its skinned body and animation,
+    /// at the motion's duration.
+    pub glb: Vec<u8>,
 }
 
 /// What the page's data slot holds (documented at the top of `viewer.js`).
@@ -73,6 +88,14 @@ struct Payload<'a> {
     scene: &'a [SceneBox],
     carried: Vec<PayloadCarried>,
     report: Option<&'a serde_json::Value>,
+    rigs: Vec<PayloadRig<'a>>,
+}
+
+#[derive(Serialize)]
+struct PayloadRig<'a> {
+    label: &'a str,
+    /// The GLB, base64.
+    glb_base64: String,
 }
 
 #[derive(Serialize)]
@@ -140,6 +163,14 @@ fn payload_json(input: &ViewerInput) -> Result<String, ExportError> {
             .map(|c| PayloadCarried { hands: c.hands.map(Joint::index), diameter_m: c.diameter_m })
             .collect(),
         report: input.report.as_ref(),
+        rigs: input
+            .rigs
+            .iter()
+            .map(|r| PayloadRig {
+                label: &r.label,
+                glb_base64: base64::engine::general_purpose::STANDARD.encode(&r.glb),
+            })
+            .collect(),
     };
     let json = serde_json::to_string(&payload).map_err(|e| ExportError::Shape(format!("viewer data: {e}")))?;
     Ok(json.replace('<', "\\u003c"))
@@ -210,6 +241,7 @@ mod tests {
                 reduce: Default::default(),
             }],
             report: Some(serde_json::json!({"constraints": [{"id": "c1", "pass": [true, false]}]})),
+            rigs: Vec::new(),
         }
     }
 
