@@ -191,6 +191,58 @@ fn a_users_rig_gets_the_motion_in_its_own_unit_and_axes_and_a_rig_without_our_jo
 }
 
 #[test]
+fn a_rig_of_other_names_is_matched_through_a_joint_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let npy = dir.path().join("joints.npy");
+    Tensor::from_vec(standing(1, 6), (1, 6, 22, 3), &Device::Cpu).unwrap().write_npy(&npy).unwrap();
+    let mixamo = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/rigs/mixamo.bvh"));
+    // Names of no convention: `rig_` glued on, and the upper chest called `Chest`.
+    let rig = dir.path().join("house_style.bvh");
+    std::fs::write(&rig, mixamo.unwrap().replace("mixamorig:", "rig_").replace("rig_Spine2", "rig_Chest")).unwrap();
+    let ours_to_mixamo = [
+        ("pelvis", "Hips"),
+        ("left_hip", "LeftUpLeg"),
+        ("right_hip", "RightUpLeg"),
+        ("spine1", "Spine"),
+        ("left_knee", "LeftLeg"),
+        ("right_knee", "RightLeg"),
+        ("spine2", "Spine1"),
+        ("left_ankle", "LeftFoot"),
+        ("right_ankle", "RightFoot"),
+        ("spine3", "Chest"),
+        ("left_foot", "LeftToeBase"),
+        ("right_foot", "RightToeBase"),
+        ("neck", "Neck"),
+        ("left_collar", "LeftShoulder"),
+        ("right_collar", "RightShoulder"),
+        ("head", "Head"),
+        ("left_shoulder", "LeftArm"),
+        ("right_shoulder", "RightArm"),
+        ("left_elbow", "LeftForeArm"),
+        ("right_elbow", "RightForeArm"),
+        ("left_wrist", "LeftHand"),
+        ("right_wrist", "RightHand"),
+    ];
+    let map: serde_json::Map<String, serde_json::Value> =
+        ours_to_mixamo.iter().map(|(ours, node)| (ours.to_string(), format!("rig_{node}").into())).collect();
+    let map_path = dir.path().join("map.json");
+    std::fs::write(&map_path, serde_json::Value::Object(map).to_string()).unwrap();
+    let export = |extra: &[&str]| {
+        let out = dir.path().join(format!("out{}", extra.len()));
+        let args = ["export", npy.to_str().unwrap(), "--out", out.to_str().unwrap(), "--rig", rig.to_str().unwrap()];
+        (mogen(&[&args[..], extra].concat()), out)
+    };
+    let (output, out) = export(&[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success() && stderr.contains("name the nodes with a joint map"), "{stderr}");
+    assert!(!out.exists());
+    let (output, out) = export(&["--rig-map", map_path.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success() && stderr.contains("(explicit map, 28 nodes"), "{stderr}");
+    assert!(out.join("sample_0/house_style.bvh").is_file() && out.join("sample_0/house_style.glb").is_file());
+}
+
+#[test]
 fn bad_input_is_named_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
