@@ -18,7 +18,8 @@
 //!    the rig turn with their parent: they keep their rest pose relative to it.
 //! 3. **Root.** The pelvis node is at `s · p(t) + (0, h'_pelvis − s · h_pelvis, 0)`, `s` the
 //!    ratio of the rig's legs (hip → knee → ankle) to ours and `h` each skeleton's rest height
-//!    above its toes; a node above the pelvis (Unreal's `root`) moves on the floor under it.
+//!    above its toes; a node above the pelvis (Unreal's `root`) moves on the floor under it,
+//!    carrying the horizontal path as engines take root motion (none with `--in-place`).
 //! 4. **Feet.** Each leg is solved ([`solve_leg`]) so that its toe is at ours scaled the same
 //!    way, `s · p_toe(t) + (0, h'_toe − s · h_toe, 0)` (on the floor at contact when ours is),
 //!    and its ankle a rig foot behind it, turned as our foot is; the knee bends as it bends, and
