@@ -279,16 +279,16 @@ fn rig_file(
         Some(judge) => judge_on_rig(judge, i, &track.forward_kinematics(), &motion_poses, on_rig.report.leg_ratio)?,
         None => Vec::new(),
     };
-    let probes = probes(&on_rig.poses)
+    let poses = &on_rig.poses;
+    let probes = probe_frames(poses.len())
         .into_iter()
-        .map(|p| {
-            let joint = Joint::ALL.into_iter().find(|j| j.name() == p.joint).unwrap_or(Joint::Pelvis);
-            RigProbe {
-                node: rig.nodes[rig.map[joint.index()]].name.clone(),
-                joint: p.joint,
-                frame: p.frame,
-                position_m: p.position_m,
-            }
+        .flat_map(|frame| {
+            PROBE_JOINTS.map(|j| RigProbe {
+                node: rig.nodes[rig.map[j.index()]].name.clone(),
+                joint: j.name(),
+                frame,
+                position_m: poses[frame][j.index()].to_array(),
+            })
         })
         .collect();
     let file = RigFile {
@@ -304,13 +304,17 @@ fn rig_file(
     Ok((file, glb_file))
 }
 
-/// [`PROBE_JOINTS`] of forward-kinematics poses `fk` at the first frame, a third, two thirds
-/// and the last frame.
+/// The frames of `frames` the probes are taken at: the first, a third, two thirds and the last.
+fn probe_frames(frames: usize) -> Vec<usize> {
+    let last = frames.saturating_sub(1);
+    let mut at = vec![0, last / 3, 2 * last / 3, last];
+    at.dedup();
+    at
+}
+
+/// [`PROBE_JOINTS`] of forward-kinematics poses `fk` at the [`probe_frames`].
 fn probes(fk: &[Pose]) -> Vec<Probe> {
-    let last = fk.len().saturating_sub(1);
-    let mut frames = vec![0, last / 3, 2 * last / 3, last];
-    frames.dedup();
-    frames
+    probe_frames(fk.len())
         .into_iter()
         .flat_map(|frame| {
             let pose = fk[frame];

@@ -138,7 +138,8 @@ pub fn retarget(track: &RotationTrack, rig: &TargetRig) -> Result<Retargeted, Ex
     let carrier = Carrier::new(track, rig)?;
     let ours = track.forward_kinematics();
     let globals: Vec<[DQuat; NUM_JOINTS]> = (0..ours.len()).map(|t| track.global_rotations(t)).collect();
-    let needed: Vec<f64> = ours.iter().zip(&globals).map(|(p, g)| carrier.drop_needed(p, g)).collect();
+    let turned: Vec<Vec<DQuat>> = globals.iter().map(|g| turns(rig, &carrier.drives, g)).collect();
+    let needed: Vec<f64> = ours.iter().zip(&turned).map(|(p, d)| carrier.drop_needed(p, d)).collect();
     let drops = eased_envelope(&needed, (DROP_EASE_S * track.fps).round() as usize);
     let (map, pelvis) = (rig.map, carrier.pelvis);
     let mut nodes = rig.nodes.clone();
@@ -147,8 +148,8 @@ pub fn retarget(track: &RotationTrack, rig: &TargetRig) -> Result<Retargeted, Ex
     let mut out = ArmatureTrack { nodes, fps: track.fps, local: Vec::new(), translations_m: Vec::new() };
     let mut poses = Vec::with_capacity(ours.len());
     let mut fixes = LegFix::default();
-    for ((p, g), drop) in ours.iter().zip(&globals).zip(&drops) {
-        let (mut d, pelvis_at, root_at) = carrier.start(p, g, *drop);
+    for (((p, g), mut d), drop) in ours.iter().zip(&globals).zip(turned).zip(&drops) {
+        let (pelvis_at, root_at) = carrier.place(p, *drop);
         let before = positions(rig, &d, root_at, pelvis, pelvis_at);
         fixes.merge(carrier.fix_legs(p, g, &mut d, &before));
         let after = positions(rig, &d, root_at, pelvis, pelvis_at);
@@ -235,17 +236,16 @@ impl<'a> Carrier<'a> {
         (self.at(joint).y - rig_toes) - self.s * (self.rest_ours[joint.index()].y - our_toes)
     }
 
-    /// At a frame with our joints `p` and turns `g`, the pelvis lowered by `drop` m: every node's
-    /// turn, the pelvis node's position and the root's, m.
-    fn start(&self, p: &Pose, g: &[DQuat; NUM_JOINTS], drop: f64) -> (Vec<DQuat>, DVec3, DVec3) {
-        let d = turns(self.rig, &self.drives, g);
+    /// At a frame with our joints `p`, the pelvis lowered by `drop` m: the pelvis node's position
+    /// and the root's, m.
+    fn place(&self, p: &Pose, drop: f64) -> (DVec3, DVec3) {
         let pelvis_at = self.s * p[0] + DVec3::Y * (self.lift(Joint::Pelvis) - drop);
         let root_at = if self.pelvis == 0 {
             pelvis_at
         } else {
             DVec3::new(pelvis_at.x - self.chain.x, 0.0, pelvis_at.z - self.chain.z)
         };
-        (d, pelvis_at, root_at)
+        (pelvis_at, root_at)
     }
 
     /// Where the ankle and toe of a leg go at a frame with our joints `p` and node turns `d`, m:
@@ -256,17 +256,18 @@ impl<'a> Carrier<'a> {
         (toe_goal - d[self.rig.map[ankle.index()]] * foot, toe_goal)
     }
 
-    /// How far the pelvis must come down at a frame for both ankle targets to lie within the
+    /// How far the pelvis must come down at a frame (our joints `p`, node turns `d`) for both
+    /// ankle targets to lie within the
     /// rig's legs' full reach, m (0 where they do; a target within reach is the IK's); at most
     /// [`MAX_DROP_OF_LEG`] of the leg.
-    fn drop_needed(&self, p: &Pose, g: &[DQuat; NUM_JOINTS]) -> f64 {
-        let (d, pelvis_at, root_at) = self.start(p, g, 0.0);
-        let at = positions(self.rig, &d, root_at, self.pelvis, pelvis_at);
+    fn drop_needed(&self, p: &Pose, d: &[DQuat]) -> f64 {
+        let (pelvis_at, root_at) = self.place(p, 0.0);
+        let at = positions(self.rig, d, root_at, self.pelvis, pelvis_at);
         let mut drop = 0.0_f64;
         for leg in LEGS {
             let [hip, knee, ankle, _] = leg.map(|j| self.at(j));
             let reach = hip.distance(knee) + knee.distance(ankle);
-            let to_goal = self.goals(p, &d, leg).0 - at[self.rig.map[leg[0].index()]];
+            let to_goal = self.goals(p, d, leg).0 - at[self.rig.map[leg[0].index()]];
             let across = DVec3::new(to_goal.x, 0.0, to_goal.z).length();
             let down = if across < reach { (reach * reach - across * across).sqrt() } else { 0.0 };
             drop = drop.max((-to_goal.y - down).clamp(0.0, MAX_DROP_OF_LEG * reach));
