@@ -470,6 +470,13 @@ fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoRepor
             rg.inversion_error_m
         )?;
     }
+    if !rg.missing_actions.is_empty() {
+        writeln!(
+            f,
+            "  no window of the database {}: the retrieved motion is a stand-in the prompt's other actions accept",
+            rg.missing_actions.join(" or ")
+        )?;
+    }
     let restarts = report.config.dno.restarts;
     for (i, m) in rg.masks.iter().enumerate() {
         let restart = rg

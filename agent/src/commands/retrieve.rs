@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use clap::Args;
 use motion_core::generation::rgdno::config::RetrievalConfig;
 use motion_core::generation::rgdno::retrieval::{retrieve, Retrieved};
+use motion_core::generation::rgdno::semantic::{missing_actions_note, named_actions};
 
 use crate::cli::retrieval_task::RetrievalTask;
 use crate::cli::{flags, load};
@@ -48,6 +49,13 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
         found.consistent,
         clock.elapsed().as_secs_f64()
     );
+    let asked: Vec<&str> = named_actions(query.prompt).iter().map(|a| a.verb()).collect();
+    if !asked.is_empty() {
+        println!("the prompt \"{}\" names: {}", query.prompt, asked.join(", "));
+    }
+    if let Some(note) = missing_actions_note(&found.missing_actions) {
+        println!("{note}");
+    }
     let line = |r: &Retrieved| {
         let errors: Vec<String> = r.per_constraint.iter().map(|(id, e)| format!("{id} {e:.4}")).collect();
         format!("{:.4}  {}  {}", r.score, r.source, errors.join(", "))

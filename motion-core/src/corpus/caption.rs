@@ -75,6 +75,12 @@ impl Action {
         }
     }
 
+    /// The verb phrase of the first phrasing, the one a window's displayed caption uses
+    /// ("crawls", "hops on one foot").
+    pub fn verb(self) -> &'static str {
+        self.verbs()[0]
+    }
+
     /// Verb phrases, one per phrasing.
     fn verbs(self) -> [&'static str; PHRASINGS] {
         match self {

@@ -1,7 +1,9 @@
 //! Why RG-DNO or its retrieval did not run: [`RgDnoError`] (a reason to fall back to DNO, or a
 //! failure) and [`RetrievalError`].
 
+use super::semantic::missing_actions_note;
 use crate::constraints::ConstraintError;
+use crate::corpus::caption::Action;
 use crate::database::DatabaseError;
 use crate::files::FileError;
 use crate::generation::method::GenerationError;
@@ -14,9 +16,16 @@ pub enum RgDnoError {
     /// The program has no relational parse.
     #[error("the program has no relational parse, so there is nothing to retrieve")]
     NoParse,
-    /// No database motion passed the semantic check and the threshold.
-    #[error("no database motion passed the semantic check and the retrieval threshold")]
-    NothingRetrieved,
+    /// No database motion passed the semantic check and the threshold; `missing` are the
+    /// prompt's actions that no window of the database does.
+    #[error(
+        "no database motion passed the semantic check and the retrieval threshold{}",
+        missing_actions_note(missing).map_or(String::new(), |note| format!(" ({note})"))
+    )]
+    NothingRetrieved {
+        /// The prompt's actions that no window does.
+        missing: Vec<Action>,
+    },
     /// The caller gave no retrieval database.
     #[error("no retrieval database was given")]
     NoDatabase,
@@ -38,7 +47,7 @@ impl RgDnoError {
     /// Whether this is a reason to fall back to DNO (nothing to retrieve, or no database to
     /// retrieve from) rather than a failure.
     pub fn falls_back(&self) -> bool {
-        matches!(self, RgDnoError::NoParse | RgDnoError::NothingRetrieved | RgDnoError::NoDatabase)
+        matches!(self, RgDnoError::NoParse | RgDnoError::NothingRetrieved { .. } | RgDnoError::NoDatabase)
     }
 }
 

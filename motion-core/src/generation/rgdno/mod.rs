@@ -114,7 +114,10 @@ pub fn generate_rg_dno(
         counting: !c_r.count_targets().is_empty(),
     };
     let found = retrieve(database, &query, &rg.retrieval, device)?;
-    let best = found.retrieved.first().ok_or(RgDnoError::NothingRetrieved)?;
+    let best = found
+        .retrieved
+        .first()
+        .ok_or_else(|| RgDnoError::NothingRetrieved { missing: found.missing_actions.clone() })?;
     seconds.retrieval = clock.elapsed().as_secs_f64();
 
     // The solver, as DNO's, for the batch and for both branches side by side.
@@ -175,6 +178,7 @@ pub fn generate_rg_dno(
         retrieved_noise_set: groups.retrieved_noise,
         candidates: found.candidates,
         consistent_candidates: found.consistent,
+        missing_actions: found.missing_actions.iter().map(|a| a.verb().to_owned()).collect(),
         retrieved: found
             .retrieved
             .iter()

@@ -141,6 +141,10 @@ pub struct RgDnoReport {
     /// Those that passed the semantic check, all scored.
     #[serde(default)]
     pub consistent_candidates: usize,
+    /// The actions the prompt names that no window of the database does, by their verb
+    /// ("crawls"): the retrieved motion is a stand-in that the prompt's other actions accept.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub missing_actions: Vec<String>,
     /// The retrieved motions, best first; the first is `x_R`.
     pub retrieved: Vec<RetrievedReport>,
     /// Mean joint distance of `G(z_R)` to `x_R`, m.

@@ -37,7 +37,9 @@ use rayon::prelude::*;
 use super::candidates::{CandidateSource, Crop, RetrievalDatabase};
 use super::config::RetrievalConfig;
 use super::error::RetrievalError;
+use super::semantic::named_actions;
 use crate::constraints::CompiledProgram;
+use crate::corpus::caption::Action;
 use crate::skeleton::NUM_JOINTS;
 
 /// A retrieved motion `x_R`.
@@ -62,6 +64,9 @@ pub struct RetrievalOutcome {
     pub candidates: usize,
     /// Those that passed the semantic check, all scored.
     pub consistent: usize,
+    /// The actions the prompt names ([`named_actions`]) that no window of the database does:
+    /// the retrieved motion, if any, is a stand-in the prompt's other actions accept.
+    pub missing_actions: Vec<Action>,
 }
 
 /// The task as retrieval sees it: the compiled `C_R`, its most difficult constraint and the
@@ -93,6 +98,8 @@ pub fn retrieve(
     let crops = database.crops(frames, config)?;
     let windows = database.consistent_windows(query.prompt, query.counting);
     let kept: Vec<Crop> = crops.iter().filter(|c| database.crop_is_consistent(c, &windows)).copied().collect();
+    let done = database.actions_done();
+    let missing_actions = named_actions(query.prompt).into_iter().filter(|a| !done.contains(a)).collect();
     // Rank every candidate on the proxy (joint centres, 5 Hz), then score the best exactly.
     let proxy = query.program.joints_only().thinned(config.proxy_frame_step, device)?;
     let mut ranked = score(database, &proxy, &kept, query.most_difficult, config, device)?;
@@ -114,7 +121,7 @@ pub fn retrieve(
             })
         })
         .collect::<Result<_, RetrievalError>>()?;
-    Ok(RetrievalOutcome { retrieved, candidates: crops.len(), consistent: kept.len() })
+    Ok(RetrievalOutcome { retrieved, candidates: crops.len(), consistent: kept.len(), missing_actions })
 }
 
 /// A candidate's score: `Σ w_i·E_i` (infinite for a crop that cannot be placed) and `E_i` in
@@ -182,6 +189,7 @@ mod tests {
     use super::super::candidates::tests::tiny_corpus;
     use super::*;
     use crate::corpus::Split;
+    use crate::generation::rgdno::error::RgDnoError;
     use crate::motion::test_support::walking_poses;
     use crate::program::TaskProgram;
     use crate::representation::{extract_features, recover_from_ric, FEATURE_DIM};
@@ -238,6 +246,22 @@ mod tests {
             .unwrap()
             .retrieved
             .is_empty());
+    }
+
+    #[test]
+    fn a_prompt_whose_action_no_window_does_retrieves_nothing_and_says_which() {
+        let walk = walking_poses(200, 0.0);
+        let database =
+            RetrievalDatabase::from_corpus(&tiny_corpus(vec![("walk", Split::Train, walk.clone())])).unwrap();
+        let program = pins(&walk[40..=40 + FRAMES]);
+        let config = RetrievalConfig::default();
+        let crawl = retrieve(&database, &query(&program, "a person crawls forward"), &config, &Device::Cpu).unwrap();
+        assert!(crawl.retrieved.is_empty() && crawl.consistent == 0, "{} consistent", crawl.consistent);
+        assert_eq!(crawl.missing_actions, [Action::Crawl]);
+        let error = RgDnoError::NothingRetrieved { missing: crawl.missing_actions };
+        assert!(error.to_string().ends_with("(no window of the database crawls)"), "{error}");
+        let walked = retrieve(&database, &query(&program, "a person walks"), &config, &Device::Cpu).unwrap();
+        assert!(walked.missing_actions.is_empty() && !walked.retrieved.is_empty());
     }
 
     #[test]

@@ -4,20 +4,99 @@
 //! A candidate is described twice ([`Described`]): by what its motion measurably does (a corpus
 //! window's first caption, made only from the tags measured on its joints: the action, the
 //! direction of travel relative to facing, the turn; a database sequence's label) and by
-//! everything said of it (every caption, with the description of the take it comes from). Direction
-//! words and gaits are checked against the measured sentence, since a take's description speaks
-//! of the whole take ("walk forward, turn around, walk back") while a window does one part of it;
-//! the action verbs of counting tasks against everything said, since a take's description carries
-//! verbs the tags cannot measure ("clap", "kick", "punch").
+//! everything said of it (every caption, with the description of the take it comes from).
+//! Direction words and actions are checked against the measured sentence, since a take's
+//! description speaks of the whole take ("walk forward, turn around, walk back") while a window
+//! does one part of it; the action verbs of counting tasks against everything said, since a
+//! take's description carries verbs the tags cannot measure ("clap", "kick", "punch").
+//!
+//! **Actions.** The prompt's words name actions of [`Action`], the vocabulary of the measured
+//! captions (a crawl, a jump, a sit, a walk, …; [`named_actions`]). When it names any, a
+//! candidate whose measured sentence names only other actions is dropped, unless one of the
+//! prompt's actions [`accepts`] it as a stand-in: a walk may be a crawl or a crouched sneak
+//! (the paper retrieves crawling for walking prompts, RG-DNO Fig. 3, to pass under barriers),
+//! but never a jump, a run or a stand; a crawl is never a jump.
+
+use crate::corpus::caption::Action;
 
 /// Pairs of direction words that contradict each other (either way round).
 const DIRECTION_CONTRADICTIONS: [(&str, &str); 3] = [("forward", "backward"), ("left", "right"), ("up", "down")];
 
-/// Pairs of gaits that contradict each other (either way round): a walk always has a foot on
-/// the ground, these have a flight phase. A crawl is not among them: the paper retrieves
-/// crawling for walking prompts (RG-DNO Fig. 3), to pass under barriers.
-const GAIT_CONTRADICTIONS: [(&str, &str); 5] =
-    [("walk", "run"), ("walk", "jog"), ("walk", "jump"), ("walk", "hop"), ("walk", "leap")];
+/// Word stems that name each action, in prompts and in the measured captions (whose verbs,
+/// [`crate::corpus::caption`]'s first phrasing, are among them: "crawls", "lies on the floor",
+/// "sits", "hops on one foot", "runs", "jumps", "balances on one leg", "sneaks in a crouch",
+/// "walks", "crouches", "stands").
+const ACTION_STEMS: [(&str, Action); 27] = [
+    ("crawl", Action::Crawl),
+    ("fours", Action::Crawl),
+    ("lie", Action::OnFloor),
+    ("lying", Action::OnFloor),
+    ("prone", Action::OnFloor),
+    ("sit", Action::Sit),
+    ("seat", Action::Sit),
+    ("hop", Action::HopOneFoot),
+    ("run", Action::Run),
+    ("jog", Action::Run),
+    ("sprint", Action::Run),
+    ("jump", Action::Jump),
+    ("leap", Action::Jump),
+    ("balanc", Action::Balance),
+    ("sneak", Action::Sneak),
+    ("creep", Action::Sneak),
+    ("tiptoe", Action::Sneak),
+    ("walk", Action::Walk),
+    ("stroll", Action::Walk),
+    ("step", Action::Walk),
+    ("march", Action::Walk),
+    ("wander", Action::Walk),
+    ("stumbl", Action::Walk),
+    ("crouch", Action::Crouch),
+    ("squat", Action::Crouch),
+    ("duck", Action::Crouch),
+    ("stand", Action::Stand),
+];
+
+/// The actions `text` names, in [`Action`]'s order, each once.
+pub fn named_actions(text: &str) -> Vec<Action> {
+    let words = words(text);
+    let mut named: Vec<Action> = Vec::new();
+    for (stem, action) in ACTION_STEMS {
+        if words.iter().any(|w| w.starts_with(stem)) && !named.contains(&action) {
+            named.push(action);
+        }
+    }
+    named
+}
+
+/// What a report says of the prompt's actions that no window of the database does
+/// ([`crate::generation::rgdno::retrieval::RetrievalOutcome::missing_actions`]): "no window of
+/// the database crawls or sits"; `None` when there are none.
+pub fn missing_actions_note(missing: &[Action]) -> Option<String> {
+    let verbs: Vec<&str> = missing.iter().map(|a| a.verb()).collect();
+    (!verbs.is_empty()).then(|| format!("no window of the database {}", verbs.join(" or ")))
+}
+
+/// Whether a prompt that names `named` accepts a window measured doing `measured`: the same
+/// action, or a stand-in that does the prompt's work (a walk may crawl or sneak under a
+/// barrier; a jump may be a hop or a running leap; a sit or a stand passes through the poses
+/// around it).
+pub fn accepts(named: Action, measured: Action) -> bool {
+    use Action::*;
+    let stand_ins: &[Action] = match named {
+        Walk => &[Crawl, Sneak],
+        Run => &[Jump],
+        Jump => &[HopOneFoot, Run],
+        HopOneFoot => &[Balance],
+        Crawl => &[OnFloor],
+        OnFloor => &[Crawl, Sit, Crouch],
+        Sit => &[Stand, Crouch, Walk],
+        Balance => &[Stand, HopOneFoot],
+        Sneak => &[Walk, Crouch, Crawl],
+        Crouch => &[Sneak, Stand, Walk, Crawl],
+        Stand => &[Balance, Crouch],
+    };
+    named == measured || stand_ins.contains(&measured)
+}
 
 /// Action verbs the semantic check of a counting task looks for, by stem.
 const ACTION_VERBS: [&str; 12] =
@@ -42,19 +121,24 @@ impl<'a> Described<'a> {
 }
 
 /// The supplementary's keyword check: `false` when the measured description holds a direction
-/// word or a gait that contradicts one of `prompt`'s and that the prompt does not name itself
-/// ("backwards" against "walks forwards", "jumps" against "walks", but not "turns right" against
-/// "turns left, then right"), or when `counting` and the prompt names an action verb that
-/// nothing said of the candidate holds. Words match by stem ("walk" matches "walks" and
-/// "walking").
+/// word that contradicts one of `prompt`'s and that the prompt does not name itself
+/// ("backwards" against "walks forwards", but not "turns right" against "turns left, then
+/// right"), when the prompt names actions and the measured description names only actions that
+/// none of them [`accepts`] ("jumps" against "crawls", "stands" against "walks"), or when
+/// `counting` and the prompt names an action verb that nothing said of the candidate holds.
+/// Words match by stem ("walk" matches "walks" and "walking").
 pub fn semantically_consistent(prompt: &str, candidate: Described<'_>, counting: bool) -> bool {
     let prompt_words = words(prompt);
     let measured = words(candidate.measured);
     let has = |ws: &[String], stem: &str| ws.iter().any(|w| w.starts_with(stem));
     let contradicts =
         |named: &str, other: &str| has(&prompt_words, named) && !has(&prompt_words, other) && has(&measured, other);
-    if DIRECTION_CONTRADICTIONS.iter().chain(&GAIT_CONTRADICTIONS).any(|&(a, b)| contradicts(a, b) || contradicts(b, a))
-    {
+    if DIRECTION_CONTRADICTIONS.iter().any(|&(a, b)| contradicts(a, b) || contradicts(b, a)) {
+        return false;
+    }
+    let asked = named_actions(prompt);
+    let done = named_actions(candidate.measured);
+    if !asked.is_empty() && !done.is_empty() && !done.iter().any(|&d| asked.iter().any(|&a| accepts(a, d))) {
         return false;
     }
     if counting {
@@ -97,6 +181,39 @@ mod tests {
         assert!(!consistent("a man walks six steps", "a person dances in place", true));
         assert!(consistent("a man walks six steps", "a person walks forward punching", true));
         assert!(consistent("a man walks six steps", "a person dances in place", false));
+    }
+
+    #[test]
+    fn a_window_whose_measured_action_the_prompt_does_not_accept_is_dropped() {
+        // The issue's crawl under a table retrieved a jump-turn; a wall walk retrieved a stand.
+        assert!(!consistent("a person crawls forward under a table", "a person jumps forward and turns right", false));
+        assert!(consistent("a person crawls forward under a table", "a person crawls forward", false));
+        assert!(!consistent("walk forwards 4 m with the right hand on a wall", "a person stands", false));
+        // A walk may crawl or sneak under a barrier, but not lie still on the floor.
+        assert!(consistent("a man walks forwards", "a person sneaks in a crouch forward", false));
+        assert!(!consistent("a man walks forwards", "a person lies on the floor", false));
+        // A sit passes through standing; a one-foot hop is not a two-foot jump.
+        assert!(consistent("a person sits down on a chair", "a person stands", false));
+        assert!(!consistent("a person hops on one foot across a line", "a person jumps forward", false));
+        // A prompt that names no action, or a label that names none, checks nothing.
+        assert!(consistent("a person reaches up high with a hand", "a person jumps forward", false));
+        assert!(consistent("a person crawls", "a salsa dance", false));
+    }
+
+    #[test]
+    fn every_measured_caption_verb_names_its_own_action() {
+        use Action::*;
+        let all = [Crawl, OnFloor, Sit, HopOneFoot, Run, Jump, Balance, Sneak, Walk, Crouch, Stand];
+        for action in all {
+            let named = named_actions(&format!("a person {} forward", action.verb()));
+            assert!(named.contains(&action), "{action:?}: {named:?}");
+            assert!(named.iter().all(|&n| accepts(action, n)), "{action:?} must accept every action its verb names");
+        }
+        assert_eq!(named_actions("a man runs forwards and jumps over an obstacle"), [Run, Jump]);
+        assert_eq!(named_actions("a person is crawling on all fours"), [Crawl]);
+        assert!(named_actions("a person reaches up high with a hand again and again").is_empty());
+        assert_eq!(missing_actions_note(&[Crawl, Sit]).unwrap(), "no window of the database crawls or sits");
+        assert_eq!(missing_actions_note(&[]), None);
     }
 
     #[test]

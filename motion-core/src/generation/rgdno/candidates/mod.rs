@@ -40,8 +40,9 @@ use serde::{Deserialize, Serialize};
 
 use super::config::RetrievalConfig;
 use super::error::RetrievalError;
-use super::semantic::{semantically_consistent, Described};
+use super::semantic::{named_actions, semantically_consistent, Described};
 use crate::corpus::caption::captions;
+use crate::corpus::caption::Action;
 use crate::corpus::{file as corpus_file, Corpus, Split};
 use crate::database::{mirror_label, DatabaseSource, MotionDatabase, Window};
 use crate::import::ImportWarning;
@@ -385,6 +386,20 @@ impl RetrievalDatabase {
             .iter()
             .map(|w| w.texts.each_ref().map(|t| semantically_consistent(prompt, t.described(), counting)))
             .collect()
+    }
+
+    /// The actions ([`named_actions`]) that the measured description of some window names, as
+    /// recorded or mirrored.
+    pub(super) fn actions_done(&self) -> Vec<Action> {
+        let mut done: Vec<Action> = Vec::new();
+        for text in self.windows.iter().flat_map(|w| &w.texts) {
+            for action in named_actions(&text.measured) {
+                if !done.contains(&action) {
+                    done.push(action);
+                }
+            }
+        }
+        done
     }
 
     /// Whether `crop` passes the semantic check, given [`Self::consistent_windows`]: every
