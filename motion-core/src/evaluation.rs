@@ -11,6 +11,7 @@ use crate::constraints::{Check, CompiledProgram};
 use crate::generation::method::{Generated, GenerationConfig};
 use crate::generation::refine::RefineReport;
 use crate::generation::rgdno::report::RgDnoReport;
+use crate::generation::rgdno::semantic::missing_actions_note;
 use crate::metrics::{footfalls, step_count, MetricMeans};
 use crate::motion::tensor_to_poses;
 use crate::numeric::mean;
@@ -470,12 +471,8 @@ fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoRepor
             rg.inversion_error_m
         )?;
     }
-    if !rg.missing_actions.is_empty() {
-        writeln!(
-            f,
-            "  no window of the database {}: the retrieved motion is a stand-in the prompt's other actions accept",
-            rg.missing_actions.join(" or ")
-        )?;
+    if let Some(note) = missing_actions_note(rg.missing_actions.iter().map(String::as_str)) {
+        writeln!(f, "  {note}: the retrieved motion is a stand-in the prompt's other actions accept")?;
     }
     let restarts = report.config.dno.restarts;
     for (i, m) in rg.masks.iter().enumerate() {

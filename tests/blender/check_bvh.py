@@ -150,12 +150,10 @@ def check_sample(root, sample, fps, metres_per_unit):
 
 
 def main(argv):
-    args = argv[argv.index("--") + 1:] if "--" in argv else []
-    if len(args) != 1:
-        print("usage: blender -b --factory-startup --python tests/blender/check_bvh.py -- <export_dir>",
-              file=sys.stderr)
+    args = script_args(argv, "check_bvh.py", ["<export_dir>"])
+    if args is None:
         return 2
-    root = Path(args[0])
+    [root] = args
     manifest = root / "export.json"
     if not manifest.is_file():
         print(f"FAIL: {manifest} does not exist", file=sys.stderr)
@@ -181,6 +179,18 @@ def main(argv):
     return finish(failures, f"OK: {len(samples)} BVH samples in {root} import into Blender "
                             f"{bpy.app.version_string} at {fps:g} fps with {BONES} bones; every probe within "
                             f"{TOLERANCE_M * 100:g} cm:", lines)
+
+
+def script_args(argv, script, names):
+    """The arguments after `--` of `blender -b --factory-startup --python tests/blender/<script>
+    -- <names>` as paths, or None after printing the usage when their number is not that of
+    `names`."""
+    args = argv[argv.index("--") + 1:] if "--" in argv else []
+    if len(args) != len(names):
+        print(f"usage: blender -b --factory-startup --python tests/blender/{script} -- {' '.join(names)}",
+              file=sys.stderr)
+        return None
+    return [Path(a) for a in args]
 
 
 def finish(failures, summary, lines):

@@ -26,6 +26,9 @@ from pathlib import Path
 
 import bpy
 
+sys.path.insert(0, str(Path(__file__).parent))
+from check_bvh import script_args  # noqa: E402
+
 try:
     import numpy
 except ImportError:
@@ -162,11 +165,10 @@ def check_sample(export_dir, fps, sample):
 
 
 def main():
-    args = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
-    if len(args) != 1:
-        print("usage: blender -b --factory-startup --python tests/blender/check_glb.py -- <export_dir>")
+    args = script_args(sys.argv, "check_glb.py", ["<export_dir>"])
+    if args is None:
         sys.exit(2)
-    export_dir = Path(args[0])
+    [export_dir] = args
     manifest = json.loads((export_dir / "export.json").read_text())
     fps = float(manifest["fps"])
     failures, summaries = [], []

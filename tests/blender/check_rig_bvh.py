@@ -26,7 +26,7 @@ from pathlib import Path
 import bpy
 
 sys.path.insert(0, str(Path(__file__).parent))
-from check_bvh import TOLERANCE_M, exit_with, finish, import_bvh, to_blender  # noqa: E402
+from check_bvh import TOLERANCE_M, exit_with, finish, import_bvh, script_args, to_blender  # noqa: E402
 
 
 def hierarchy(path):
@@ -96,21 +96,26 @@ def check_sample(root, sample, rig_tree):
     return failures + found, worst
 
 
-def main(argv):
-    args = argv[argv.index("--") + 1:] if "--" in argv else []
-    if len(args) != 2:
-        print("usage: blender -b --factory-startup --python tests/blender/check_rig_bvh.py -- <export_dir> <rig.bvh>",
-              file=sys.stderr)
-        return 2
-    root, rig_file = Path(args[0]), Path(args[1])
-    rig_tree = hierarchy(rig_file)
-    samples = json.loads((root / "export.json").read_text())["samples"]
+def check_samples(samples, kind, check):
+    """Runs `check(sample)` -> (failures, largest probe error in metres) on every sample: all the
+    failures, and one line per sample naming its rig file of `kind` ("bvh" or "glb")."""
     failures, lines = [], []
     for sample in samples:
-        sample_failures, worst = check_sample(root, sample, rig_tree)
+        sample_failures, worst = check(sample)
         failures += sample_failures
-        lines.append(f"  {sample.get('rig', {}).get('bvh')}: {sample['frames']} frames, largest probe error "
+        lines.append(f"  {sample.get('rig', {}).get(kind)}: {sample['frames']} frames, largest probe error "
                      f"{worst * 1000:.3f} mm")
+    return failures, lines
+
+
+def main(argv):
+    args = script_args(argv, "check_rig_bvh.py", ["<export_dir>", "<rig.bvh>"])
+    if args is None:
+        return 2
+    root, rig_file = args
+    rig_tree = hierarchy(rig_file)
+    samples = json.loads((root / "export.json").read_text())["samples"]
+    failures, lines = check_samples(samples, "bvh", lambda sample: check_sample(root, sample, rig_tree))
     return finish(failures, f"OK: {len(samples)} samples on the rig {rig_file.name} ({len(rig_tree)} bones, its "
                             f"names and parents) import into Blender {bpy.app.version_string}; every probe within "
                             f"{TOLERANCE_M * 100:g} cm:", lines)

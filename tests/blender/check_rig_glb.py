@@ -26,9 +26,9 @@ from pathlib import Path
 import bpy
 
 sys.path.insert(0, str(Path(__file__).parent))
-from check_bvh import TOLERANCE_M, exit_with, finish  # noqa: E402
+from check_bvh import TOLERANCE_M, exit_with, finish, script_args  # noqa: E402
 from check_glb import animation_span, go_to_export_frame, import_glb  # noqa: E402
-from check_rig_bvh import bone_tree_failures, hierarchy, probe_failures  # noqa: E402
+from check_rig_bvh import bone_tree_failures, check_samples, hierarchy, probe_failures  # noqa: E402
 
 
 def check_sample(root, sample, fps, rig_tree):
@@ -54,12 +54,10 @@ def check_sample(root, sample, fps, rig_tree):
 
 
 def main(argv):
-    args = argv[argv.index("--") + 1:] if "--" in argv else []
-    if len(args) != 2:
-        print("usage: blender -b --factory-startup --python tests/blender/check_rig_glb.py -- <export_dir> <rig.bvh>",
-              file=sys.stderr)
+    args = script_args(argv, "check_rig_glb.py", ["<export_dir>", "<rig.bvh>"])
+    if args is None:
         return 2
-    root, rig_file = Path(args[0]), Path(args[1])
+    root, rig_file = args
     rig_tree = hierarchy(rig_file)
     manifest = json.loads((root / "export.json").read_text())
     fps = float(manifest["fps"])
@@ -67,12 +65,7 @@ def main(argv):
     if not samples:
         print(f"FAIL: {root / 'export.json'} lists no samples", file=sys.stderr)
         return 1
-    failures, lines = [], []
-    for sample in samples:
-        sample_failures, worst = check_sample(root, sample, fps, rig_tree)
-        failures += sample_failures
-        lines.append(f"  {sample.get('rig', {}).get('glb')}: {sample['frames']} frames, largest probe error "
-                     f"{worst * 1000:.3f} mm")
+    failures, lines = check_samples(samples, "glb", lambda sample: check_sample(root, sample, fps, rig_tree))
     return finish(failures, f"OK: {len(samples)} GLB samples on the rig {rig_file.name} ({len(rig_tree)} bones, its "
                             f"names and parents) import into Blender {bpy.app.version_string} at {fps:g} fps; every "
                             f"probe within {TOLERANCE_M * 100:g} cm:", lines)

@@ -53,7 +53,7 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     if !asked.is_empty() {
         println!("the prompt \"{}\" names: {}", query.prompt, asked.join(", "));
     }
-    if let Some(note) = missing_actions_note(&found.missing_actions) {
+    if let Some(note) = missing_actions_note(found.missing_actions.iter().map(|a| a.verb())) {
         println!("{note}");
     }
     let line = |r: &Retrieved| {

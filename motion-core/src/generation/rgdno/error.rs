@@ -20,7 +20,7 @@ pub enum RgDnoError {
     /// prompt's actions that no window of the database does.
     #[error(
         "no database motion passed the semantic check and the retrieval threshold{}",
-        missing_actions_note(missing).map_or(String::new(), |note| format!(" ({note})"))
+        missing_actions_note(missing.iter().map(|a| a.verb())).map_or(String::new(), |note| format!(" ({note})"))
     )]
     NothingRetrieved {
         /// The prompt's actions that no window does.

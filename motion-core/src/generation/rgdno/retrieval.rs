@@ -37,7 +37,7 @@ use rayon::prelude::*;
 use super::candidates::{CandidateSource, Crop, RetrievalDatabase};
 use super::config::RetrievalConfig;
 use super::error::RetrievalError;
-use super::semantic::named_actions;
+use super::semantic::Heard;
 use crate::constraints::CompiledProgram;
 use crate::corpus::caption::Action;
 use crate::skeleton::NUM_JOINTS;
@@ -64,7 +64,7 @@ pub struct RetrievalOutcome {
     pub candidates: usize,
     /// Those that passed the semantic check, all scored.
     pub consistent: usize,
-    /// The actions the prompt names ([`named_actions`]) that no window of the database does:
+    /// The actions the prompt names ([`super::semantic::named_actions`]) that no window of the database does:
     /// the retrieved motion, if any, is a stand-in the prompt's other actions accept.
     pub missing_actions: Vec<Action>,
 }
@@ -96,10 +96,10 @@ pub fn retrieve(
     }
     let frames = query.program.frames();
     let crops = database.crops(frames, config)?;
-    let windows = database.consistent_windows(query.prompt, query.counting);
+    let heard = Heard::new(query.prompt, query.counting);
+    let windows = database.consistent_windows(&heard);
     let kept: Vec<Crop> = crops.iter().filter(|c| database.crop_is_consistent(c, &windows)).copied().collect();
-    let done = database.actions_done();
-    let missing_actions = named_actions(query.prompt).into_iter().filter(|a| !done.contains(a)).collect();
+    let missing_actions = heard.actions().iter().copied().filter(|a| !database.actions_done().contains(a)).collect();
     // Rank every candidate on the proxy (joint centres, 5 Hz), then score the best exactly.
     let proxy = query.program.joints_only().thinned(config.proxy_frame_step, device)?;
     let mut ranked = score(database, &proxy, &kept, query.most_difficult, config, device)?;

@@ -56,9 +56,13 @@ const ACTION_STEMS: [(&str, Action); 27] = [
     ("stand", Action::Stand),
 ];
 
-/// The actions `text` names, in [`Action`]'s order, each once.
+/// The actions `text` names, in the order of [`ACTION_STEMS`], each once.
 pub fn named_actions(text: &str) -> Vec<Action> {
-    let words = words(text);
+    actions_in(&words(text))
+}
+
+/// [`named_actions`] of a text's lower-case `words`.
+fn actions_in(words: &[String]) -> Vec<Action> {
     let mut named: Vec<Action> = Vec::new();
     for (stem, action) in ACTION_STEMS {
         if words.iter().any(|w| w.starts_with(stem)) && !named.contains(&action) {
@@ -69,10 +73,11 @@ pub fn named_actions(text: &str) -> Vec<Action> {
 }
 
 /// What a report says of the prompt's actions that no window of the database does
-/// ([`crate::generation::rgdno::retrieval::RetrievalOutcome::missing_actions`]): "no window of
-/// the database crawls or sits"; `None` when there are none.
-pub fn missing_actions_note(missing: &[Action]) -> Option<String> {
-    let verbs: Vec<&str> = missing.iter().map(|a| a.verb()).collect();
+/// ([`crate::generation::rgdno::retrieval::RetrievalOutcome::missing_actions`]), given by
+/// their verbs ([`Action::verb`]): "no window of the database crawls or sits"; `None` when there
+/// are none.
+pub fn missing_actions_note<'a>(verbs: impl IntoIterator<Item = &'a str>) -> Option<String> {
+    let verbs: Vec<&str> = verbs.into_iter().collect();
     (!verbs.is_empty()).then(|| format!("no window of the database {}", verbs.join(" or ")))
 }
 
@@ -120,35 +125,58 @@ impl<'a> Described<'a> {
     }
 }
 
-/// The supplementary's keyword check: `false` when the measured description holds a direction
-/// word that contradicts one of `prompt`'s and that the prompt does not name itself
-/// ("backwards" against "walks forwards", but not "turns right" against "turns left, then
-/// right"), when the prompt names actions and the measured description names only actions that
-/// none of them [`accepts`] ("jumps" against "crawls", "stands" against "walks"), or when
-/// `counting` and the prompt names an action verb that nothing said of the candidate holds.
-/// Words match by stem ("walk" matches "walks" and "walking").
-pub fn semantically_consistent(prompt: &str, candidate: Described<'_>, counting: bool) -> bool {
-    let prompt_words = words(prompt);
-    let measured = words(candidate.measured);
-    let has = |ws: &[String], stem: &str| ws.iter().any(|w| w.starts_with(stem));
-    let contradicts =
-        |named: &str, other: &str| has(&prompt_words, named) && !has(&prompt_words, other) && has(&measured, other);
-    if DIRECTION_CONTRADICTIONS.iter().any(|&(a, b)| contradicts(a, b) || contradicts(b, a)) {
-        return false;
+/// A prompt as the semantic check hears it, read once per query: its words, the actions they
+/// name, and whether the task counts actions.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Heard {
+    words: Vec<String>,
+    actions: Vec<Action>,
+    counting: bool,
+}
+
+impl Heard {
+    /// `prompt` heard for a task that counts actions (`counting`) or not.
+    pub fn new(prompt: &str, counting: bool) -> Self {
+        let words = words(prompt);
+        Heard { actions: actions_in(&words), words, counting }
     }
-    let asked = named_actions(prompt);
-    let done = named_actions(candidate.measured);
-    if !asked.is_empty() && !done.is_empty() && !done.iter().any(|&d| asked.iter().any(|&a| accepts(a, d))) {
-        return false;
+
+    /// The actions the prompt names ([`named_actions`]).
+    pub fn actions(&self) -> &[Action] {
+        &self.actions
     }
-    if counting {
-        let said = words(candidate.said);
-        let verbs: Vec<&str> = ACTION_VERBS.iter().copied().filter(|v| has(&prompt_words, v)).collect();
-        if !verbs.is_empty() && !verbs.iter().any(|v| has(&said, v)) {
+
+    /// The supplementary's keyword check: `false` when the measured description holds a
+    /// direction word that contradicts one of the prompt's and that the prompt does not name
+    /// itself ("backwards" against "walks forwards", but not "turns right" against "turns left,
+    /// then right"), when the prompt names actions and the measured description names only
+    /// actions that none of them [`accepts`] ("jumps" against "crawls", "stands" against
+    /// "walks"), or when the task counts and the prompt names an action verb that nothing said
+    /// of the candidate holds. Words match by stem ("walk" matches "walks" and "walking").
+    pub fn consistent(&self, candidate: Described<'_>) -> bool {
+        let measured = words(candidate.measured);
+        let has = |ws: &[String], stem: &str| ws.iter().any(|w| w.starts_with(stem));
+        let contradicts =
+            |named: &str, other: &str| has(&self.words, named) && !has(&self.words, other) && has(&measured, other);
+        if DIRECTION_CONTRADICTIONS.iter().any(|&(a, b)| contradicts(a, b) || contradicts(b, a)) {
             return false;
         }
+        let done = actions_in(&measured);
+        if !self.actions.is_empty()
+            && !done.is_empty()
+            && !done.iter().any(|&d| self.actions.iter().any(|&a| accepts(a, d)))
+        {
+            return false;
+        }
+        if self.counting {
+            let said = words(candidate.said);
+            let verbs: Vec<&str> = ACTION_VERBS.iter().copied().filter(|v| has(&self.words, v)).collect();
+            if !verbs.is_empty() && !verbs.iter().any(|v| has(&said, v)) {
+                return false;
+            }
+        }
+        true
     }
-    true
 }
 
 fn words(text: &str) -> Vec<String> {
@@ -160,7 +188,7 @@ mod tests {
     use super::*;
 
     fn consistent(prompt: &str, label: &str, counting: bool) -> bool {
-        semantically_consistent(prompt, Described::label(label), counting)
+        Heard::new(prompt, counting).consistent(Described::label(label))
     }
 
     #[test]
@@ -212,8 +240,11 @@ mod tests {
         assert_eq!(named_actions("a man runs forwards and jumps over an obstacle"), [Run, Jump]);
         assert_eq!(named_actions("a person is crawling on all fours"), [Crawl]);
         assert!(named_actions("a person reaches up high with a hand again and again").is_empty());
-        assert_eq!(missing_actions_note(&[Crawl, Sit]).unwrap(), "no window of the database crawls or sits");
-        assert_eq!(missing_actions_note(&[]), None);
+        assert_eq!(
+            missing_actions_note([Crawl.verb(), Sit.verb()]).unwrap(),
+            "no window of the database crawls or sits"
+        );
+        assert_eq!(missing_actions_note([]), None);
     }
 
     #[test]
@@ -223,13 +254,13 @@ mod tests {
             measured: "a person walks forward",
             said: "a person walks forward | walk forward, turn around, walk back: someone steps ahead",
         };
-        assert!(semantically_consistent("a man walks forwards", window, false));
+        assert!(Heard::new("a man walks forwards", false).consistent(window));
         // The window runs, whatever the take's description says.
         let running = Described { measured: "a person runs forward", said: "walk: a person runs forward" };
-        assert!(!semantically_consistent("a man walks forwards", running, false));
+        assert!(!Heard::new("a man walks forwards", false).consistent(running));
         // A clap is in the take's description only.
         let clapping = Described { measured: "a person stands", said: "a person stands | clapping hands" };
-        assert!(semantically_consistent("a person claps three times", clapping, true));
-        assert!(!semantically_consistent("a person kicks three times", clapping, true));
+        assert!(Heard::new("a person claps three times", true).consistent(clapping));
+        assert!(!Heard::new("a person kicks three times", true).consistent(clapping));
     }
 }

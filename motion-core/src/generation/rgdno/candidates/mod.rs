@@ -40,7 +40,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::RetrievalConfig;
 use super::error::RetrievalError;
-use super::semantic::{named_actions, semantically_consistent, Described};
+use super::semantic::{named_actions, Described, Heard};
 use crate::corpus::caption::captions;
 use crate::corpus::caption::Action;
 use crate::corpus::{file as corpus_file, Corpus, Split};
@@ -114,6 +114,9 @@ pub struct RetrievalDatabase {
     mirror: bool,
     /// The index of each joint's mirror image ([`Joint::mirror`]).
     mirror_of: [usize; NUM_JOINTS],
+    /// The actions some window's measured description names ([`named_actions`]), as recorded
+    /// or mirrored: read once when the database is made.
+    actions_done: Vec<Action>,
 }
 
 #[derive(Debug, Clone)]
@@ -283,7 +286,7 @@ impl RetrievalDatabase {
 
     fn empty(mirror: bool) -> Self {
         let mirror_of = Joint::ALL.map(|j| j.mirror().index());
-        Self { joints: Vec::new(), clips: Vec::new(), windows: Vec::new(), mirror, mirror_of }
+        Self { joints: Vec::new(), clips: Vec::new(), windows: Vec::new(), mirror, mirror_of, actions_done: Vec::new() }
     }
 
     /// Appends a clip of joint coordinates (`[frames, 22, 3]`, flat) with its windows.
@@ -308,10 +311,18 @@ impl RetrievalDatabase {
         });
     }
 
-    /// `self` without spare capacity, or [`RetrievalError::Empty`] when no clip has 2 frames.
+    /// `self` without spare capacity and with the actions its windows do, or
+    /// [`RetrievalError::Empty`] when no clip has 2 frames.
     fn checked(mut self) -> Result<Self, RetrievalError> {
         self.joints.shrink_to_fit();
         self.windows.shrink_to_fit();
+        for text in self.windows.iter().flat_map(|w| &w.texts) {
+            for action in named_actions(&text.measured) {
+                if !self.actions_done.contains(&action) {
+                    self.actions_done.push(action);
+                }
+            }
+        }
         if self.clips.iter().any(|c| c.frames >= 2) {
             Ok(self)
         } else {
@@ -379,27 +390,16 @@ impl RetrievalDatabase {
         Ok(crops)
     }
 
-    /// Whether each window, as recorded and as mirrored, passes the semantic check of `prompt`
-    /// ([`semantically_consistent`]), indexed like the windows.
-    pub(super) fn consistent_windows(&self, prompt: &str, counting: bool) -> Vec<[bool; 2]> {
-        self.windows
-            .iter()
-            .map(|w| w.texts.each_ref().map(|t| semantically_consistent(prompt, t.described(), counting)))
-            .collect()
+    /// Whether each window, as recorded and as mirrored, passes the semantic check of the
+    /// prompt `heard` ([`Heard::consistent`]), indexed like the windows.
+    pub(super) fn consistent_windows(&self, heard: &Heard) -> Vec<[bool; 2]> {
+        self.windows.iter().map(|w| w.texts.each_ref().map(|t| heard.consistent(t.described()))).collect()
     }
 
     /// The actions ([`named_actions`]) that the measured description of some window names, as
     /// recorded or mirrored.
-    pub(super) fn actions_done(&self) -> Vec<Action> {
-        let mut done: Vec<Action> = Vec::new();
-        for text in self.windows.iter().flat_map(|w| &w.texts) {
-            for action in named_actions(&text.measured) {
-                if !done.contains(&action) {
-                    done.push(action);
-                }
-            }
-        }
-        done
+    pub(super) fn actions_done(&self) -> &[Action] {
+        &self.actions_done
     }
 
     /// Whether `crop` passes the semantic check, given [`Self::consistent_windows`]: every

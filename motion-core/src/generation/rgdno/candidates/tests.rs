@@ -98,7 +98,7 @@ fn the_semantic_check_reads_the_crops_windows_and_their_mirrors() {
     assert_eq!(source.to_string(), format!("left, frames 60..161 at ×1.00 of window 40..160: {:?}", source.caption));
     let mirrored = Crop { mirrored: true, ..crop };
     assert!(database.source(&mirrored, 100).caption.contains("turns right"));
-    let windows = database.consistent_windows("a person walks and turns right", false);
+    let windows = database.consistent_windows(&Heard::new("a person walks and turns right", false));
     assert!(!database.crop_is_consistent(&crop, &windows));
     assert!(database.crop_is_consistent(&mirrored, &windows));
 }
