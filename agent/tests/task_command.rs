@@ -114,10 +114,14 @@ fn without_dry_run_the_task_becomes_motions_with_rg_dno() {
     let rg = &report["rg_dno"];
     assert!(rg["retrieved"][0]["source"]["clip"].is_string(), "{rg}");
     assert!(rg["retrieved"][0]["source"]["caption"].is_string(), "{rg}");
+    // Its semantic score: the cosine similarity of its caption's sentence vector to the prompt's.
+    let similarity = rg["retrieved"][0]["caption_similarity"].as_f64().unwrap_or(f64::NAN);
+    assert!(similarity > 0.0 && similarity <= 1.0 + 1e-6, "{rg}");
     assert_eq!(rg["masks"][0]["candidate"]["kind"], "temporal", "{rg}");
     assert_eq!(rg["config"]["final_steps"], 3, "--steps scales the stages: {rg}");
     let (stdout, stderr) = (text(&output.stdout), text(&output.stderr));
     assert!(stdout.contains("rg-dno: constraint error") && stdout.contains("retrieved "), "{stdout}");
+    assert!(stdout.contains(&format!("caption similarity {similarity:.2}")), "{stdout}");
     assert!(stderr.contains("retrieval database: ") && stderr.contains("the train split of "), "{stderr}");
     // Three steps meet nothing: the sample runs again, RG-DNO on the same database (opened once).
     assert!(stderr.contains("attempt 2 of 2: sample(s) 0 miss a constraint"), "{stderr}");

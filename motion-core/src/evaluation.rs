@@ -458,10 +458,11 @@ fn constraint_lines(f: &mut fmt::Formatter<'_>, c: &ConstraintReport) -> fmt::Re
 /// RG-DNO's retrieved motion, each sample's mask and the stages' seconds.
 fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoReport) -> fmt::Result {
     if let Some(r) = rg.retrieved.first() {
+        let similarity = r.caption_similarity.map_or(String::new(), |s| format!(", caption similarity {s:.2}"));
         writeln!(
             f,
-            "  retrieved {} resized to {} frames, C_R score {:.4}, best of {} candidates ({} after the semantic \
-             check) in {:.1} s; inversion error {:.3} m",
+            "  retrieved {} resized to {} frames, C_R score {:.4}{similarity}, best of {} candidates ({} after the \
+             semantic check) in {:.1} s; inversion error {:.3} m",
             r.source,
             report.frames,
             r.score,

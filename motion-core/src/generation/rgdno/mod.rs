@@ -37,7 +37,7 @@ mod stages;
 
 use std::time::Instant;
 
-use candle_core::{Device, Tensor};
+use candle_core::{DType, Device, Tensor};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
@@ -125,6 +125,15 @@ pub fn generate_rg_dno(
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
     let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.dno.ddim_steps)?;
     let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, guidance, config.dno.ddim_steps)?;
+    // The semantic score of each retrieved motion: its caption's sentence vector against the
+    // program text's (both unit vectors, so their product is the cosine similarity).
+    let captions: Vec<&str> = found.retrieved.iter().map(|r| r.source.caption.as_str()).collect();
+    let similarity = prior
+        .encode_text(&captions, device)?
+        .matmul(&text.get(0)?.unsqueeze(1)?)?
+        .flatten_all()?
+        .to_dtype(DType::F64)?
+        .to_vec1::<f64>()?;
 
     // Inversion (eq. 7), once for the batch.
     let clock = Instant::now();
@@ -182,10 +191,12 @@ pub fn generate_rg_dno(
         retrieved: found
             .retrieved
             .iter()
-            .map(|r| RetrievedReport {
+            .zip(similarity)
+            .map(|(r, similarity)| RetrievedReport {
                 source: r.source.clone(),
                 score: r.score,
                 per_constraint: r.per_constraint.clone(),
+                caption_similarity: Some(similarity),
             })
             .collect(),
         inversion_error_m,

@@ -19,6 +19,10 @@ pub struct RetrievedReport {
     pub score: f64,
     /// `(id, E_i)` per constraint of `C_R`.
     pub per_constraint: Vec<(String, f64)>,
+    /// The semantic score: cosine similarity of the sentence vectors (the prior's text encoder)
+    /// of its caption and of the program's text; none in reports written before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub caption_similarity: Option<f64>,
 }
 
 /// The mask chosen for one sample.
