@@ -191,6 +191,48 @@ fn a_users_rig_gets_the_motion_in_its_own_unit_and_axes_and_a_rig_without_our_jo
 }
 
 #[test]
+fn a_skinned_character_gets_the_motion_in_its_own_file_and_a_gltf_missing_its_buffer_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let npy = dir.path().join("joints.npy");
+    Tensor::from_vec(standing(1, 12), (1, 12, 22, 3), &Device::Cpu).unwrap().write_npy(&npy).unwrap();
+    let character = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/rigs/mixamo_character.glb");
+    let out = dir.path().join("character");
+    let args = ["export", npy.to_str().unwrap(), "--out", out.to_str().unwrap(), "--rig", character.to_str().unwrap()];
+    let output = mogen(&args);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("on the rig `mixamo_character` (Mixamo, 28 nodes"), "{stderr}");
+    // The character's own document: its mesh, skin and nodes, and the motion as its animation.
+    let json_of = |bytes: &[u8]| -> serde_json::Value {
+        let length = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        serde_json::from_slice(&bytes[20..20 + length]).unwrap()
+    };
+    let original = json_of(&std::fs::read(&character).unwrap());
+    let written = json_of(&std::fs::read(out.join("sample_0/mixamo_character.glb")).unwrap());
+    assert_eq!((&written["meshes"], &written["skins"]), (&original["meshes"], &original["skins"]));
+    let channels = written["animations"][0]["channels"].as_array().unwrap();
+    assert_eq!(channels.len(), 2 * 28, "a translation and a rotation channel per joint");
+    let bvh = std::fs::read_to_string(out.join("sample_0/mixamo_character.bvh")).unwrap();
+    assert!(bvh.starts_with("HIERARCHY\nROOT mixamorig:Hips\n") && bvh.contains("Frames: 12"), "{bvh}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).unwrap()).unwrap();
+    assert_eq!(manifest["samples"][0]["rig"]["units_per_metre"], 1.0);
+
+    // A .gltf whose buffer file is not beside it.
+    let gltf = dir.path().join("character.gltf");
+    let mut document = original.clone();
+    document["buffers"][0]["uri"] = "character.bin".into();
+    std::fs::write(&gltf, serde_json::to_vec(&document).unwrap()).unwrap();
+    let out = dir.path().join("refused");
+    let args = ["export", npy.to_str().unwrap(), "--out", out.to_str().unwrap(), "--rig", gltf.to_str().unwrap()];
+    let output = mogen(&args);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(stderr.contains("character.gltf: buffer 0") && stderr.contains("character.bin"), "{stderr}");
+    assert!(!out.exists(), "nothing is written");
+}
+
+#[test]
 fn a_rig_of_other_names_is_matched_through_a_joint_map() {
     let dir = tempfile::tempdir().unwrap();
     let npy = dir.path().join("joints.npy");

@@ -130,6 +130,15 @@ pub const RIG_JOINTS: Limit = Limit {
 pub const MOCAP_FILE_BYTES: Limit =
     Limit { name: "mocap file size", max: 512 << 20, unit: "bytes", advice: "split the capture into shorter files" };
 
+/// Bytes of a character read as a rig, and of each file its glTF names (a textured game character
+/// is tens of MB).
+pub const CHARACTER_FILE_BYTES: Limit = Limit {
+    name: "character file size",
+    max: 256 << 20,
+    unit: "bytes",
+    advice: "a character to retarget onto needs its skin and meshes; shrink its textures",
+};
+
 /// Bytes of a list of prompts read for a report (`mogen report prior --paraphrases`).
 pub const PROMPT_LIST_FILE_BYTES: Limit = Limit {
     name: "prompt list file size",

@@ -34,6 +34,7 @@ the importer module's `open` is replaced, while importing, by one that drops the
 import builtins
 import contextlib
 import json
+import struct
 import sys
 from pathlib import Path
 
@@ -179,6 +180,16 @@ def main(argv):
     return finish(failures, f"OK: {len(samples)} BVH samples in {root} import into Blender "
                             f"{bpy.app.version_string} at {fps:g} fps with {BONES} bones; every probe within "
                             f"{TOLERANCE_M * 100:g} cm:", lines)
+
+
+def read_glb(path):
+    """The glTF JSON of the GLB file `path` (a 12-byte header, then the JSON chunk)."""
+    data = Path(path).read_bytes()
+    magic, _version, _length = struct.unpack_from("<4sII", data, 0)
+    json_length, kind = struct.unpack_from("<I4s", data, 12)
+    if magic != b"glTF" or kind != b"JSON":
+        raise ValueError(f"{path}: not a GLB file")
+    return json.loads(data[20 : 20 + json_length])
 
 
 def script_args(argv, script, names):

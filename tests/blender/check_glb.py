@@ -20,14 +20,13 @@ Exits 1 with one line per failure, or prints a summary and exits 0.
 
 import json
 import math
-import struct
 import sys
 from pathlib import Path
 
 import bpy
 
 sys.path.insert(0, str(Path(__file__).parent))
-from check_bvh import script_args  # noqa: E402
+from check_bvh import read_glb, script_args  # noqa: E402
 
 try:
     import numpy
@@ -52,12 +51,7 @@ def distance(a, b):
 
 def glb_rest_joints(path):
     """Rest position (export axes, m) of every node in the GLB's skin, by name."""
-    data = path.read_bytes()
-    magic, _version, _length = struct.unpack_from("<4sII", data, 0)
-    if magic != b"glTF":
-        raise ValueError(f"{path}: not a GLB file")
-    json_length, _kind = struct.unpack_from("<II", data, 12)
-    gltf = json.loads(data[20 : 20 + json_length])
+    gltf = read_glb(path)
     nodes = gltf["nodes"]
     parent = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
 

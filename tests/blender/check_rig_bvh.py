@@ -3,7 +3,7 @@ Blender.
 
 Run:
 
-    blender -b --factory-startup --python tests/blender/check_rig_bvh.py -- <export_dir> <rig.bvh>
+    blender -b --factory-startup --python tests/blender/check_rig_bvh.py -- <export_dir> <rig.bvh|rig.glb>
 
 `<export_dir>/export.json` gives per sample a `rig` entry: the BVH on the rig (`bvh`), its unit
 (`units_per_metre`), whether it is Z-up (`z_up`), and probes: the rig node carrying one of our
@@ -14,9 +14,10 @@ Each file is imported with Blender's own BVH importer, scaled to metres, with ax
 (x, y, z) at Blender's (x, -z, y) whatever the file's up axis: forward -Z, up Y for a Y-up file
 (the importer's defaults), forward Y, up Z (no turn) for a Z-up one, whose file axes already are
 (x, -z, y). The script checks that the armature's bones are the rig's nodes under the same names
-with the same parents (its hierarchy as `<rig.bvh>` declares it), that the action is keyed on
-every frame, and that every probed bone's head is within 1 cm of its probe. It exits 1 with one
-line per failure, or prints a summary and exits 0.
+with the same parents (the hierarchy a BVH rig declares, or a glTF character's skin joints, each
+under its nearest joint ancestor), that the action is keyed on every frame, and that every probed
+bone's head is within 1 cm of its probe. It exits 1 with one line per failure, or prints a summary
+and exits 0.
 """
 
 import json
@@ -26,7 +27,7 @@ from pathlib import Path
 import bpy
 
 sys.path.insert(0, str(Path(__file__).parent))
-from check_bvh import TOLERANCE_M, exit_with, finish, import_bvh, script_args, to_blender  # noqa: E402
+from check_bvh import TOLERANCE_M, exit_with, finish, import_bvh, read_glb, script_args, to_blender  # noqa: E402
 
 
 def hierarchy(path):
@@ -48,6 +49,36 @@ def hierarchy(path):
         elif words[0] == "}":
             stack.pop()
     return parents
+
+
+def skin_joints(gltf):
+    """The indices of the nodes that a skin of `gltf` names as a joint, in file order."""
+    return sorted({j for skin in gltf.get("skins", []) for j in skin["joints"]})
+
+
+def node_parents(gltf):
+    """{node index: its parent's index} of `gltf`'s node tree."""
+    return {c: i for i, node in enumerate(gltf["nodes"]) for c in node.get("children", [])}
+
+
+def skin_hierarchy(gltf):
+    """{joint name: parent name or None} of `gltf`'s skin joints, each under its nearest ancestor
+    that is a joint (the armature's node above them, and nodes between joints, left out)."""
+    joints, up, nodes = set(skin_joints(gltf)), node_parents(gltf), gltf["nodes"]
+
+    def joint_parent(i):
+        i = up.get(i)
+        while i is not None and i not in joints:
+            i = up.get(i)
+        return None if i is None else nodes[i].get("name", f"node {i}")
+
+    return {nodes[j].get("name", f"node {j}"): joint_parent(j) for j in skin_joints(gltf)}
+
+
+def rig_hierarchy(path):
+    """{node name: parent name or None} of the rig file `path`: a BVH's HIERARCHY, or the skin
+    joints of a glTF character (.glb)."""
+    return skin_hierarchy(read_glb(path)) if Path(path).suffix.lower() == ".glb" else hierarchy(path)
 
 
 def bone_tree_failures(where, arm, rig_tree):
@@ -109,11 +140,11 @@ def check_samples(samples, kind, check):
 
 
 def main(argv):
-    args = script_args(argv, "check_rig_bvh.py", ["<export_dir>", "<rig.bvh>"])
+    args = script_args(argv, "check_rig_bvh.py", ["<export_dir>", "<rig.bvh|rig.glb>"])
     if args is None:
         return 2
     root, rig_file = args
-    rig_tree = hierarchy(rig_file)
+    rig_tree = rig_hierarchy(rig_file)
     samples = json.loads((root / "export.json").read_text())["samples"]
     failures, lines = check_samples(samples, "bvh", lambda sample: check_sample(root, sample, rig_tree))
     return finish(failures, f"OK: {len(samples)} samples on the rig {rig_file.name} ({len(rig_tree)} bones, its "

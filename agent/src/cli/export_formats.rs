@@ -30,13 +30,15 @@ pub struct ExportFormats {
     /// keeps its height and every turn. The viewer, the strip and the npy files keep the path.
     #[arg(long)]
     pub in_place: bool,
-    /// Also write every motion onto your own rig: a BVH file whose skeleton (hierarchy and rest
-    /// offsets; any motion in it is ignored) follows the Mixamo, Unreal mannequin, Unity
-    /// humanoid, CMU or SMPL bone names (any case, any `name:` prefix). Written as
-    /// sample_<i>/<rig>.bvh in the rig's unit and up axis and sample_<i>/<rig>.glb (metres, y
-    /// up, a skinned body and the scene), the feet kept where the motion plants them;
-    /// export.json reports what carried over. Rigs to try: fixtures/rigs/.
-    #[arg(long, value_name = "FILE.bvh")]
+    /// Also write every motion onto your own rig: a skinned character (.glb or .gltf: its skin's
+    /// joints at their bind pose) or a BVH skeleton (hierarchy and rest offsets), whose bones
+    /// follow the Mixamo, Unreal mannequin, Unity humanoid, CMU or SMPL names (any case, any
+    /// `name:` prefix); any motion in it is ignored. Written as sample_<i>/<rig>.bvh in the rig's
+    /// unit and up axis and sample_<i>/<rig>.glb: a character's own file (meshes, materials)
+    /// with the motion as its animation, or for a BVH rig its bones with a skinned capsule body
+    /// and the scene. The feet are kept where the motion plants them; export.json reports what
+    /// carried over. Rigs to try: fixtures/rigs/.
+    #[arg(long, value_name = "FILE")]
     pub rig: Option<PathBuf>,
     /// With --rig: a JSON file naming the rig's node of each of our 22 joints
     /// ({"pelvis": "Hips", "left_hip": "LeftUpLeg", ...}), for a rig whose names follow no
@@ -50,7 +52,7 @@ impl ExportFormats {
     /// fails before any work).
     pub fn options(&self) -> anyhow::Result<ExportOptions> {
         let bvh_unit = if self.centimetres { BvhUnit::Centimetres } else { BvhUnit::Metres };
-        let rig = self.rig.as_deref().map(|path| TargetRig::read_bvh(path, self.rig_map.as_deref())).transpose()?;
+        let rig = self.rig.as_deref().map(|path| TargetRig::read(path, self.rig_map.as_deref())).transpose()?;
         Ok(ExportOptions { gif: self.gif, bvh_unit, fps: self.fps, in_place: self.in_place, rig })
     }
 }

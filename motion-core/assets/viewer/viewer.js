@@ -8,8 +8,9 @@
 //     carried: [{ hands: [joint, joint], diameter_m }], report: TaskReport|null,
 //     rigs: [{ label, glb_base64 }] }
 // A rig is a sample on the user's rig (`--rig`): its GLB is read by THREE.GLTFLoader and its
-// skinned body played by an AnimationMixer at the page's time (the GLB's scene boxes are left
-// hidden: the page draws its own). `window.mogenRigsShown` counts the rigs on stage.
+// skinned body played by an AnimationMixer at the page's time (the GLB's scene boxes, meshes
+// under no bone, are left hidden: the page draws its own). `window.mogenRigsShown` counts the
+// rigs on stage.
 // Axes are the project's and three.js's own: metres, y up, the character starts facing +z and
 // +x is its left, so positions go in unchanged.
 'use strict';
@@ -237,6 +238,11 @@
     return { sample, index, group, jointMeshes, boneMeshes, balls, label, positions, colour: mid };
   });
 
+  /** Whether a bone lies above `object` in its tree. */
+  function boneAbove(object) {
+    for (let up = object.parent; up; up = up.parent) if (up.isBone) return true;
+    return false;
+  }
   // Each sample on the user's rig, where the rig stands.
   const mixers = [];
   window.mogenRigsShown = 0;
@@ -250,8 +256,8 @@
           if (object.isSkinnedMesh) {
             object.castShadow = true;
             object.frustumCulled = false; // the skin moves the body far from its bind box
-          } else if (object.isMesh) {
-            object.visible = false;
+          } else if (object.isMesh && !boneAbove(object)) {
+            object.visible = false; // a scene box of our rig GLB; a prop on a bone stays
           }
         });
         const label = textSprite(rig.label, 0.12, '#555555');

@@ -48,6 +48,7 @@ use json::{Index, Root};
 
 use super::armature::{rest_positions, ArmatureNode, ArmatureTrack};
 use super::error::{write_atomically, ExportError};
+use super::glb::glb_container;
 use super::scene::{SceneBox, SceneRole};
 use crate::skeleton::{Joint, NUM_JOINTS};
 
@@ -56,10 +57,6 @@ mod geometry;
 mod tests;
 
 use geometry::{body, Geometry};
-
-/// GLB chunk types: `JSON` and `BIN\0` read as little-endian `u32`.
-const CHUNK_JSON: u32 = 0x4E4F_534A;
-const CHUNK_BIN: u32 = 0x004E_4942;
 
 /// Most nodes a GLB's skin holds: its vertices name their node in a `u16`.
 const MAX_NODES: usize = 1 << 16;
@@ -459,26 +456,4 @@ fn animation(glb: &mut Builder, label: &str, track: &ArmatureTrack) {
         name: Some(label.into()),
         samplers,
     });
-}
-
-/// The GLB container: 12-byte header, the JSON chunk padded with spaces, the BIN chunk padded
-/// with zeros, each chunk a multiple of 4 bytes.
-fn glb_container(json: &[u8], bin: &[u8]) -> Result<Vec<u8>, ExportError> {
-    let padded = |len: usize| len.next_multiple_of(4);
-    let total = 12 + 8 + padded(json.len()) + 8 + padded(bin.len());
-    let total_u32 = u32::try_from(total)
-        .map_err(|_| ExportError::Shape(format!("a GLB holds at most 4 GiB; this one needs {total} bytes")))?;
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend(2u32.to_le_bytes());
-    out.extend(total_u32.to_le_bytes());
-    for (chunk, kind, fill) in [(json, CHUNK_JSON, b' '), (bin, CHUNK_BIN, 0)] {
-        let len = padded(chunk.len());
-        // Fits in a u32: the whole file's length does.
-        out.extend((len as u32).to_le_bytes());
-        out.extend(kind.to_le_bytes());
-        out.extend_from_slice(chunk);
-        out.resize(out.len() + len - chunk.len(), fill);
-    }
-    Ok(out)
 }

@@ -16,6 +16,7 @@ pub mod armature;
 pub mod bvh;
 mod error;
 mod folder;
+pub mod glb;
 pub mod gltf;
 pub mod in_place;
 mod outputs;

@@ -113,8 +113,9 @@ pub struct ExportedSample {
 pub struct RigFile {
     /// BVH file on the rig, relative to the output folder.
     pub bvh: String,
-    /// GLB file on the rig (metres, y up, whatever the rig's unit and up axis), relative to the
-    /// output folder.
+    /// GLB file on the rig, relative to the output folder: for a BVH rig, its nodes with a skinned
+    /// capsule body and the scene (metres, y up, whatever the rig's unit and up axis); for a glTF
+    /// character, the character's own file with the motion as its animation (in the file's unit).
     pub glb: String,
     /// The rig file's units per metre (its lengths are written in them).
     pub units_per_metre: f64,
@@ -272,7 +273,10 @@ fn rig_file(
 ) -> Result<(RigFile, Vec<u8>), ExportError> {
     let (bvh, glb) = (format!("sample_{i}/{}.bvh", rig.name()), format!("sample_{i}/{}.glb", rig.name()));
     write_bvh(&out.join(&bvh), &on_rig.track, rig.axes)?;
-    let glb_file = glb_bytes(label, &on_rig.track, &rig.map, boxes)?;
+    let glb_file = match &rig.character {
+        Some(character) => character.animated_glb(label, &on_rig.track, rig.axes.per_metre)?,
+        None => glb_bytes(label, &on_rig.track, &rig.map, boxes)?,
+    };
     write_atomically(&out.join(&glb), &glb_file)?;
     let motion_poses = if files_are_the_motion { on_rig.poses.clone() } else { retarget(track, rig)?.poses };
     let constraints = match judge {

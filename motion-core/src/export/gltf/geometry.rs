@@ -222,8 +222,8 @@ mod tests {
 
     #[test]
     fn a_rigs_extra_bones_below_the_pelvis_get_thin_capsules() {
-        let rig = TargetRig::read_bvh(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/rigs/unreal.bvh"), None)
-            .unwrap();
+        let rig =
+            TargetRig::read(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/rigs/unreal.bvh"), None).unwrap();
         let rest = rig.rest_positions();
         let (body, bound_to) = body(&rest, &rig.nodes, &rig.map);
         assert_outward(&body);

@@ -8,6 +8,7 @@ use json::validation::Validate;
 
 use super::*;
 use crate::export::armature::our_joint_nodes;
+use crate::export::glb::{CHUNK_BIN, CHUNK_JSON};
 use crate::export::retarget::{retarget, TargetRig};
 use crate::export::rotations::{RotationTrack, ANIMATED_OFFSETS};
 use crate::import::{deepmimic::shipped, MocapClip};
@@ -250,7 +251,7 @@ fn bad_input_is_an_error() {
 
 /// A shipped rig (`fixtures/rigs/`).
 fn shipped_rig(file: &str) -> TargetRig {
-    TargetRig::read_bvh(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/rigs").join(file), None).unwrap()
+    TargetRig::read(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/rigs").join(file), None).unwrap()
 }
 
 #[test]

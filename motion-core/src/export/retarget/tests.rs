@@ -54,7 +54,7 @@ fn our_own_skeleton_as_the_target_reproduces_our_joints() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("ours.bvh");
     std::fs::write(&path, bvh_text(&track.armature(), crate::export::bvh::BvhUnit::Metres.into())).unwrap();
-    let rig = TargetRig::read_bvh(&path, None).unwrap();
+    let rig = TargetRig::read(&path, None).unwrap();
     assert_eq!((rig.matched.clone(), rig.axes.up), (Matched::Convention(Convention::Smpl), UpAxis::Y));
     let done = retarget(&track, &rig).unwrap();
     let worst =
@@ -83,7 +83,7 @@ fn every_shipped_rig_carries_the_walk_with_the_feet_where_it_plants_them() {
         ("unity.bvh", Convention::Unity, 0.95, UpAxis::Y, true),
         ("short_legs.bvh", Convention::Smpl, 0.7, UpAxis::Y, false),
     ] {
-        let rig = TargetRig::read_bvh(&fixture("rigs").join(file), None).unwrap();
+        let rig = TargetRig::read(&fixture("rigs").join(file), None).unwrap();
         assert_eq!((rig.matched.clone(), rig.axes.up), (Matched::Convention(convention), up), "{file}");
         let done = retarget(&track, &rig).unwrap();
         let r = &done.report;
@@ -120,7 +120,7 @@ fn every_shipped_rig_carries_the_walk_with_the_feet_where_it_plants_them() {
 #[test]
 fn a_capture_rig_takes_the_motion_in_its_own_unit() {
     let (track, _) = walk();
-    let rig = TargetRig::read_bvh(&fixture("mocap/cmu/cmu_01_01_20fps.bvh"), None).unwrap();
+    let rig = TargetRig::read(&fixture("mocap/cmu/cmu_01_01_20fps.bvh"), None).unwrap();
     assert_eq!(rig.matched, Matched::Convention(Convention::Cmu));
     let done = retarget(&track, &rig).unwrap();
     println!("{:?}", done.report);
@@ -150,13 +150,13 @@ fn a_rig_that_cannot_be_matched_is_refused_naming_what_it_lacks() {
         std::fs::read_to_string(fixture("rigs/mixamo.bvh")).unwrap().replace("mixamorig:LeftToeBase", "mixamorig:Toe");
     let path = dir.path().join("toeless.bvh");
     std::fs::write(&path, text).unwrap();
-    let err = TargetRig::read_bvh(&path, None).unwrap_err().to_string();
+    let err = TargetRig::read(&path, None).unwrap_err().to_string();
     assert!(err.contains("toeless.bvh") && err.contains("Mixamo, lacks LeftToeBase (left_foot)"), "{err}");
     let map = dir.path().join("map.json");
     std::fs::write(&map, "[1, 2]").unwrap();
-    let err = TargetRig::read_bvh(&path, Some(&map)).unwrap_err().to_string();
+    let err = TargetRig::read(&path, Some(&map)).unwrap_err().to_string();
     assert!(err.contains("map.json: a joint map is a JSON object"), "{err}");
-    let missing = TargetRig::read_bvh(&dir.path().join("none.bvh"), None).unwrap_err().to_string();
+    let missing = TargetRig::read(&dir.path().join("none.bvh"), None).unwrap_err().to_string();
     assert!(missing.contains("none.bvh"), "{missing}");
 }
 
@@ -169,7 +169,7 @@ fn the_tasks_constraints_are_judged_again_where_the_rig_stands_and_at_our_scale(
     let track = main_command_motion();
     let ours = track.forward_kinematics();
     let verdicts = |file: &str| {
-        let rig = TargetRig::read_bvh(&fixture("rigs").join(file), None).unwrap();
+        let rig = TargetRig::read(&fixture("rigs").join(file), None).unwrap();
         let done = retarget(&track, &rig).unwrap();
         let judged = judge_on_rig(&judge, 0, &ours, &done.poses, done.report.leg_ratio).unwrap();
         judged.into_iter().map(|c| (c.id, [c.ours, c.on_rig, c.at_our_scale])).collect::<Vec<_>>()
