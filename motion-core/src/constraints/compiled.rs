@@ -7,7 +7,7 @@ use super::error::ConstraintError;
 use super::flight;
 use super::frames::Frames;
 use super::geometry::unit;
-use super::node::{body_points, Comparison, Node};
+use super::node::{body_points, Comparison, CountValue, Node};
 use super::scene::{is_obstacle, primitive_error};
 use crate::program::{
     Airborne, BoneDirection, Carry, ComInSupport, Condition, Count, Equal, Events, Expr, FootContact, FrameRef,
@@ -102,6 +102,21 @@ impl CompiledProgram {
             });
         }
         softened
+    }
+
+    /// This program with every step and event count valued by its soft count
+    /// ([`CountValue::Soft`]) instead of the judge's: a proxy for ranking many motions at once,
+    /// where counting each one's steps as the judge does would cost more than the ranking.
+    pub fn soft_counts(&self) -> CompiledProgram {
+        let mut proxy = self.clone();
+        for c in &mut proxy.constraints {
+            c.node.walk_mut(&mut |node| {
+                if let Node::Steps { value, .. } | Node::Events { value, .. } = node {
+                    *value = CountValue::Soft;
+                }
+            });
+        }
+        proxy
     }
 
     /// This program with every scene term on the joint centres only, without body-surface
@@ -215,7 +230,7 @@ impl CompiledProgram {
         let mut found = Vec::new();
         for c in &self.constraints {
             let _ = c.node.walk(&mut |node: &Node| {
-                if let Node::Count { target, .. } | Node::Steps { target } | Node::Events { target, .. } = node {
+                if let Node::Count { target, .. } | Node::Steps { target, .. } | Node::Events { target, .. } = node {
                     found.push((c.id.clone(), *target as u32));
                 }
                 Ok(())
@@ -281,13 +296,16 @@ impl Compiler<'_> {
             Expr::Or(args) => Node::Or(args.args.iter().map(|a| self.expr(id, a)).collect::<Result<_>>()?),
             Expr::Not(not) => Node::Not { arg: Box::new(self.expr(id, &not.arg)?), margin: not.margin },
             Expr::Count(count) => self.count(count)?,
-            Expr::Steps(Steps { target_count }) => Node::Steps { target: f64::from(*target_count) },
+            Expr::Steps(Steps { target_count }) => {
+                Node::Steps { target: f64::from(*target_count), value: CountValue::Judged }
+            }
             Expr::Events(events @ Events { signal, event, target_count, frames, .. }) => Node::Events {
                 signal: signal.clone(),
                 region: *event,
                 hysteresis: events.hysteresis(),
                 target: f64::from(*target_count),
                 frames: self.select(frames, self.length(signal))?,
+                value: CountValue::Judged,
             },
             Expr::Airborne(airborne) => self.airborne(id, airborne)?,
             Expr::Carry(Carry { hands, diameter_m, clearance_m, frames, reduce }) => Node::Carry {

@@ -1,6 +1,9 @@
 //! Differentiable counting (RG-DNO supp. D, eqs. 15–16): soft counts of the peaks or valleys of
 //! scalar signals, e.g. steps as peaks of the foot speed, claps as valleys of the hand distance;
 //! steps as leg alternations; events as entries into a region of a signal (hands that meet).
+//! Steps and events are judged by state machines with hysteresis ([`crate::metrics::step_count`],
+//! [`crate::metrics::event_count`]); their errors take the judge's count as their value and the
+//! soft count's gradient ([`judged_error`]), so the optimiser's minimum is where the judge passes.
 
 use candle_core::{Result, Tensor, D};
 
@@ -98,6 +101,38 @@ pub fn soft_event_count(s: &Tensor, region: EventRegion, hysteresis: f64) -> Res
         }
     };
     (changes + ends)? * 0.5
+}
+
+/// Steps of joints `[B, T, 22, 3]` as the judge counts them ([`crate::metrics::step_count`]),
+/// per sample.
+pub fn judged_steps(joints: &Tensor) -> Result<Vec<f64>> {
+    Ok(crate::motion::tensor_to_poses(joints)?.iter().map(|m| crate::metrics::step_count(m) as f64).collect())
+}
+
+/// Events of `s` `[B, n]` as the judge counts them ([`crate::metrics::event_count`]), per sample.
+pub fn judged_events(s: &Tensor, region: EventRegion, hysteresis: f64) -> Result<Vec<f64>> {
+    let rows = s.to_dtype(candle_core::DType::F64)?.to_vec2::<f64>()?;
+    Ok(rows.iter().map(|row| crate::metrics::event_count(row, region, hysteresis) as f64).collect())
+}
+
+/// `judged` `[B]` as the value with the gradient of `soft` `[B]`: `soft + (judged − sg(soft))`,
+/// `sg` stopping the gradient (the straight-through estimator). A count is a whole number that
+/// moves in jumps; the soft count says which way the motion should move to change it.
+fn valued_as(soft: &Tensor, judged: Vec<f64>) -> Result<Tensor> {
+    let judged = Tensor::from_vec(judged, soft.dims(), soft.device())?.to_dtype(soft.dtype())?;
+    soft + (judged - soft.detach())?
+}
+
+/// The error `(n − N)²` `[B]` of a count that the judge makes as `judged` (per sample) and the
+/// soft count relaxes as `soft` `[B]`: its value is the judge's `(n_judge − N)²`, 0 exactly when
+/// the judge passes; its gradient `2·((n_soft − N) + (n_judge − N))·∇n_soft` is the paper's pull
+/// of the soft count to the target, plus, while the judge's count is off, a pull by the judge's
+/// miss ([`valued_as`]), which moves a motion whose soft count sits on the target while the
+/// judge counts otherwise.
+pub fn judged_error(soft: &Tensor, judged: Vec<f64>, target: f64) -> Result<Tensor> {
+    let soft_error = (soft - target)?.sqr()?;
+    let judged_error = (valued_as(soft, judged)? - target)?.sqr()?;
+    judged_error + (&soft_error - soft_error.detach())?
 }
 
 /// Box filter of odd width `w` along axis 1 of `s` `[B, n]`, "valid" mode: `[B, n − w + 1]`,

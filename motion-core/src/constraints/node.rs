@@ -21,6 +21,19 @@ pub(super) enum Comparison {
     GreaterThan(f64),
 }
 
+/// What the error `(n − target)²` of a count the judge makes by a state machine (steps, events)
+/// takes as `n`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum CountValue {
+    /// The judge's own count ([`count::judged_steps`], [`count::judged_events`]) as the value,
+    /// with the soft count's gradient ([`count::judged_error`]): the error is 0 exactly when the
+    /// judge passes the count, so the optimiser's minimum is the judge's.
+    Judged,
+    /// The soft count, value and gradient: for ranking many motions at once, where the judge's
+    /// count of each would cost more than the ranking.
+    Soft,
+}
+
 /// A compiled expression.
 #[derive(Debug, Clone)]
 pub(super) enum Node {
@@ -48,6 +61,7 @@ pub(super) enum Node {
     },
     Steps {
         target: f64,
+        value: CountValue,
     },
     Events {
         signal: Quantity,
@@ -55,6 +69,7 @@ pub(super) enum Node {
         hysteresis: f64,
         target: f64,
         frames: Frames,
+        value: CountValue,
     },
     Airborne {
         clearance: f64,
@@ -233,10 +248,22 @@ impl Node {
                 }
                 (total - *target)?.sqr()?
             }
-            Node::Steps { target } => (count::soft_step_count(joints)? - *target)?.sqr()?,
-            Node::Events { signal: quantity, region, hysteresis, target, frames } => {
+            Node::Steps { target, value } => {
+                let soft = count::soft_step_count(joints)?;
+                match value {
+                    CountValue::Judged => count::judged_error(&soft, count::judged_steps(joints)?, *target)?,
+                    CountValue::Soft => (soft - *target)?.sqr()?,
+                }
+            }
+            Node::Events { signal: quantity, region, hysteresis, target, frames, value } => {
                 let s = frames.select(&signal(joints, quantity)?.squeeze(D::Minus1)?)?;
-                (count::soft_event_count(&s, *region, *hysteresis)? - *target)?.sqr()?
+                let soft = count::soft_event_count(&s, *region, *hysteresis)?;
+                match value {
+                    CountValue::Judged => {
+                        count::judged_error(&soft, count::judged_events(&s, *region, *hysteresis)?, *target)?
+                    }
+                    CountValue::Soft => (soft - *target)?.sqr()?,
+                }
             }
             Node::Airborne { clearance, length, starts, when } => {
                 flight_error(joints, *clearance, *length, starts, when)?

@@ -145,11 +145,9 @@ impl Node {
                     tolerance: COUNT_TOLERANCE,
                 })
             }
-            Node::Steps { target } => {
-                let counted: Vec<f64> = crate::motion::tensor_to_poses(joints)?
-                    .iter()
-                    .map(|m| (crate::metrics::step_count(m) as f64 - target).abs())
-                    .collect();
+            Node::Steps { target, .. } => {
+                let counted: Vec<f64> =
+                    super::count::judged_steps(joints)?.into_iter().map(|n| (n - target).abs()).collect();
                 leaf(Check {
                     what: format!("steps (leg alternations) off the target {target}"),
                     unit: Unit::Count,
@@ -157,7 +155,7 @@ impl Node {
                     tolerance: COUNT_TOLERANCE,
                 })
             }
-            Node::Events { signal: quantity, region, hysteresis, target, frames } => {
+            Node::Events { signal: quantity, region, hysteresis, target, frames, .. } => {
                 leaf(events_check(joints, quantity, *region, *hysteresis, *target, frames)?)
             }
             Node::Airborne { clearance, length, starts, when } => {
@@ -267,12 +265,7 @@ fn events_check(
     frames: &Frames,
 ) -> Result<Check, ConstraintError> {
     let s = frames.select(&signal(joints, quantity)?.squeeze(D::Minus1)?)?;
-    let off = s
-        .to_dtype(candle_core::DType::F64)?
-        .to_vec2::<f64>()?
-        .iter()
-        .map(|row| (crate::metrics::event_count(row, region, hysteresis) as f64 - target).abs())
-        .collect();
+    let off = super::count::judged_events(&s, region, hysteresis)?.into_iter().map(|n| (n - target).abs()).collect();
     let (relation, threshold) = match region {
         EventRegion::Below(t) => ("below", t),
         EventRegion::Above(t) => ("above", t),

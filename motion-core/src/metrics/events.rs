@@ -7,7 +7,7 @@ use crate::program::EventRegion;
 /// band (`θ + hysteresis` for `below`, `θ − hysteresis` for `above`); an event under way at the
 /// first frame counts. A clap is the wrists coming within θ of each other; wrists that stop at
 /// 0.17 m with θ = 0.06 m make none. The one definition of an event count: the `events`
-/// constraint's check uses it and its loss is its soft form
+/// constraint's check uses it, and so does its error, with the gradient of the soft form
 /// ([`crate::constraints::soft_event_count`]).
 pub fn event_count(values: &[f64], region: EventRegion, hysteresis: f64) -> usize {
     // Signed depth into the region: > 0 inside, < −hysteresis beyond the band.

@@ -11,6 +11,7 @@ use crate::skeleton::Joint;
 use crate::skeleton::NUM_JOINTS;
 use crate::testing::finite_difference_check;
 
+mod counting;
 mod scene;
 
 /// The standing pose gliding along +z at 1 m/s (0.05 m per frame), frames `[T][22][3]`.
@@ -52,9 +53,10 @@ fn close(expr: &str, motion: &[[[f64; 3]; NUM_JOINTS]], expected: f64) {
 }
 
 /// The gradient of the program's total w.r.t. a jittered version of `motion` matches finite
-/// differences.
+/// differences, with steps and events valued by their soft count (a judged count's value moves
+/// in whole jumps; its gradient is the soft count's, `counting::a_judged_count_has_the_soft_counts_gradient`).
 fn gradient_ok(expr: &str, motion: &[[[f64; 3]; NUM_JOINTS]]) {
-    let compiled = compile(motion.len(), expr);
+    let compiled = compile(motion.len(), expr).soft_counts();
     let base = tensor(motion);
     let jitter = (random_motion(motion.len(), 11) - tensor(&glide(motion.len()))).unwrap() * 0.02;
     let jitter = jitter.unwrap();
@@ -284,12 +286,10 @@ fn events_need_the_event_to_happen() {
     let minima = format!(
         r#"{{"op": "count", "signals": [{wrists}], "extremum": "valleys", "threshold": 0.2, "target_count": 3}}"#
     );
-    // Met: the soft count is within 0.1 of 3 (the sigmoids' soft edges), so the error is below 0.01.
-    let met = error_of(&events, &claps);
-    assert!(met < 0.01, "three claps cost {met}");
-    // Hands that never meet: no event, (0 − 3)² = 9 (to the sigmoids' tails).
-    let missed = error_of(&events, &near);
-    assert!((missed - 9.0).abs() < 0.2, "hands 0.17 m apart cost {missed}");
+    // Met: the judge's count is 3, so the error is 0.
+    assert_eq!(error_of(&events, &claps), 0.0);
+    // Hands that never meet: no event, (0 − 3)² = 9.
+    assert_eq!(error_of(&events, &near), 9.0);
     // The count of minima is fooled by them.
     assert!(error_of(&minima, &near) < 1e-6);
     // The report counts with the metric: 3 and 0.

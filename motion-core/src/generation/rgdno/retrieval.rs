@@ -100,12 +100,14 @@ pub fn retrieve(
     let windows = database.consistent_windows(&heard);
     let kept: Vec<Crop> = crops.iter().filter(|c| database.crop_is_consistent(c, &windows)).copied().collect();
     let missing_actions = heard.actions().iter().copied().filter(|a| !database.actions_done().contains(a)).collect();
-    // Rank every candidate on the proxy (joint centres, 5 Hz), then score the best exactly.
-    let proxy = query.program.joints_only().thinned(config.proxy_frame_step, device)?;
+    // Rank every candidate on the proxy (joint centres, 5 Hz), then score the best exactly;
+    // counts by their soft form throughout, a ranking of near misses rather than a judgement.
+    let program = query.program.soft_counts();
+    let proxy = program.joints_only().thinned(config.proxy_frame_step, device)?;
     let mut ranked = score(database, &proxy, &kept, query.most_difficult, config, device)?;
     ranked.sort_by(|a, b| a.total.total_cmp(&b.total));
     let shortlist: Vec<Crop> = ranked.iter().take(config.exact_shortlist.max(config.top_k)).map(|s| s.crop).collect();
-    let mut scored = score(database, query.program, &shortlist, query.most_difficult, config, device)?;
+    let mut scored = score(database, &program, &shortlist, query.most_difficult, config, device)?;
     scored.retain(|s| s.total.is_finite() && config.threshold.is_none_or(|t| s.total <= t));
     scored.sort_by(|a, b| a.total.total_cmp(&b.total));
     scored.truncate(config.top_k);
