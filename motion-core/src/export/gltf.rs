@@ -307,8 +307,9 @@ impl Builder {
     }
 }
 
-/// Per-component minimum and maximum of `values`, elements of `width` scalars.
-fn bounds(values: &[f32], width: usize) -> (json::Value, json::Value) {
+/// Per-component minimum and maximum of `values`, elements of `width` scalars (glTF's accessor
+/// `min` and `max`).
+pub(crate) fn bounds(values: &[f32], width: usize) -> (json::Value, json::Value) {
     let mut min = vec![f32::INFINITY; width];
     let mut max = vec![f32::NEG_INFINITY; width];
     for element in values.chunks(width) {

@@ -208,11 +208,9 @@ fn accessor(document: &mut Value, bin: &mut Vec<u8>, values: &[f32], kind: &str,
     let mut accessor =
         json!({"bufferView": views, "componentType": FLOAT, "count": values.len() / width, "type": kind});
     if bounds {
-        let column = |i: usize| values.iter().skip(i).step_by(width).copied();
-        let min: Vec<f32> = (0..width).map(|i| column(i).fold(f32::INFINITY, f32::min)).collect();
-        let max: Vec<f32> = (0..width).map(|i| column(i).fold(f32::NEG_INFINITY, f32::max)).collect();
-        accessor["min"] = json!(min);
-        accessor["max"] = json!(max);
+        let (min, max) = crate::export::gltf::bounds(values, width);
+        accessor["min"] = min;
+        accessor["max"] = max;
     }
     push(document, "accessors", accessor)
 }
@@ -343,30 +341,39 @@ fn skin(document: &Value, bin: &[u8], world: &[DMat4]) -> Result<(Vec<usize>, Ve
 /// tree holds the most, depth first in skin order, and each one's parent joint (its nearest
 /// ancestor node that is a joint).
 fn joint_tree(joints: &[usize], parents: &[Option<usize>]) -> (Vec<usize>, Vec<Option<usize>>) {
+    let mut skin_index = vec![None; parents.len()];
+    for (k, &n) in joints.iter().enumerate() {
+        skin_index[n] = Some(k);
+    }
     let above = |k: usize| {
         let mut n = parents[joints[k]];
         while let Some(p) = n {
-            if let Some(j) = joints.iter().position(|j| *j == p) {
-                return Some(j);
+            if skin_index[p].is_some() {
+                return skin_index[p];
             }
             n = parents[p];
         }
         None
     };
     let joint_parent: Vec<Option<usize>> = (0..joints.len()).map(above).collect();
-    let top = |mut k: usize| {
-        while let Some(p) = joint_parent[k] {
-            k = p;
+    let mut children = vec![Vec::new(); joints.len()];
+    for (k, p) in joint_parent.iter().enumerate() {
+        if let Some(p) = p {
+            children[*p].push(k);
         }
-        k
-    };
-    let root = (0..joints.len()).max_by_key(|r| (0..joints.len()).filter(|k| top(*k) == *r).count()).unwrap_or(0);
-    let mut order = Vec::new();
-    let mut stack = vec![root];
-    while let Some(k) = stack.pop() {
-        order.push(k);
-        stack.extend((0..joints.len()).rev().filter(|c| joint_parent[*c] == Some(k)));
     }
+    // The tree of each root, depth first in skin order; the largest is the rig.
+    let tree = |root: usize| {
+        let mut order = Vec::new();
+        let mut stack = vec![root];
+        while let Some(k) = stack.pop() {
+            order.push(k);
+            stack.extend(children[k].iter().rev());
+        }
+        order
+    };
+    let roots = (0..joints.len()).filter(|k| joint_parent[*k].is_none());
+    let order = roots.map(tree).max_by_key(|order| order.len()).unwrap_or_default();
     let parents_out = order.iter().map(|&k| joint_parent[k]).collect();
     (order, parents_out)
 }
