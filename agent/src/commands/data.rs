@@ -31,10 +31,12 @@ pub enum DataCommand {
         #[arg(long)]
         no_mirror: bool,
     },
-    /// Build the motion corpus from the shared capture (CMU, HDM05) and the shipped clips.
+    /// Build the motion corpus from the shared capture (CMU, HDM05), ACCAD's takes and the
+    /// shipped clips.
     ///
     /// Reads the CMU database in its 22-joint form (`smpl22_20fps_f16.npz` and `index.tsv`),
-    /// HDM05's ASF/AMC clips and the shipped clips of a catalog. Every take is screened (glitches, frozen frames, T-poses, uneven floors are
+    /// HDM05's ASF/AMC clips, ACCAD's BVH takes (fetched by `fixtures/corpus/accad/fetch.sh`,
+    /// each checked against its SHA-256 in the manifest) and the shipped clips of a catalog. Every take is screened (glitches, frozen frames, T-poses, uneven floors are
     /// dropped and reported), re-targeted to the rest skeleton, floored, cut into captioned
     /// windows and split by subject; the result is one compressed file (the shipped
     /// `fixtures/corpus/corpus.safetensors.gz` is made this way).
@@ -45,6 +47,12 @@ pub enum DataCommand {
         /// The shared HDM05 folder (ASF/AMC).
         #[arg(long, default_value = "../shared/data/hdm05")]
         hdm05: PathBuf,
+        /// The folder of ACCAD's takes (`Female1_bvh/`, `Male2_bvh/`).
+        #[arg(long, default_value = "fixtures/corpus/accad/takes")]
+        accad: PathBuf,
+        /// The SHA-256 list of ACCAD's takes (`sha256sum` format, paths relative to `--accad`).
+        #[arg(long, default_value = "fixtures/corpus/accad/MANIFEST.sha256")]
+        accad_manifest: PathBuf,
         /// The catalog of shipped clips added to the training split.
         #[arg(long, default_value_os_t = paths::default_catalog())]
         catalog: PathBuf,
@@ -71,6 +79,9 @@ pub enum DataCommand {
         /// Seed of the random draw.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Draw only the windows of one source (cmu, hdm05, accad, shipped).
+        #[arg(long, value_parser = source_name)]
+        source: Option<Source>,
     },
     /// Print what a corpus or a database holds (by default the shipped corpus).
     ///
@@ -98,13 +109,19 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
             println!("wrote {}", out.display());
             Ok(())
         }
-        DataCommand::Corpus { cmu, hdm05, catalog, out } => {
+        DataCommand::Corpus { cmu, hdm05, accad, accad_manifest, catalog, out } => {
             let mut takes: Vec<RawTake> = Vec::new();
             eprintln!("reading {}", cmu.display());
             takes.extend(cmu::read_cmu_folder(&cmu).context("reading the CMU capture")?.into_iter().map(RawTake::from));
             eprintln!("reading {}", hdm05.display());
             takes.extend(motion_core::corpus::hdm05::read_hdm05_folder(&hdm05).context("reading the HDM05 capture")?);
             takes.extend(shipped_takes(&catalog)?);
+            // Last, so that the clips and windows of the other sources keep their indices.
+            eprintln!("reading {}", accad.display());
+            takes.extend(
+                motion_core::corpus::accad::read_accad_folder(&accad, &accad_manifest)
+                    .context("reading ACCAD's takes (fixtures/corpus/accad/fetch.sh fetches them)")?,
+            );
             eprintln!("screening, re-targeting and captioning {} takes", takes.len());
             let corpus = Corpus::build(takes, &ScreenConfig::default());
             corpus_file::save(&corpus, &out).with_context(|| format!("writing {}", out.display()))?;
@@ -112,9 +129,9 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
             println!("wrote {}", out.display());
             Ok(())
         }
-        DataCommand::Show { corpus, out, random, seed } => {
+        DataCommand::Show { corpus, out, random, seed, source } => {
             let corpus = corpus_file::load(&corpus).with_context(|| format!("reading {}", corpus.display()))?;
-            show(&corpus, &out, random, seed)
+            show(&corpus, &out, random, seed, source)
         }
         DataCommand::Stats { file } => {
             if file.extension().is_some_and(|e| e == "gz") {
@@ -129,9 +146,17 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
     }
 }
 
-/// A window of each skill family, chosen where the take's description names the skill and the
-/// window's own tags show it; the first such window in corpus order.
-fn skill_windows(corpus: &Corpus) -> Vec<(&'static str, usize)> {
+/// A source by its lower-case name.
+fn source_name(name: &str) -> Result<Source, String> {
+    Source::ALL.into_iter().find(|s| s.name() == name).ok_or_else(|| {
+        let names: Vec<&str> = Source::ALL.iter().map(|s| s.name()).collect();
+        format!("no source `{name}`; the sources are {}", names.join(", "))
+    })
+}
+
+/// A window of each skill family among `eligible` (window indices in corpus order), chosen where
+/// the take's description names the skill and the window's own tags show it; the first such one.
+fn skill_windows(corpus: &Corpus, eligible: &[usize]) -> Vec<(&'static str, usize)> {
     use motion_core::corpus::caption::Action;
     use motion_core::corpus::skill::Skill;
     use motion_core::corpus::tags::{MotionTags, TravelDirection};
@@ -152,12 +177,12 @@ fn skill_windows(corpus: &Corpus) -> Vec<(&'static str, usize)> {
     families
         .iter()
         .filter_map(|(name, skill, shows)| {
-            corpus
-                .windows
+            eligible
                 .iter()
-                .position(|w| {
-                    let clip = &corpus.clips[w.clip];
-                    skill.named_by(&clip.description) && shows(&w.tags)
+                .copied()
+                .find(|&i| {
+                    let w = &corpus.windows[i];
+                    skill.named_by(&corpus.clips[w.clip].description) && shows(&w.tags)
                 })
                 .map(|i| (*name, i))
         })
@@ -172,11 +197,14 @@ fn splitmix64(x: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-fn show(corpus: &Corpus, out: &Path, random: usize, seed: u64) -> anyhow::Result<()> {
+fn show(corpus: &Corpus, out: &Path, random: usize, seed: u64, source: Option<Source>) -> anyhow::Result<()> {
     use motion_core::render::{motion_strip, StripRow};
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let row = |label: String, i: usize| StripRow { label, poses: corpus.window_joints(&corpus.windows[i]) };
-    let skills = skill_windows(corpus);
+    let eligible: Vec<usize> = (0..corpus.windows.len())
+        .filter(|&i| source.is_none_or(|s| corpus.clips[corpus.windows[i].clip].source == s))
+        .collect();
+    let skills = skill_windows(corpus, &eligible);
     let rows: Vec<StripRow<'_>> = skills
         .iter()
         .map(|(name, i)| {
@@ -192,7 +220,7 @@ fn show(corpus: &Corpus, out: &Path, random: usize, seed: u64) -> anyhow::Result
         .collect();
     motion_strip(&rows, 8, &[], &[], "one window per skill family", &out.join("skills.png"))?;
     // A seeded draw without replacement: the windows in the order of a hash of seed and index.
-    let mut drawn: Vec<usize> = (0..corpus.windows.len()).collect();
+    let mut drawn = eligible;
     drawn.sort_by_key(|&i| splitmix64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)));
     drawn.truncate(random);
     let mut table = String::from("| # | take (frames) | description | caption | tags |\n|---|---|---|---|---|\n");

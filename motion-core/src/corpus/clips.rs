@@ -253,7 +253,9 @@ fn prepare_stretches(poses: &[Pose], verdicts: &mut FrameVerdicts, config: &Scre
     out
 }
 
-/// Splits per (source, subject): the shipped clips train; CMU and HDM05 subjects are assigned
+/// Splits per (source, subject): the shipped clips and ACCAD's two performers train (they are
+/// there for the rare skills retrieval lacks, and CMU's and HDM05's held-out people judge);
+/// CMU and HDM05 subjects are assigned
 /// by [`split::assign_subjects`] within their source, with the skill families their takes'
 /// descriptions name as published (not [`caption::readable_description`]'s words, so that
 /// tidying a description never moves a subject to another split).

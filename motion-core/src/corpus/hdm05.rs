@@ -7,13 +7,10 @@
 
 use std::path::Path;
 
-use super::source::{RawTake, Source};
+use super::source::{RawTake, Source, HOLD_FRAMES};
 use crate::files::FileError;
 use crate::import::asf_amc::{AsfAmcClip, AsfAmcOptions};
 use crate::import::{resample, ImportError};
-
-/// Most frames of the first and last pose held around a short clip (1 s each).
-pub const HOLD_FRAMES: usize = 20;
 
 /// An I/O error naming `path`.
 fn io(path: &Path) -> impl Fn(std::io::Error) -> ImportError + '_ {

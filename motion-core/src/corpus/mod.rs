@@ -4,14 +4,15 @@
 //! splits are held out of both.
 //!
 //! Sources: the CMU Graphics Lab Motion Capture Database in its shared 22-joint form
-//! ([`cmu`]), HDM05 clips read from ASF/AMC, and the clips shipped before the corpus
-//! (`fixtures/mocap/catalog.json`), each with its provenance. Every take goes through the same
+//! ([`cmu`]), HDM05 clips read from ASF/AMC, ACCAD's BVH takes ([`accad`]) and the clips shipped
+//! before the corpus (`fixtures/mocap/catalog.json`), each with its provenance. Every take goes through the same
 //! steps: [`screen`] (drop what is not motion, by measurement), [`prepare`] (re-target to the
 //! rest skeleton, floor under the stance feet, canonical start), then windows of
 //! [`WINDOW_FRAMES`] every [`WINDOW_STRIDE_FRAMES`], each with its measured [`tags`] and
 //! [`caption`]s. [`file`] stores it compactly; [`stats`] counts hours per source, skill and
 //! split.
 
+pub mod accad;
 pub mod caption;
 mod clips;
 pub mod cmu;

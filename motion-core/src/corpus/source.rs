@@ -4,6 +4,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::skeleton::Pose;
 
+/// Most frames of the first and last pose held around a short one-shot take (1 s each), so that
+/// a take cut to one repetition (a hop of 0.8 s) reaches a window's length.
+pub const HOLD_FRAMES: usize = 20;
+
 /// A take as read from a source, before the screen.
 #[derive(Debug, Clone)]
 pub struct RawTake {
@@ -35,11 +39,13 @@ pub enum Source {
     Hdm05,
     /// The clips shipped before the corpus (`fixtures/mocap/`: DeepMimic, CMU via assimp).
     Shipped,
+    /// ACCAD's Open Motion Project (The Ohio State University), CC BY 3.0.
+    Accad,
 }
 
 impl Source {
     /// Every source, in report order.
-    pub const ALL: [Source; 3] = [Source::Cmu, Source::Hdm05, Source::Shipped];
+    pub const ALL: [Source; 4] = [Source::Cmu, Source::Hdm05, Source::Accad, Source::Shipped];
 
     /// Lower-case name.
     pub fn name(self) -> &'static str {
@@ -47,6 +53,7 @@ impl Source {
             Source::Cmu => "cmu",
             Source::Hdm05 => "hdm05",
             Source::Shipped => "shipped",
+            Source::Accad => "accad",
         }
     }
 }

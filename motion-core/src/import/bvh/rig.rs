@@ -25,6 +25,10 @@ pub enum Rig {
     /// Mixamo (`mixamorig:` prefix optional): Hips, Spine, Spine1, Spine2, Neck, Head,
     /// LeftShoulder, LeftArm, LeftForeArm, LeftHand, LeftUpLeg, LeftLeg, LeftFoot, LeftToeBase.
     Mixamo,
+    /// ACCAD's Open Motion Project takes (MotionBuilder's rig): Hips, ToSpine, Spine, Spine1, Neck,
+    /// Head, LeftShoulder, LeftArm, LeftForeArm, LeftHand, LeftUpLeg, LeftLeg, LeftFoot,
+    /// LeftToeBase; Mixamo's names without Spine2.
+    Accad,
     /// Joint-named limbs on a Hips/Ab/Chest spine, as in assimp's Boxing_Toes.bvh: Hips, Ab,
     /// Chest, Neck, Head, LeftCollar, LeftShoulder, LeftElbow, LeftWrist, LeftHip, LeftKnee,
     /// LeftAnkle, LeftToes.
@@ -41,13 +45,14 @@ pub enum Rig {
 
 impl Rig {
     /// Every rig, in detection order.
-    pub const ALL: [Rig; 5] = [Rig::Cmu, Rig::Mixamo, Rig::HipsAbChest, Rig::HipsChestChest2, Rig::Smpl];
+    pub const ALL: [Rig; 6] = [Rig::Cmu, Rig::Mixamo, Rig::Accad, Rig::HipsAbChest, Rig::HipsChestChest2, Rig::Smpl];
 
     /// Display name.
     pub fn name(self) -> &'static str {
         match self {
             Rig::Cmu => "CMU (cgspeed)",
             Rig::Mixamo => "Mixamo",
+            Rig::Accad => "ACCAD (MotionBuilder)",
             Rig::HipsAbChest => "Hips/Ab/Chest",
             Rig::HipsChestChest2 => "Hips/Chest/Chest2",
             Rig::Smpl => "SMPL",
@@ -98,6 +103,32 @@ impl Rig {
                 At("LeftFoot"),
                 At("RightFoot"),
                 Between("Spine2", "Neck", 0.8),
+                At("LeftToeBase"),
+                At("RightToeBase"),
+                At("Neck"),
+                At("LeftShoulder"),
+                At("RightShoulder"),
+                At("Head"),
+                At("LeftArm"),
+                At("RightArm"),
+                At("LeftForeArm"),
+                At("RightForeArm"),
+                At("LeftHand"),
+                At("RightHand"),
+            ],
+            // Female1's rest: Spine 0.11 m above Hips, Spine1 0.23 m (where the clavicles start,
+            // 0.08 m off the mid-line), Neck 0.50 m, Head 0.59 m.
+            Rig::Accad => [
+                At("Hips"),
+                At("LeftUpLeg"),
+                At("RightUpLeg"),
+                At("Spine"),
+                At("LeftLeg"),
+                At("RightLeg"),
+                At("Spine1"),
+                At("LeftFoot"),
+                At("RightFoot"),
+                Between("Spine1", "Neck", 0.85),
                 At("LeftToeBase"),
                 At("RightToeBase"),
                 At("Neck"),
