@@ -9,7 +9,9 @@
 //!   it as an `End Site`. On our track the nodes are the 22 joints under their snake_case names,
 //!   which are SMPL's (`pelvis`, `left_hip`, …), `pelvis` the root, and the five end joints
 //!   (head, wrists, feet) end [`END_SITE_M`](super::armature::END_SITE_M) further along their
-//!   own bone.
+//!   own bone. BVH separates its tokens by whitespace, so a name that holds any (glTF allows
+//!   "Left Arm") is written with `_` in its place (`Left_Arm`), and an empty name as
+//!   `joint_<node>`; the GLB beside it keeps the names as they are.
 //! - **Channels**: translated nodes ([`ArmatureNode::translated`]: the root, and on our track
 //!   the six joints with animated offsets, hips, spine1, neck and collars) have `Xposition
 //!   Yposition Zposition Zrotation Xrotation Yrotation`, every other node `Zrotation Xrotation
@@ -181,6 +183,16 @@ fn hierarchy_order(nodes: &[ArmatureNode]) -> Vec<usize> {
     order
 }
 
+/// Node `i`'s name as one BVH token: whitespace replaced by `_`, `joint_<i>` when empty.
+fn bvh_name(name: &str, i: usize) -> String {
+    let token: String = name.chars().map(|c| if c.is_whitespace() { '_' } else { c }).collect();
+    if token.is_empty() {
+        format!("joint_{i}")
+    } else {
+        token
+    }
+}
+
 /// Appends the block of node `i` and its descendants, indented by `depth` levels.
 fn write_node(out: &mut String, nodes: &[ArmatureNode], axes: BvhAxes, i: usize, depth: usize) {
     let pad = "  ".repeat(depth);
@@ -191,7 +203,7 @@ fn write_node(out: &mut String, nodes: &[ArmatureNode], axes: BvhAxes, i: usize,
     } else {
         "CHANNELS 3 Zrotation Xrotation Yrotation"
     };
-    let _ = writeln!(out, "{pad}{keyword} {}\n{pad}{{", node.name);
+    let _ = writeln!(out, "{pad}{keyword} {}\n{pad}{{", bvh_name(&node.name, i));
     let _ = writeln!(out, "{pad}  OFFSET {}\n{pad}  {channels}", axes.vector(node.offset_m));
     if let Some(tip) = node.end_site_m {
         let _ = writeln!(out, "{pad}  End Site\n{pad}  {{\n{pad}    OFFSET {}\n{pad}  }}", axes.vector(tip));
@@ -337,6 +349,23 @@ mod tests {
     fn motion_line(text: &str, k: usize) -> Vec<f64> {
         let start = text.lines().position(|l| l.starts_with("Frame Time")).unwrap() + 1;
         text.lines().nth(start + k).unwrap().split(' ').map(|v| v.parse().unwrap()).collect()
+    }
+
+    /// A user's joint names with spaces (legal in glTF) or none at all are written as single
+    /// tokens, so the file parses, here and in any BVH reader.
+    #[test]
+    fn names_with_whitespace_are_written_as_one_token() {
+        let mut armature = one_frame([DQuat::IDENTITY; NUM_JOINTS], DVec3::Y).armature();
+        armature.nodes[0].name = "Root Bone".into();
+        armature.nodes[1].name = "left\tthigh ".into();
+        armature.nodes[2].name = String::new();
+        let text = bvh_text(&armature, BvhUnit::Metres.into());
+        assert!(text.contains("ROOT Root_Bone\n") && text.contains("JOINT left_thigh_\n"), "{text}");
+        assert!(text.contains("JOINT joint_2\n"), "{text}");
+        let (bvh, _) = crate::import::bvh::Bvh::parse(&text, Path::new("names.bvh")).unwrap();
+        for name in ["Root_Bone", "left_thigh_", "joint_2", "spine1"] {
+            assert!(bvh.joint_index(name).is_some(), "{name}");
+        }
     }
 
     #[test]
