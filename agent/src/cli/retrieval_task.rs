@@ -8,6 +8,7 @@ use motion_core::constraints::CompiledProgram;
 use motion_core::generation::rgdno::candidates::{RetrievalDatabase, RetrievalSource};
 use motion_core::generation::rgdno::retrieval::RetrievalQuery;
 use motion_core::program::TaskProgram;
+use motion_core::text::{ConditionEncoder, MINILM_NAME};
 
 use super::generation_args::retrieval_source;
 use super::load::load_program;
@@ -29,6 +30,8 @@ pub struct RetrievalTask {
     pub database: RetrievalDatabase,
     /// Seconds opening the database took.
     pub open_s: f64,
+    /// The shipped sentence encoder (the prior's), for retrieval's caption similarity.
+    pub encoder: ConditionEncoder,
 }
 
 impl RetrievalTask {
@@ -46,7 +49,19 @@ impl RetrievalTask {
         let clock = std::time::Instant::now();
         let (database, _) = source.open().with_context(|| format!("opening {source}"))?;
         let open_s = clock.elapsed().as_secs_f64();
-        Ok(Self { program: task, retrieval: groups.retrieval, compiled, most_difficult, source, database, open_s })
+        let text_models = crate::paths::text_models();
+        let encoder = ConditionEncoder::sentence(MINILM_NAME, &text_models, device)
+            .with_context(|| format!("loading the sentence encoder from {}", text_models.display()))?;
+        Ok(Self {
+            program: task,
+            retrieval: groups.retrieval,
+            compiled,
+            most_difficult,
+            source,
+            database,
+            open_s,
+            encoder,
+        })
     }
 
     /// The retrieval query of the task.
@@ -56,6 +71,7 @@ impl RetrievalTask {
             most_difficult: &self.most_difficult,
             prompt: &self.program.text,
             counting: !self.compiled.count_targets().is_empty(),
+            encoder: Some(&self.encoder),
         }
     }
 }

@@ -26,6 +26,10 @@ pub struct RetrieveArgs {
     /// Weight of C_R's constraints other than the most difficult one.
     #[arg(long, default_value_t = RetrievalConfig::default().related_weight, value_parser = flags::weight)]
     related_weight: f64,
+    /// Weight λ of the caption similarity in the shortlist's ranking (C_R score + λ·(1 − cosine of
+    /// the prompt and the window's caption with its take's description); 0: C_R alone, as the paper).
+    #[arg(long, default_value_t = RetrievalConfig::default().caption_weight, value_parser = flags::weight)]
+    caption_weight: f64,
     /// Also print the best crop of each clip among the exactly scored shortlist.
     #[arg(long)]
     per_clip: bool,
@@ -35,7 +39,12 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     let device = load::device()?;
     let task = RetrievalTask::open(&args.program, args.database.as_deref(), &device)?;
     let RetrievalTask { database, source, most_difficult, open_s: opened, .. } = &task;
-    let config = RetrievalConfig { related_weight: args.related_weight, top_k: args.top, ..RetrievalConfig::default() };
+    let config = RetrievalConfig {
+        related_weight: args.related_weight,
+        caption_weight: args.caption_weight,
+        top_k: args.top,
+        ..RetrievalConfig::default()
+    };
     let query = task.query();
     let clock = std::time::Instant::now();
     let found = retrieve(database, &query, &config, &device)?;
@@ -58,7 +67,8 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     }
     let line = |r: &Retrieved| {
         let errors: Vec<String> = r.per_constraint.iter().map(|(id, e)| format!("{id} {e:.4}")).collect();
-        format!("{:.4}  {}  {}", r.score, r.source, errors.join(", "))
+        let similarity = r.caption_similarity.map_or(String::new(), |c| format!("  caption similarity {c:.2}"));
+        format!("{:.4}  {}  {}{similarity}", r.score, r.source, errors.join(", "))
     };
     println!("best {}:", found.retrieved.len());
     for r in &found.retrieved {

@@ -34,6 +34,10 @@ pub struct RetrievalConfig {
     /// spans its constraints reduce over, keyframes kept ([`CompiledProgram::thinned`]), and the
     /// joint centres only (default 4: 5 Hz; 1: every frame).
     pub proxy_frame_step: usize,
+    /// `λ` of the caption similarity in the shortlist's ranking,
+    /// `Σ_i w_i·E_i + λ·(1 − cos(prompt, sentence))` (beyond the paper; default 0.05; 0 ranks by
+    /// `C_R` alone, as the paper does). [`super::retrieval`] says what it reads.
+    pub caption_weight: f64,
 }
 
 impl Default for RetrievalConfig {
@@ -47,6 +51,7 @@ impl Default for RetrievalConfig {
             batch: 32,
             exact_shortlist: 64,
             proxy_frame_step: 4,
+            caption_weight: 0.05,
         }
     }
 }

@@ -37,7 +37,7 @@ mod stages;
 
 use std::time::Instant;
 
-use candle_core::{DType, Device, Tensor};
+use candle_core::{Device, Tensor};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
@@ -112,6 +112,7 @@ pub fn generate_rg_dno(
         most_difficult: &parse.most_difficult,
         prompt: &program.text,
         counting: !c_r.count_targets().is_empty(),
+        encoder: Some(&prior.encoder),
     };
     let found = retrieve(database, &query, &rg.retrieval, device)?;
     let best = found
@@ -125,15 +126,6 @@ pub fn generate_rg_dno(
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
     let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.dno.ddim_steps)?;
     let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, guidance, config.dno.ddim_steps)?;
-    // The semantic score of each retrieved motion: its caption's sentence vector against the
-    // program text's (both unit vectors, so their product is the cosine similarity).
-    let captions: Vec<&str> = found.retrieved.iter().map(|r| r.source.caption.as_str()).collect();
-    let similarity = prior
-        .encode_text(&captions, device)?
-        .matmul(&text.get(0)?.unsqueeze(1)?)?
-        .flatten_all()?
-        .to_dtype(DType::F64)?
-        .to_vec1::<f64>()?;
 
     // Inversion (eq. 7), once for the batch.
     let clock = Instant::now();
@@ -191,12 +183,11 @@ pub fn generate_rg_dno(
         retrieved: found
             .retrieved
             .iter()
-            .zip(similarity)
-            .map(|(r, similarity)| RetrievedReport {
+            .map(|r| RetrievedReport {
                 source: r.source.clone(),
                 score: r.score,
                 per_constraint: r.per_constraint.clone(),
-                caption_similarity: Some(similarity),
+                caption_similarity: r.caption_similarity,
             })
             .collect(),
         inversion_error_m,

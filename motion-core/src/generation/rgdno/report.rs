@@ -20,7 +20,9 @@ pub struct RetrievedReport {
     /// `(id, E_i)` per constraint of `C_R`.
     pub per_constraint: Vec<(String, f64)>,
     /// The semantic score: cosine similarity of the sentence vectors (the prior's text encoder)
-    /// of its caption and of the program's text; none in reports written before it.
+    /// of its window's sentence (the caption with its take's description) and of the program's
+    /// text, which ranks the shortlist beside `C_R` ([`super::retrieval`]); none in reports
+    /// written before it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub caption_similarity: Option<f64>,
 }

@@ -30,6 +30,15 @@
 //! [`RetrievalConfig::proxy_frame_step`]-th frame), then the best
 //! [`RetrievalConfig::exact_shortlist`] exactly (body-surface points, every frame). Features
 //! (`[T, 263]`, for the inversion) are extracted for the retrieved few only.
+//!
+//! **Caption similarity** (beyond the paper, which ranks by `C_R` alone): with a sentence
+//! encoder, each exactly scored candidate's sentence (its window's caption with the take's
+//! description, [`RetrievalDatabase`]'s words for it) is compared with the prompt, and the
+//! shortlist is ranked by `Σ_i w_i·E_i + λ·(1 − cos(prompt, sentence))`, `λ`
+//! [`RetrievalConfig::caption_weight`]: of two motions that fit `C_R` about equally, the one
+//! whose take does what the sentence says wins ("a person carries a box forward" then retrieves
+//! "walk carrying a box" over a plain walk that fits 0.004 better). Only the shortlist is read,
+//! so meaning re-ranks good fits and never lifts a poor one.
 
 use candle_core::{DType, Device, Tensor};
 use rayon::prelude::*;
@@ -41,6 +50,7 @@ use super::semantic::Heard;
 use crate::constraints::CompiledProgram;
 use crate::corpus::caption::Action;
 use crate::skeleton::NUM_JOINTS;
+use crate::text::TextEncoder;
 
 /// A retrieved motion `x_R`.
 #[derive(Debug, Clone)]
@@ -51,6 +61,9 @@ pub struct Retrieved {
     pub score: f64,
     /// `(id, E_i)` per constraint of `C_R` (unweighted).
     pub per_constraint: Vec<(String, f64)>,
+    /// Cosine similarity of its sentence to the prompt's (both as the sentence encoder gives
+    /// them); `None` without an encoder.
+    pub caption_similarity: Option<f64>,
     /// Raw features `[T, 263]`.
     pub features: Tensor,
 }
@@ -71,7 +84,7 @@ pub struct RetrievalOutcome {
 
 /// The task as retrieval sees it: the compiled `C_R`, its most difficult constraint and the
 /// prompt that the semantic check reads.
-#[derive(Debug, Clone, Copy)]
+#[derive(Clone, Copy)]
 pub struct RetrievalQuery<'a> {
     /// `C_R`, compiled for the task's frame count.
     pub program: &'a CompiledProgram,
@@ -81,6 +94,9 @@ pub struct RetrievalQuery<'a> {
     pub prompt: &'a str,
     /// Whether the task counts actions (its candidates must carry the prompt's action verb).
     pub counting: bool,
+    /// The sentence encoder that caption similarity reads with (the prior's); `None` ranks by
+    /// `C_R` alone and reports no similarity.
+    pub encoder: Option<&'a dyn TextEncoder>,
 }
 
 /// Eqs. 5–6: scores every crop of `database` that passes the semantic check on `query` and
@@ -93,6 +109,9 @@ pub fn retrieve(
 ) -> Result<RetrievalOutcome, RetrievalError> {
     if !(config.related_weight.is_finite() && config.related_weight >= 0.0) {
         return Err(RetrievalError::Setting(format!("related_weight must be ≥ 0, got {}", config.related_weight)));
+    }
+    if !(config.caption_weight.is_finite() && config.caption_weight >= 0.0) {
+        return Err(RetrievalError::Setting(format!("caption_weight must be ≥ 0, got {}", config.caption_weight)));
     }
     let frames = query.program.frames();
     let crops = database.crops(frames, config)?;
@@ -109,21 +128,51 @@ pub fn retrieve(
     let shortlist: Vec<Crop> = ranked.iter().take(config.exact_shortlist.max(config.top_k)).map(|s| s.crop).collect();
     let mut scored = score(database, &program, &shortlist, query.most_difficult, config, device)?;
     scored.retain(|s| s.total.is_finite() && config.threshold.is_none_or(|t| s.total <= t));
-    scored.sort_by(|a, b| a.total.total_cmp(&b.total));
-    scored.truncate(config.top_k);
+    let similarity = match query.encoder {
+        Some(encoder) => caption_similarities(database, encoder, query.prompt, &scored, device)?,
+        None => vec![None; scored.len()],
+    };
+    let rank = |(s, sim): &(Scored, Option<f64>)| s.total + config.caption_weight * (1.0 - sim.unwrap_or(1.0)).max(0.0);
+    let mut ranked: Vec<(Scored, Option<f64>)> = scored.into_iter().zip(similarity).collect();
+    ranked.sort_by(|a, b| rank(a).total_cmp(&rank(b)));
+    ranked.truncate(config.top_k);
     let ids: Vec<&str> = query.program.ids().collect();
-    let retrieved = scored
+    let retrieved = ranked
         .into_iter()
-        .map(|s| {
+        .map(|(s, caption_similarity)| {
             Ok(Retrieved {
                 source: database.source(&s.crop, frames),
                 score: s.total,
                 per_constraint: ids.iter().map(|id| (*id).to_owned()).zip(s.errors).collect(),
+                caption_similarity,
                 features: database.features(&s.crop, frames, device)?,
             })
         })
         .collect::<Result<_, RetrievalError>>()?;
     Ok(RetrievalOutcome { retrieved, candidates: crops.len(), consistent: kept.len(), missing_actions })
+}
+
+/// The cosine similarity of each candidate's sentence ([`RetrievalDatabase::sentence`]) to the
+/// prompt's, each distinct sentence encoded once; `None` for a candidate without one.
+fn caption_similarities(
+    database: &RetrievalDatabase,
+    encoder: &dyn TextEncoder,
+    prompt: &str,
+    scored: &[Scored],
+    device: &Device,
+) -> Result<Vec<Option<f64>>, RetrievalError> {
+    let sentences: Vec<&str> = scored.iter().map(|s| database.sentence(&s.crop)).collect();
+    let mut distinct: Vec<&str> = sentences.iter().copied().filter(|t| !t.is_empty()).collect();
+    distinct.sort_unstable();
+    distinct.dedup();
+    if distinct.is_empty() {
+        return Ok(vec![None; scored.len()]);
+    }
+    let unit = |v: Tensor| -> candle_core::Result<Tensor> { v.broadcast_div(&v.sqr()?.sum_keepdim(1)?.sqrt()?) };
+    let prompt = unit(encoder.encode(&[prompt], device)?.to_dtype(DType::F32)?)?;
+    let vectors = unit(encoder.encode(&distinct, device)?.to_dtype(DType::F32)?)?;
+    let cosine = vectors.matmul(&prompt.t()?)?.flatten_all()?.to_dtype(DType::F64)?.to_vec1::<f64>()?;
+    Ok(sentences.iter().map(|t| distinct.binary_search(t).ok().map(|k| cosine[k]).filter(|c| c.is_finite())).collect())
 }
 
 /// A candidate's score: `Σ w_i·E_i` (infinite for a crop that cannot be placed) and `E_i` in
@@ -211,7 +260,7 @@ mod tests {
     }
 
     fn query<'a>(program: &'a CompiledProgram, prompt: &'a str) -> RetrievalQuery<'a> {
-        RetrievalQuery { program, most_difficult: "c1", prompt, counting: false }
+        RetrievalQuery { program, most_difficult: "c1", prompt, counting: false, encoder: None }
     }
 
     #[test]
@@ -248,6 +297,63 @@ mod tests {
             .unwrap()
             .retrieved
             .is_empty());
+    }
+
+    /// Hears one thing: whether a text speaks of a box (`[1, 0]`) or not (`[0, 1]`).
+    struct BoxEars;
+
+    impl TextEncoder for BoxEars {
+        fn dim(&self) -> usize {
+            2
+        }
+
+        fn encode(&self, prompts: &[&str], device: &Device) -> candle_core::Result<Tensor> {
+            let rows: Vec<f32> =
+                prompts.iter().flat_map(|p| if p.contains("box") { [1.0, 0.0] } else { [0.0, 1.0] }).collect();
+            Tensor::from_vec(rows, (prompts.len(), 2), device)
+        }
+    }
+
+    /// Of two walks that fit `C_R` almost equally, the one whose take carries a box wins for a
+    /// prompt about a box; a box-carrying take that fits badly does not, and with a caption
+    /// weight of 0 the ranking is `C_R`'s alone.
+    #[test]
+    fn caption_similarity_ranks_near_equal_fits_by_what_the_take_does() {
+        let plain = walking_poses(200, 0.0);
+        let mut boxed = plain.clone();
+        for pose in &mut boxed {
+            for wrist in [crate::skeleton::Joint::LeftWrist, crate::skeleton::Joint::RightWrist] {
+                pose[wrist.index()].y += 0.02;
+            }
+        }
+        let mut corpus = tiny_corpus(vec![
+            ("plain", Split::Train, plain.clone()),
+            ("boxed", Split::Train, boxed),
+            ("turning box", Split::Train, walking_poses(200, 0.8)),
+        ]);
+        for (k, window) in corpus.windows.iter_mut().enumerate() {
+            if window.clip > 0 {
+                window.captions = crate::corpus::caption::captions(&window.tags, "walk carrying a box", k);
+            }
+        }
+        let database = RetrievalDatabase::from_corpus(&corpus).unwrap();
+        let program = pins(&plain[40..=40 + FRAMES]);
+        let prompt = "a person carries a box";
+        let config = RetrievalConfig { related_weight: 1.0, ..RetrievalConfig::default() };
+        let heard = RetrievalQuery { encoder: Some(&BoxEars), ..query(&program, prompt) };
+        let found = retrieve(&database, &heard, &config, &Device::Cpu).unwrap();
+        let best = &found.retrieved[0];
+        assert_eq!((best.source.clip.as_str(), best.caption_similarity), ("boxed", Some(1.0)), "{}", best.source);
+        assert!(best.score > 1e-6 && best.score < config.caption_weight, "{}", best.score);
+        let plain_fit = found.retrieved.iter().find(|r| r.source.clip == "plain").unwrap();
+        assert_eq!(plain_fit.caption_similarity, Some(0.0));
+        assert!(plain_fit.score < best.score);
+        assert!(found.retrieved.iter().all(|r| r.source.clip != "turning box"));
+        let by_fit = RetrievalConfig { caption_weight: 0.0, ..config.clone() };
+        let found = retrieve(&database, &heard, &by_fit, &Device::Cpu).unwrap();
+        assert_eq!(found.retrieved[0].source.clip, "plain");
+        let negative = RetrievalConfig { caption_weight: -1.0, ..config };
+        assert!(retrieve(&database, &heard, &negative, &Device::Cpu).is_err());
     }
 
     #[test]

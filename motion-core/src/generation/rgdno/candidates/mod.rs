@@ -41,8 +41,8 @@ use serde::{Deserialize, Serialize};
 use super::config::RetrievalConfig;
 use super::error::RetrievalError;
 use super::semantic::{named_actions, Described, Heard};
-use crate::corpus::caption::captions;
 use crate::corpus::caption::Action;
+use crate::corpus::caption::{captions, PHRASINGS};
 use crate::corpus::{file as corpus_file, Corpus, Split};
 use crate::database::{mirror_label, DatabaseSource, MotionDatabase, Window};
 use crate::import::ImportWarning;
@@ -149,11 +149,15 @@ struct WindowText {
     measured: String,
     /// See [`Described::said`].
     said: String,
+    /// The one sentence retrieval's caption similarity reads: a corpus window's caption that
+    /// carries its take's description ("walk carrying a box: a person walks forward"), or its
+    /// measured caption when the take has none; a database sequence's label.
+    sentence: String,
 }
 
 impl WindowText {
     fn label(label: &str) -> Self {
-        WindowText { measured: label.to_owned(), said: label.to_owned() }
+        WindowText { measured: label.to_owned(), said: label.to_owned(), sentence: label.to_owned() }
     }
 
     fn described(&self) -> Described<'_> {
@@ -242,9 +246,13 @@ impl RetrievalDatabase {
         for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == Split::Train) {
             let mirrored_description = mirror_label(&clip.description);
             let windows = corpus.windows.iter().enumerate().filter(|(_, w)| w.clip == index).map(|(number, w)| {
-                let text = |captions: Vec<String>| WindowText {
-                    measured: captions.first().cloned().unwrap_or_default(),
-                    said: captions.join(" | "),
+                let text = |captions: Vec<String>| {
+                    let measured = captions.first().cloned().unwrap_or_default();
+                    WindowText {
+                        sentence: captions.get(PHRASINGS).cloned().unwrap_or_else(|| measured.clone()),
+                        said: captions.join(" | "),
+                        measured,
+                    }
                 };
                 StoredWindow {
                     start: w.start,
@@ -439,6 +447,12 @@ impl RetrievalDatabase {
             }
         }
         best.0
+    }
+
+    /// The sentence caption similarity reads for `crop`: that of the window sharing the most
+    /// frames with it, as recorded or mirrored.
+    pub(super) fn sentence(&self, crop: &Crop) -> &str {
+        self.windows.get(self.describing_window(crop)).map_or("", |w| &w.texts[usize::from(crop.mirrored)].sentence)
     }
 
     /// Where `crop` comes from, resized to `frames`.
