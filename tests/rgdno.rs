@@ -19,6 +19,7 @@ use motion_core::generation::rgdno::{generate_rg_dno, RgDnoTask};
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
 use motion_core::testing::pinned_program_json;
+use motion_core::text::{ConditionEncoder, MINILM_NAME};
 
 /// The shipped catalog's clips as a retrieval database (a user's own database takes this path).
 fn database() -> RetrievalDatabase {
@@ -58,7 +59,13 @@ fn retrieval_finds_a_planted_crop_and_the_semantic_check_filters() {
     let all: Vec<String> = program.constraints.iter().map(|c| c.id.clone()).collect();
     let compiled = CompiledProgram::compile(&program, &device).unwrap().subset(&all);
     let config = RetrievalConfig { related_weight: 1.0, ..config };
-    let query = RetrievalQuery { program: &compiled, most_difficult: "c1", prompt: &program.text, counting: false };
+    let query = RetrievalQuery {
+        program: &compiled,
+        most_difficult: "c1",
+        prompt: &program.text,
+        counting: false,
+        encoder: None,
+    };
     let found = retrieve(&database, &query, &config, &device).unwrap().retrieved;
     assert_eq!(found[0].source, source, "best: {}", found[0].source);
     assert!(found[0].score < 1e-6, "{}", found[0].score);
@@ -89,8 +96,16 @@ fn the_shipped_corpus_retrieves_a_low_motion_from_its_train_split_for_the_barrie
     .unwrap();
     let groups = program.constraint_groups().unwrap();
     let compiled = CompiledProgram::compile(&program, &device).unwrap().subset(&groups.retrieval);
-    let query = RetrievalQuery { program: &compiled, most_difficult: "c1", prompt: &program.text, counting: false };
+    let encoder = ConditionEncoder::sentence(MINILM_NAME, &fixtures().join("text"), &device).unwrap();
+    let query = RetrievalQuery {
+        program: &compiled,
+        most_difficult: "c1",
+        prompt: &program.text,
+        counting: false,
+        encoder: Some(&encoder),
+    };
     let found = retrieve(&database, &query, &RetrievalConfig::default(), &device).unwrap();
+    assert!(found.retrieved.iter().all(|r| r.caption_similarity.is_some_and(|c| (-1.0..=1.0).contains(&c))));
     assert!(found.consistent < found.candidates, "the walk prompt drops runs, jumps and backward walks");
     let best = &found.retrieved[0].source;
     assert!(found.retrieved.iter().all(|r| train.contains(&r.source.clip.as_str())));
