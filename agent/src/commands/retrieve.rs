@@ -27,7 +27,8 @@ pub struct RetrieveArgs {
     #[arg(long, default_value_t = RetrievalConfig::default().related_weight, value_parser = flags::weight)]
     related_weight: f64,
     /// Weight λ of the caption similarity in the shortlist's ranking (C_R score + λ·(1 − cosine of
-    /// the prompt and the window's caption with its take's description); 0: C_R alone, as the paper).
+    /// the prompt and the window's caption with its take's description); 0, the default: C_R
+    /// alone, as the paper; 0.05 makes "carries a box" retrieve a box carry).
     #[arg(long, default_value_t = RetrievalConfig::default().caption_weight, value_parser = flags::weight)]
     caption_weight: f64,
     /// Also print the best crop of each clip among the exactly scored shortlist.

@@ -33,12 +33,13 @@
 //!
 //! **Caption similarity** (beyond the paper, which ranks by `C_R` alone): with a sentence
 //! encoder, each exactly scored candidate's sentence (its window's caption with the take's
-//! description, [`RetrievalDatabase`]'s words for it) is compared with the prompt, and the
-//! shortlist is ranked by `Σ_i w_i·E_i + λ·(1 − cos(prompt, sentence))`, `λ`
-//! [`RetrievalConfig::caption_weight`]: of two motions that fit `C_R` about equally, the one
-//! whose take does what the sentence says wins ("a person carries a box forward" then retrieves
-//! "walk carrying a box" over a plain walk that fits 0.004 better). Only the shortlist is read,
-//! so meaning re-ranks good fits and never lifts a poor one.
+//! description, [`RetrievalDatabase`]'s words for it) is compared with the prompt and reported,
+//! and the shortlist is ranked by `Σ_i w_i·E_i + λ·(1 − cos(prompt, sentence))`, `λ`
+//! [`RetrievalConfig::caption_weight`] (0 by default: the paper's ranking). With `λ > 0`, of two
+//! motions that fit `C_R` about equally the one whose take does what the sentence says wins (at
+//! 0.05, "a person carries a box forward" retrieves "walk carrying a box" over a plain walk that
+//! fits 0.004 better). Only the shortlist is read, so meaning re-ranks good fits and never lifts
+//! a poor one.
 
 use candle_core::{DType, Device, Tensor};
 use rayon::prelude::*;
@@ -339,7 +340,7 @@ mod tests {
         let database = RetrievalDatabase::from_corpus(&corpus).unwrap();
         let program = pins(&plain[40..=40 + FRAMES]);
         let prompt = "a person carries a box";
-        let config = RetrievalConfig { related_weight: 1.0, ..RetrievalConfig::default() };
+        let config = RetrievalConfig { related_weight: 1.0, caption_weight: 0.05, ..RetrievalConfig::default() };
         let heard = RetrievalQuery { encoder: Some(&BoxEars), ..query(&program, prompt) };
         let found = retrieve(&database, &heard, &config, &Device::Cpu).unwrap();
         let best = &found.retrieved[0];
