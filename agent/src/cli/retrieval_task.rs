@@ -49,7 +49,7 @@ impl RetrievalTask {
         let clock = std::time::Instant::now();
         let (database, _) = source.open().with_context(|| format!("opening {source}"))?;
         let open_s = clock.elapsed().as_secs_f64();
-        let text_models = crate::paths::text_models();
+        let text_models = agent::paths::text_models();
         let encoder = ConditionEncoder::sentence(MINILM_NAME, &text_models, device)
             .with_context(|| format!("loading the sentence encoder from {}", text_models.display()))?;
         Ok(Self {
