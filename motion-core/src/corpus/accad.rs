@@ -12,6 +12,7 @@
 
 use std::path::Path;
 
+use super::caption::split_camel_case;
 use super::source::{RawTake, Source, HOLD_FRAMES};
 use crate::files::{sha256_hex, FileError};
 use crate::import::bvh::{BvhClip, BvhOptions};
@@ -27,24 +28,7 @@ const ANGLES: [&str; 4] = ["45", "90", "135", "180"];
 /// `WalkToHopToWalk1` → "walk then hop then walk", `WalkWithBox` → "walk carrying a box",
 /// `WalkTurnLeft135` → "walk turn left 135 degrees", `PutDownBoxToRun` → "put down a box then run".
 pub fn describe(motion: &str) -> String {
-    let mut words: Vec<String> = Vec::new();
-    let mut current = String::new();
-    let mut previous: Option<char> = None;
-    for c in motion.chars() {
-        let boundary = previous.is_some_and(|p| {
-            (p.is_ascii_lowercase() && c.is_ascii_uppercase())
-                || (p.is_ascii_alphabetic() && c.is_ascii_digit())
-                || (p.is_ascii_digit() && c.is_ascii_alphabetic())
-        });
-        if boundary && !current.is_empty() {
-            words.push(std::mem::take(&mut current));
-        }
-        current.push(c.to_ascii_lowercase());
-        previous = Some(c);
-    }
-    if !current.is_empty() {
-        words.push(current);
-    }
+    let mut words: Vec<String> = split_camel_case(motion).iter().map(|w| w.to_ascii_lowercase()).collect();
     // "T2" is a second take: split as "t", "2".
     if words.len() >= 2 && words[words.len() - 2] == "t" && words[words.len() - 1].chars().all(|c| c.is_ascii_digit()) {
         words.truncate(words.len() - 2);

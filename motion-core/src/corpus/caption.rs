@@ -218,7 +218,7 @@ pub fn readable_description(raw: &str) -> String {
 
 /// Splits a word at a capital after a lower-case letter, a digit after a letter and a capital
 /// after a digit: `RunningWideLeft` → `Running Wide Left`, `90TwistsFall` → `90 Twists Fall`.
-fn split_camel_case(word: &str) -> Vec<String> {
+pub(crate) fn split_camel_case(word: &str) -> Vec<String> {
     let mut out: Vec<String> = Vec::new();
     let mut previous: Option<char> = None;
     for c in word.chars() {

@@ -129,6 +129,11 @@ pub fn retrieve(
     let shortlist: Vec<Crop> = ranked.iter().take(config.exact_shortlist.max(config.top_k)).map(|s| s.crop).collect();
     let mut scored = score(database, &program, &shortlist, query.most_difficult, config, device)?;
     scored.retain(|s| s.total.is_finite() && config.threshold.is_none_or(|t| s.total <= t));
+    if config.caption_weight == 0.0 {
+        // Ranked by C_R alone: only the kept few need their similarity, for the report.
+        scored.sort_by(|a, b| a.total.total_cmp(&b.total));
+        scored.truncate(config.top_k);
+    }
     let similarity = match query.encoder {
         Some(encoder) => caption_similarities(database, encoder, query.prompt, &scored, device)?,
         None => vec![None; scored.len()],

@@ -116,32 +116,14 @@ impl Rig {
                 At("LeftHand"),
                 At("RightHand"),
             ],
-            // Female1's rest: Spine 0.11 m above Hips, Spine1 0.23 m (where the clavicles start,
-            // 0.08 m off the mid-line), Neck 0.50 m, Head 0.59 m.
-            Rig::Accad => [
-                At("Hips"),
-                At("LeftUpLeg"),
-                At("RightUpLeg"),
-                At("Spine"),
-                At("LeftLeg"),
-                At("RightLeg"),
-                At("Spine1"),
-                At("LeftFoot"),
-                At("RightFoot"),
-                Between("Spine1", "Neck", 0.85),
-                At("LeftToeBase"),
-                At("RightToeBase"),
-                At("Neck"),
-                At("LeftShoulder"),
-                At("RightShoulder"),
-                At("Head"),
-                At("LeftArm"),
-                At("RightArm"),
-                At("LeftForeArm"),
-                At("RightForeArm"),
-                At("LeftHand"),
-                At("RightHand"),
-            ],
+            // Mixamo's names without Spine2. Female1's rest: Spine 0.11 m above Hips, Spine1
+            // 0.23 m (where the clavicles start, 0.08 m off the mid-line), Neck 0.50 m, Head
+            // 0.59 m; spine3 at the base of the neck.
+            Rig::Accad => {
+                let mut sources = Rig::Mixamo.sources();
+                sources[Joint::Spine3.index()] = Between("Spine1", "Neck", 0.85);
+                sources
+            }
             // Ab 0.08 m above Hips, Chest 0.31 m, Neck (and both collars) 0.53 m, Head 0.64 m.
             Rig::HipsAbChest => [
                 At("Hips"),
