@@ -161,9 +161,36 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     assert!(report.retrieved[0].source.caption.contains("crawl"), "{}", report.retrieved[0].source);
     assert_eq!(report.masks.len(), 2);
     assert!(report.masks.iter().all(|m| m.candidate.kind == MaskKind::Temporal && m.candidate.bits < 4));
-    assert!(report.inversion_error_m.is_finite() && report.soft_blend_objective.iter().all(|v| v.is_finite()));
+    assert!(report.inverted.len() == 1 && report.inverted[0].motion == 0 && report.inverted[0].error_m.is_finite());
+    assert!(report.soft_blend_objective.iter().all(|v| v.is_finite()));
     assert_eq!(generated.loss_history[0].len(), 3);
-    assert_eq!(report.restart, vec![0, 0]);
+    assert_eq!((report.restart.as_slice(), report.motion.as_slice()), ([0, 0].as_slice(), [0, 0].as_slice()));
+    // Retrieval keeps one crop per take.
+    let takes: Vec<&str> = report.retrieved.iter().map(|r| r.source.clip.split('#').next().unwrap()).collect();
+    assert!(takes.len() > 1 && (1..takes.len()).all(|k| !takes[..k].contains(&takes[k])), "{takes:?}");
+
+    // Two retrieved motions: the first is the run above, so each sample keeps a final F_C at
+    // most its one-motion value, from the motion that reached the lower one. Skipping the first
+    // starts from the second alone.
+    let two = RgDnoConfig { retrieved_motions: 2, ..rg.clone() };
+    let mut inversions = Vec::new();
+    let (_, both) = generate_rg_dno(&prior, task, &config, &two, &device, |p| {
+        if p.stage == Inversion {
+            inversions.push(p.round);
+        }
+    })
+    .unwrap();
+    assert_eq!(both.inverted.iter().map(|i| i.motion).collect::<Vec<_>>(), [0, 1]);
+    assert!(inversions.contains(&0) && inversions.contains(&1), "{inversions:?}");
+    let second = RgDnoConfig { skip_retrieved: 1, ..rg.clone() };
+    let (_, alone) = generate_rg_dno(&prior, task, &config, &second, &device, |_| {}).unwrap();
+    assert_eq!((alone.inverted.len(), alone.inverted[0].motion, alone.motion.as_slice()), (1, 1, [1, 1].as_slice()));
+    for b in 0..2 {
+        let best = report.final_objective[b].min(alone.final_objective[b]);
+        assert!((both.final_objective[b] - best).abs() <= 1e-6 * best.max(1.0), "sample {b}");
+        let from_second = alone.final_objective[b] < report.final_objective[b];
+        assert_eq!(both.motion[b], usize::from(from_second), "sample {b}");
+    }
 
     // Restarts N_S: restart 0 is the run above, so each sample keeps a final F_C at most its
     // one-restart value, from the restart that reached the lower one.
@@ -190,6 +217,7 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
         (RgDnoConfig { segments: 0, ..rg.clone() }, "segments"),
         (RgDnoConfig { mask_kinds: vec![], ..rg.clone() }, "mask_kinds"),
         (RgDnoConfig { final_lr: f64::NAN, ..rg.clone() }, "final_lr"),
+        (RgDnoConfig { retrieved_motions: 0, ..rg.clone() }, "retrieved_motions"),
     ] {
         let err = generate_rg_dno(&prior, task, &config, &bad, &device, |_| {}).err().unwrap().to_string();
         assert!(err.contains(field), "{err}");

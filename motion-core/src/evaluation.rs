@@ -457,19 +457,21 @@ fn constraint_lines(f: &mut fmt::Formatter<'_>, c: &ConstraintReport) -> fmt::Re
 
 /// RG-DNO's retrieved motion, each sample's mask and the stages' seconds.
 fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoReport) -> fmt::Result {
-    if let Some(r) = rg.retrieved.first() {
+    for (k, used) in rg.inverted.iter().enumerate() {
+        let Some(r) = rg.retrieved.get(used.motion) else { continue };
         let similarity = r.caption_similarity.map_or(String::new(), |s| format!(", caption similarity {s:.2}"));
+        let rank = if used.motion == 0 { String::new() } else { format!(" (retrieved motion {})", used.motion) };
+        let pool = match k {
+            0 => format!(
+                ", best of {} candidates ({} after the semantic check) in {:.1} s",
+                rg.candidates, rg.consistent_candidates, rg.seconds.retrieval
+            ),
+            _ => String::new(),
+        };
         writeln!(
             f,
-            "  retrieved {} resized to {} frames, C_R score {:.4}{similarity}, best of {} candidates ({} after the \
-             semantic check) in {:.1} s; inversion error {:.3} m",
-            r.source,
-            report.frames,
-            r.score,
-            rg.candidates,
-            rg.consistent_candidates,
-            rg.seconds.retrieval,
-            rg.inversion_error_m
+            "  retrieved{rank} {} resized to {} frames, C_R score {:.4}{similarity}{pool}; inversion error {:.3} m",
+            r.source, report.frames, r.score, used.error_m
         )?;
     }
     if let Some(note) = missing_actions_note(rg.missing_actions.iter().map(String::as_str)) {
@@ -482,6 +484,10 @@ fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoRepor
             .get(i)
             .filter(|_| restarts > 1)
             .map_or(String::new(), |r| format!(" (restart {r} of {restarts})"));
+        let restart = match rg.motion.get(i) {
+            Some(&j) if rg.inverted.len() > 1 || j > 0 => format!("{restart}, from retrieved motion {j}"),
+            _ => restart,
+        };
         writeln!(
             f,
             "  sample {i}: {:?} mask {:0w$b}, F_C {:.4}, reward {:.4}{restart}",

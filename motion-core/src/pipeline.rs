@@ -45,8 +45,8 @@ pub struct TaskSettings {
     /// RG-DNO's retrieval database.
     pub database: RetrievalSource,
     /// Further attempts for the samples that miss a constraint at its tolerance: each such
-    /// sample is generated again from fresh start noise (attempt k + 1 from seed + k·N_S) and
-    /// keeps its best attempt (most constraints met, then the lowest constraint error), up to
+    /// sample is generated again from fresh start noise (attempt k + 1 from seed + k·N_S; with
+    /// RG-DNO, from the next retrieved takes) and keeps its best attempt (most constraints met, then the lowest constraint error), up to
     /// this many times (DNO's noise search, spent only where it is needed). 0: off.
     pub retry_unmet: usize,
     /// Choices about the exported files.
@@ -118,8 +118,9 @@ pub fn run_task(
 }
 
 /// Generates and evaluates `program` with `settings` (RG-DNO with its fallback to DNO); then,
-/// with [`TaskSettings::retry_unmet`], generates the samples that miss a constraint again and
-/// keeps each one's best attempt.
+/// with [`TaskSettings::retry_unmet`], generates the samples that miss a constraint again (from
+/// fresh noise and, with RG-DNO, from the next retrieved takes) and keeps each one's best
+/// attempt.
 fn generate_task(
     prior: &Prior,
     checked: &CheckedProgram,
@@ -156,6 +157,8 @@ fn generate_task(
             settings.retry_unmet + 1
         )));
         let retry_config = GenerationConfig { samples: unmet.len(), seed, ..config.clone() };
+        let rg_dno = retry_rg_dno(&settings.rg_dno, k);
+        let retrieval = retrieval.map(|r| Retrieval { rg_dno: &rg_dno, ..r });
         let retry = generate(prior, task, retrieval, &retry_config, device, &mut on)?;
         let retry_report = evaluation::report(program, compiled, &retry.generated, &retry_config)?;
         let mut rows = vec![None; config.samples];
@@ -186,6 +189,12 @@ fn generate_task(
 /// an earlier attempt's restarts (restart r of an attempt from seed s starts from s + r).
 fn retry_seed(config: &GenerationConfig, k: usize) -> u64 {
     config.seed.wrapping_add((k * config.dno.restarts.max(1)) as u64)
+}
+
+/// RG-DNO's settings for retry `k` (≥ 1): it starts from the retrieved takes after those of the
+/// earlier attempts, so that a sample a take did not serve is tried from another.
+fn retry_rg_dno(rg: &RgDnoConfig, k: usize) -> RgDnoConfig {
+    RgDnoConfig { skip_retrieved: rg.skip_retrieved + k * rg.retrieved_motions, ..rg.clone() }
 }
 
 /// RG-DNO's retrieval database, opened (its crops are made per query).
@@ -335,4 +344,23 @@ pub fn write_exports(
         motion_gif(&rows, &input.scene, title, &GifOptions::default(), &folder.path().join("motion.gif"))?;
     }
     Ok(manifest)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Retry k starts from fresh noise (past every restart's seed of the earlier attempts) and,
+    /// with RG-DNO, from the retrieved takes after those the earlier attempts started from.
+    #[test]
+    fn a_retry_starts_from_new_noise_and_the_next_retrieved_takes() {
+        let mut config = GenerationConfig::new(Method::RgDno);
+        config.seed = 7;
+        config.dno.restarts = 3;
+        assert_eq!((retry_seed(&config, 1), retry_seed(&config, 2)), (10, 13));
+        let rg = RgDnoConfig { retrieved_motions: 2, ..RgDnoConfig::default() };
+        assert_eq!((retry_rg_dno(&rg, 1).skip_retrieved, retry_rg_dno(&rg, 2).skip_retrieved), (2, 4));
+        let skipping = RgDnoConfig { skip_retrieved: 1, ..RgDnoConfig::default() };
+        assert_eq!(retry_rg_dno(&skipping, 1), RgDnoConfig { skip_retrieved: 2, ..RgDnoConfig::default() });
+    }
 }

@@ -148,13 +148,15 @@ pub struct GenerationArgs {
     /// What RG-DNO retrieves from: a motion corpus (`.safetensors.gz`: its train split, with
     /// mirrored copies), a database file of `mogen data build` (`.safetensors`) or a catalog of
     /// clips (`.json`, built in memory with every augmentation); default: the train split of the
-    /// shipped corpus (7.5 h of CMU and HDM05 capture; its validation and test splits are never
-    /// retrieved).
+    /// shipped corpus (7.9 h of CMU, HDM05 and ACCAD capture, 6.2 h of it in the train split;
+    /// its validation and test splits are never retrieved).
     #[arg(long, value_name = "FILE")]
     pub database: Option<PathBuf>,
     /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
-    /// first_lr, segments, mask_kinds, mask_batch, reward, final_steps, final_lr, ablation;
-    /// missing fields keep the paper's defaults), e.g. '{"retrieval": {"related_weight": 0.01}}',
+    /// first_lr, segments, mask_kinds, mask_batch, reward, final_steps, final_lr, ablation,
+    /// retrieved_motions, skip_retrieved; missing fields keep the paper's defaults), e.g.
+    /// '{"retrieval": {"related_weight": 0.01}}', '{"retrieved_motions": 2}' (start from the best
+    /// crops of two takes in turn, each sample keeping its better attempt),
     /// the supplementary's reward for a task '{"reward": "steps_raising_hands"}' (also
     /// narrow_gap, low_barrier; or the weights '{"reward": {"semantic": 0.5}}') or Table 4's
     /// '{"ablation": "random_only"}' (also retrieved_only, no_parsing, half_mask, no_reward,

@@ -289,11 +289,18 @@ fn rg_dno_against_dno(by_task: &BTreeMap<&str, BTreeMap<Method, &TaskReport>>) -
         out.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
         for (task, d, r) in pairs {
             let steps = |p: &TaskReport| p.steps.as_ref().map_or("–".to_owned(), |s| s.counts_text());
-            let retrieved = r
-                .rg_dno
-                .as_ref()
-                .and_then(|rg| rg.retrieved.first())
-                .map_or_else(|| r.fallback.clone().unwrap_or_default(), |x| x.source.to_string());
+            let retrieved = r.rg_dno.as_ref().and_then(|rg| Some((rg, rg.retrieved.first()?))).map_or_else(
+                || r.fallback.clone().unwrap_or_default(),
+                |(rg, first)| match rg.kept_motions().as_slice() {
+                    [] | [(0, _)] => first.source.to_string(),
+                    kept => {
+                        let takes = kept
+                            .iter()
+                            .filter_map(|&(m, n)| Some(format!("{} ×{n}", rg.retrieved.get(m)?.source.clip)));
+                        format!("{}; samples kept {}", first.source, takes.collect::<Vec<_>>().join(", "))
+                    }
+                },
+            );
             out.push_str(&format!(
                 "| {task} | {:.6} ({:.6}) | {:.6} ({:.6}) | {} | {:.0}% → {:.0}% | {} → {} | {:.3} → {:.3} | {} → {} | {retrieved} | {:.0} → {:.0} |\n",
                 d.constraint_error,

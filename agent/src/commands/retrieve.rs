@@ -1,6 +1,5 @@
 //! `mogen retrieve`: RG-DNO's constraint-based retrieval for a program, on its own.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use clap::Args;
@@ -20,7 +19,8 @@ pub struct RetrieveArgs {
     /// (`.json`, built in memory); default: the train split of the shipped corpus.
     #[arg(long, value_name = "FILE")]
     database: Option<PathBuf>,
-    /// Retrieved motions printed, best first.
+    /// Retrieved motions printed, best first, one per take (its best crop; a mirror image is
+    /// the same take).
     #[arg(long, default_value_t = 10)]
     top: usize,
     /// Weight of C_R's constraints other than the most difficult one.
@@ -31,9 +31,6 @@ pub struct RetrieveArgs {
     /// alone, as the paper; 0.05 makes "carries a box" retrieve a box carry).
     #[arg(long, default_value_t = RetrievalConfig::default().caption_weight, value_parser = flags::weight)]
     caption_weight: f64,
-    /// Also print the best crop of each clip among the exactly scored shortlist.
-    #[arg(long)]
-    per_clip: bool,
 }
 
 pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
@@ -74,19 +71,6 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     println!("best {}:", found.retrieved.len());
     for r in &found.retrieved {
         println!("  {}", line(r));
-    }
-    if args.per_clip {
-        let shortlist = RetrievalConfig { top_k: config.exact_shortlist, ..config };
-        let mut per_clip = BTreeMap::new();
-        for r in retrieve(database, &query, &shortlist, &device)?.retrieved {
-            per_clip.entry(r.source.clip.clone()).or_insert(r);
-        }
-        println!("best of each clip in the shortlist:");
-        let mut best: Vec<_> = per_clip.into_values().collect();
-        best.sort_by(|a, b| a.score.total_cmp(&b.score));
-        for r in &best {
-            println!("  {}", line(r));
-        }
     }
     Ok(())
 }

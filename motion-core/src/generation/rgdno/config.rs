@@ -20,7 +20,7 @@ pub struct RetrievalConfig {
     pub resize_factors: Vec<f64>,
     /// Weight of `C_R`'s constraints other than `c_D` in the score (default 0.1).
     pub related_weight: f64,
-    /// Retrieved motions kept, best first (default 5).
+    /// Retrieved motions kept, best first, each from a different take (default 5).
     pub top_k: usize,
     /// A motion is kept only when its score is at most this (default `None`: no threshold).
     pub threshold: Option<f64>,
@@ -85,6 +85,15 @@ pub struct RgDnoConfig {
     pub final_lr: f64,
     /// One of Table 4's ablations instead of the full method (default: none).
     pub ablation: Ablation,
+    /// Retrieved motions `m` the stages start from (beyond the paper, whose stated future work
+    /// this is; default 1, the paper's): the best crops of `m` different takes
+    /// ([`super::retrieval`]), each inverted and run through every stage with the run's
+    /// restarts; each sample keeps its best attempt by `F_C`, as restarts do.
+    pub retrieved_motions: usize,
+    /// Retrieved motions passed over, best first (default 0): a retry of the samples that
+    /// missed a constraint starts from the takes after those the earlier attempts used
+    /// ([`crate::pipeline`]). Counted around when it passes the last one retrieved.
+    pub skip_retrieved: usize,
 }
 
 /// Table 4's ablations of RG-DNO (each leaves one part of the method out).
@@ -146,6 +155,8 @@ impl Default for RgDnoConfig {
             final_steps: 400,
             final_lr: 0.02,
             ablation: Ablation::None,
+            retrieved_motions: 1,
+            skip_retrieved: 0,
         }
     }
 }
@@ -178,6 +189,9 @@ impl RgDnoConfig {
                 MAX_SEGMENTS, self.segments
             ));
         }
+        if self.retrieved_motions == 0 {
+            return bad("rg_dno.retrieved_motions must be at least 1, got 0".into());
+        }
         if self.mask_kinds.is_empty() {
             return bad("rg_dno.mask_kinds must name at least one of \"temporal\", \"spatial\"".into());
         }
@@ -205,6 +219,19 @@ impl RgDnoConfig {
         }
         Ok(())
     }
+
+    /// The retrieval settings that keep enough takes for the motions the stages start from.
+    pub(super) fn retrieval_keeping_used(&self) -> RetrievalConfig {
+        let top_k = self.retrieval.top_k.max(self.skip_retrieved + self.retrieved_motions);
+        RetrievalConfig { top_k, ..self.retrieval.clone() }
+    }
+
+    /// The indices into the retrieved motions (best first, `retrieved` of them) that the stages
+    /// start from: [`Self::retrieved_motions`] distinct ones after [`Self::skip_retrieved`],
+    /// counted around past the last.
+    pub(super) fn used_motions(&self, retrieved: usize) -> Vec<usize> {
+        (0..self.retrieved_motions.min(retrieved)).map(|j| (self.skip_retrieved + j) % retrieved).collect()
+    }
 }
 
 #[cfg(test)]
@@ -223,6 +250,23 @@ mod tests {
         let mut unpolished = paper.clone();
         unpolished.inversion.polish_steps = 0;
         assert_eq!(unpolished.scaled_to(50).inversion.polish_steps, 0);
+    }
+
+    #[test]
+    fn used_motions_are_distinct_start_after_the_skipped_and_count_around() {
+        let config = |retrieved_motions, skip_retrieved| RgDnoConfig {
+            retrieved_motions,
+            skip_retrieved,
+            ..RgDnoConfig::default()
+        };
+        assert_eq!(config(1, 0).used_motions(5), [0]);
+        assert_eq!(config(2, 0).used_motions(5), [0, 1]);
+        assert_eq!(config(2, 2).used_motions(5), [2, 3]);
+        assert_eq!(config(2, 4).used_motions(5), [4, 0]);
+        assert_eq!(config(3, 1).used_motions(2), [1, 0]);
+        assert_eq!(config(2, 4).retrieval_keeping_used().top_k, 6);
+        assert_eq!(config(1, 0).retrieval_keeping_used(), RetrievalConfig::default());
+        assert!(config(0, 0).validate(100).is_err());
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! Stage 3 (eq. 7): the retrieved motion `x_R` inverted to noise, `z_R = G⁻¹(x_R)`, once for the
+//! Stage 3 (eq. 7): a retrieved motion `x_R` inverted to noise, `z_R = G⁻¹(x_R)`, once for the
 //! batch ([`crate::generation::inversion::invert_motion`]: fixed-point DDIM inversion, then polishing).
 
 use candle_core::{DType, Tensor};
@@ -11,12 +11,14 @@ use crate::numeric::mean;
 use crate::prior::Prior;
 
 /// The noise `[1, T, 263]` whose sample reproduces the raw features `x_r` `[T, 263]` under the
-/// prompt `text` `[1, ..]`, and the mean joint distance of its motion to `x_R`, m.
+/// prompt `text` `[1, ..]`, and the mean joint distance of its motion to `x_R`, m; `round` names
+/// the retrieved motion in the progress reports.
 pub(super) fn invert_retrieved(
     prior: &Prior,
     x_r: &Tensor,
     text: &Tensor,
     inversion: &InversionConfig,
+    round: usize,
     progress: &mut dyn FnMut(&StageProgress),
 ) -> Result<(Tensor, f64), RgDnoError> {
     let x_r = prior.mean_std.normalize(&x_r.to_dtype(DType::F32)?.unsqueeze(0)?)?;
@@ -26,7 +28,7 @@ pub(super) fn invert_retrieved(
         polished += 1;
         progress(&StageProgress {
             stage: Stage::Inversion,
-            round: 0,
+            round,
             step: polished,
             steps: polish_steps,
             loss: mean(&s.loss),

@@ -5,7 +5,8 @@
 //!    retrieval set `C_R`, the random-noise set `C1` and the retrieved-noise set `C2`;
 //! 2. **retrieval** (§4.3, eqs. 5–6, [`retrieval`]): the motion `x_R` of the retrieval
 //!    database ([`candidates`]: by default the corpus's train split) that best satisfies `C_R`,
-//!    among those that pass the semantic check ([`semantic`]);
+//!    among those that pass the semantic check ([`semantic`]); beyond the paper, the best of
+//!    several takes, each started from in turn ([`config::RgDnoConfig::retrieved_motions`]);
 //! 3. **inversion** (eq. 7, `invert.rs`): `z_R = G⁻¹(x_R)` ([`crate::generation::inversion::invert_motion`]);
 //! 4. **two branches** (eqs. 8–9, `branches.rs`): `z1` from random noise fitted to `C1`, `z2`
 //!    from `z_R` fitted to `C2`, each `N1` DNO steps;
@@ -58,7 +59,7 @@ use config::{Ablation, RgDnoConfig};
 use error::RgDnoError;
 use mask::blend;
 use mask_search::{MaskStages, Objective};
-use report::{ChosenMask, RetrievedReport, RgDnoReport, StageProgress, StageSeconds, StageSteps};
+use report::{ChosenMask, InvertedReport, RetrievedReport, RgDnoReport, StageProgress, StageSeconds, StageSteps};
 use retrieval::{retrieve, RetrievalQuery};
 use reward::RewardWeights;
 use stages::Stages;
@@ -77,9 +78,11 @@ pub struct RgDnoTask<'a> {
 
 /// Generates `config.samples` motions for `task` with RG-DNO. `config` gives the samples,
 /// seed, guidance, DDIM steps, the DNO regulariser, the jitter guard, the clean-up and the
-/// restarts `N_S` (`config.dno.restarts`: retrieval and inversion run once; restart r runs the
-/// stages after them from the random noise of seed `seed + r`, and each sample keeps the
-/// restart whose final motion has the lowest `F_C`); `rg` the RG-DNO stages.
+/// restarts `N_S` (`config.dno.restarts`); `rg` the RG-DNO stages. Retrieval runs once; each
+/// retrieved motion the stages start from ([`RgDnoConfig::retrieved_motions`], one by default)
+/// is inverted once, and its restart r runs the stages after the inversion from the random
+/// noise of seed `seed + r`. Each sample keeps the attempt whose final motion has the lowest
+/// `F_C`.
 pub fn generate_rg_dno(
     prior: &Prior,
     task: RgDnoTask<'_>,
@@ -114,11 +117,10 @@ pub fn generate_rg_dno(
         counting: !c_r.count_targets().is_empty(),
         encoder: Some(&prior.encoder),
     };
-    let found = retrieve(database, &query, &rg.retrieval, device)?;
-    let best = found
-        .retrieved
-        .first()
-        .ok_or_else(|| RgDnoError::NothingRetrieved { missing: found.missing_actions.clone() })?;
+    let found = retrieve(database, &query, &rg.retrieval_keeping_used(), device)?;
+    if found.retrieved.is_empty() {
+        return Err(RgDnoError::NothingRetrieved { missing: found.missing_actions.clone() });
+    }
     seconds.retrieval = clock.elapsed().as_secs_f64();
 
     // The solver, as DNO's, for the batch and for both branches side by side.
@@ -126,47 +128,59 @@ pub fn generate_rg_dno(
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
     let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.dno.ddim_steps)?;
     let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, guidance, config.dno.ddim_steps)?;
-
-    // Inversion (eq. 7), once for the batch.
-    let clock = Instant::now();
     let inversion = InversionConfig {
         guidance: config.guidance,
         ddim_steps: config.dno.ddim_steps,
         schedule: config.schedule,
         ..rg.inversion.clone()
     };
-    let (z_r, inversion_error_m) =
-        invert::invert_retrieved(prior, &best.features, &text.narrow(0, 0, 1)?, &inversion, &mut progress)?;
-    let z_r = z_r.broadcast_as((batch, compiled.frames(), FEATURE_DIM))?.contiguous()?;
-    seconds.inversion = clock.elapsed().as_secs_f64();
-
     let foot_lock = finishing_foot_lock(program, config);
-    let stages = Stages {
-        prior,
-        compiled,
-        groups: &groups,
-        config,
-        rg,
-        solver: &solver,
-        both: &both,
-        z_r: &z_r,
-        foot_lock: &foot_lock,
-    };
     let mut kept: Option<Attempt> = None;
-    let mut restart = vec![0; batch];
-    for r in 0..config.dno.restarts {
-        let attempt = stages.attempt(config.seed.wrapping_add(r as u64), r, &mut seconds, &mut progress)?;
-        kept = Some(match kept {
-            None => attempt,
-            Some(old) => {
-                let take: Vec<bool> =
-                    attempt.objective.iter().zip(&old.objective).map(|(&new, &old)| dno::beats(new, old)).collect();
-                for (chosen, _) in restart.iter_mut().zip(&take).filter(|(_, &t)| t) {
-                    *chosen = r;
+    let (mut inverted, mut restart, mut motion) = (Vec::new(), vec![0; batch], vec![0; batch]);
+    let restarts = config.dno.restarts;
+    for (j, index) in rg.used_motions(found.retrieved.len()).into_iter().enumerate() {
+        // Inversion (eq. 7), once for the batch.
+        let clock = Instant::now();
+        let (z_r, error_m) = invert::invert_retrieved(
+            prior,
+            &found.retrieved[index].features,
+            &text.narrow(0, 0, 1)?,
+            &inversion,
+            j,
+            &mut progress,
+        )?;
+        let z_r = z_r.broadcast_as((batch, compiled.frames(), FEATURE_DIM))?.contiguous()?;
+        seconds.inversion += clock.elapsed().as_secs_f64();
+        inverted.push(InvertedReport { motion: index, error_m });
+        let stages = Stages {
+            prior,
+            compiled,
+            groups: &groups,
+            config,
+            rg,
+            solver: &solver,
+            both: &both,
+            z_r: &z_r,
+            foot_lock: &foot_lock,
+        };
+        for r in 0..restarts {
+            let round = j * restarts + r;
+            let attempt = stages.attempt(config.seed.wrapping_add(r as u64), round, &mut seconds, &mut progress)?;
+            kept = Some(match kept {
+                None => {
+                    motion.fill(index);
+                    attempt
                 }
-                old.merge(attempt, &take)?
-            }
-        });
+                Some(old) => {
+                    let take: Vec<bool> =
+                        attempt.objective.iter().zip(&old.objective).map(|(&new, &old)| dno::beats(new, old)).collect();
+                    for b in (0..batch).filter(|&b| take[b]) {
+                        (restart[b], motion[b]) = (r, index);
+                    }
+                    old.merge(attempt, &take)?
+                }
+            });
+        }
     }
     let kept = kept.ok_or_else(|| GenerationError::Setting("RG-DNO ran no restarts".into()))?;
 
@@ -190,7 +204,8 @@ pub fn generate_rg_dno(
                 caption_similarity: r.caption_similarity,
             })
             .collect(),
-        inversion_error_m,
+        inverted,
+        motion,
         z1_error: kept.z1_error,
         z2_error: kept.z2_error,
         masks: kept.masks,

@@ -27,6 +27,15 @@ pub struct RetrievedReport {
     pub caption_similarity: Option<f64>,
 }
 
+/// A retrieved motion inverted to noise.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct InvertedReport {
+    /// Its index in the report's `retrieved`.
+    pub motion: usize,
+    /// Mean joint distance of `G(z_R)` to `x_R`, m.
+    pub error_m: f64,
+}
+
 /// The mask chosen for one sample.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ChosenMask {
@@ -116,8 +125,22 @@ impl StageSeconds {
 }
 
 impl RgDnoReport {
+    /// The retrieved motions the samples kept (indices into `retrieved`, first kept first) and
+    /// how many samples kept each.
+    pub fn kept_motions(&self) -> Vec<(usize, usize)> {
+        let mut kept: Vec<(usize, usize)> = Vec::new();
+        for &m in &self.motion {
+            match kept.iter_mut().find(|(k, _)| *k == m) {
+                Some((_, count)) => *count += 1,
+                None => kept.push((m, 1)),
+            }
+        }
+        kept
+    }
+
     /// This report with the per-sample figures of `other` (another attempt at the same task)
-    /// where `rows[b]` is `Some(i)`, as [`crate::generation::method::Generated::with_rows_from`]; the seconds add up.
+    /// where `rows[b]` is `Some(i)`, as [`crate::generation::method::Generated::with_rows_from`];
+    /// the seconds and steps add up and the inverted motions of both are listed.
     pub fn with_rows_from(self, other: RgDnoReport, rows: &[Option<usize>]) -> RgDnoReport {
         RgDnoReport {
             z1_error: pick_rows(self.z1_error, &other.z1_error, rows),
@@ -125,6 +148,8 @@ impl RgDnoReport {
             masks: pick_rows(self.masks, &other.masks, rows),
             soft_blend_objective: pick_rows(self.soft_blend_objective, &other.soft_blend_objective, rows),
             restart: pick_rows(self.restart, &other.restart, rows),
+            motion: pick_rows(self.motion, &other.motion, rows),
+            inverted: self.inverted.into_iter().chain(other.inverted).collect(),
             final_objective: pick_rows(self.final_objective, &other.final_objective, rows),
             seconds: self.seconds.plus(&other.seconds),
             steps: self.steps.plus(&other.steps),
@@ -151,10 +176,17 @@ pub struct RgDnoReport {
     /// ("crawls"): the retrieved motion is a stand-in that the prompt's other actions accept.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub missing_actions: Vec<String>,
-    /// The retrieved motions, best first; the first is `x_R`.
+    /// The retrieved motions, best first, one per take; the stages started from those of
+    /// `inverted`.
     pub retrieved: Vec<RetrievedReport>,
-    /// Mean joint distance of `G(z_R)` to `x_R`, m.
-    pub inversion_error_m: f64,
+    /// The retrieved motions `x_R` the stages started from, each inverted to `z_R`, in the
+    /// order they ran.
+    #[serde(default)]
+    pub inverted: Vec<InvertedReport>,
+    /// Which retrieved motion (an index into `retrieved`) each sample's kept attempt started
+    /// from.
+    #[serde(default)]
+    pub motion: Vec<usize>,
     /// `F_{C1}(G(z1))` per sample.
     pub z1_error: Vec<f64>,
     /// `F_{C2}(G(z2))` per sample.
@@ -211,7 +243,8 @@ impl Stage {
 pub struct StageProgress {
     /// The stage.
     pub stage: Stage,
-    /// The restart (0 to `N_S` − 1; 0 for the inversion, which runs once).
+    /// The attempt: retrieved motion `j` (0 to `m` − 1) and restart `r` (0 to `N_S` − 1) make
+    /// attempt `j·N_S + r`; the inversion of motion `j` is round `j`.
     pub round: usize,
     /// Steps done.
     pub step: usize,

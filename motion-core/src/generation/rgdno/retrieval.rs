@@ -101,7 +101,8 @@ pub struct RetrievalQuery<'a> {
 }
 
 /// Eqs. 5–6: scores every crop of `database` that passes the semantic check on `query` and
-/// returns the best `top_k` under the threshold, best first, with their features on `device`.
+/// returns the best `top_k` under the threshold, one per take, best first, with their features
+/// on `device`.
 pub fn retrieve(
     database: &RetrievalDatabase,
     query: &RetrievalQuery<'_>,
@@ -132,7 +133,7 @@ pub fn retrieve(
     if config.caption_weight == 0.0 {
         // Ranked by C_R alone: only the kept few need their similarity, for the report.
         scored.sort_by(|a, b| a.total.total_cmp(&b.total));
-        scored.truncate(config.top_k);
+        scored = one_per_take(database, scored, config.top_k, |s| &s.crop);
     }
     let similarity = match query.encoder {
         Some(encoder) => caption_similarities(database, encoder, query.prompt, &scored, device)?,
@@ -141,7 +142,7 @@ pub fn retrieve(
     let rank = |(s, sim): &(Scored, Option<f64>)| s.total + config.caption_weight * (1.0 - sim.unwrap_or(1.0)).max(0.0);
     let mut ranked: Vec<(Scored, Option<f64>)> = scored.into_iter().zip(similarity).collect();
     ranked.sort_by(|a, b| rank(a).total_cmp(&rank(b)));
-    ranked.truncate(config.top_k);
+    let ranked = one_per_take(database, ranked, config.top_k, |(s, _)| &s.crop);
     let ids: Vec<&str> = query.program.ids().collect();
     let retrieved = ranked
         .into_iter()
@@ -156,6 +157,24 @@ pub fn retrieve(
         })
         .collect::<Result<_, RetrievalError>>()?;
     Ok(RetrievalOutcome { retrieved, candidates: crops.len(), consistent: kept.len(), missing_actions })
+}
+
+/// The first `top_k` of `ranked` (best first) whose takes differ: a take's neighbouring crops
+/// and its mirror image fit `C_R` alike and start the same motion, so only its best one counts.
+fn one_per_take<T>(database: &RetrievalDatabase, ranked: Vec<T>, top_k: usize, crop: impl Fn(&T) -> &Crop) -> Vec<T> {
+    let mut takes: Vec<&str> = Vec::with_capacity(top_k);
+    let mut kept = Vec::with_capacity(top_k);
+    for item in ranked {
+        if kept.len() == top_k {
+            break;
+        }
+        let take = database.take(crop(&item));
+        if !takes.contains(&take) {
+            takes.push(take);
+            kept.push(item);
+        }
+    }
+    kept
 }
 
 /// The cosine similarity of each candidate's sentence ([`RetrievalDatabase::sentence`]) to the
@@ -285,7 +304,9 @@ mod tests {
         assert_eq!((best.source.clip.as_str(), best.source.start, best.source.frames), ("turn", 40, FRAMES + 1));
         assert!(!best.source.mirrored && best.score < 1e-6, "{} {}", best.source, best.score);
         assert_eq!(best.features.dims(), [FRAMES, FEATURE_DIM]);
-        assert_eq!(found.retrieved.len(), config.top_k);
+        // One crop per take, mirror images included: the two clips, best first.
+        let takes: Vec<&str> = found.retrieved.iter().map(|r| r.source.clip.as_str()).collect();
+        assert_eq!(takes, ["turn", "straight"]);
         assert!(found.retrieved.windows(2).all(|w| w[0].score <= w[1].score));
         assert_eq!(found.candidates, found.consistent);
         // The turning walk turns left: a prompt that turns right drops it, not its mirror.
@@ -354,7 +375,9 @@ mod tests {
         let plain_fit = found.retrieved.iter().find(|r| r.source.clip == "plain").unwrap();
         assert_eq!(plain_fit.caption_similarity, Some(0.0));
         assert!(plain_fit.score < best.score);
-        assert!(found.retrieved.iter().all(|r| r.source.clip != "turning box"));
+        // The box-carrying take that fits badly ranks last of the three takes, whatever its words.
+        let takes: Vec<&str> = found.retrieved.iter().map(|r| r.source.clip.as_str()).collect();
+        assert_eq!(takes, ["boxed", "plain", "turning box"]);
         let by_fit = RetrievalConfig { caption_weight: 0.0, ..config.clone() };
         let found = retrieve(&database, &heard, &by_fit, &Device::Cpu).unwrap();
         assert_eq!(found.retrieved[0].source.clip, "plain");

@@ -455,6 +455,14 @@ impl RetrievalDatabase {
         self.windows.get(self.describing_window(crop)).map_or("", |w| &w.texts[usize::from(crop.mirrored)].sentence)
     }
 
+    /// The take `crop` comes from: its clip's name up to a `#` (a take's kept stretches
+    /// `07_01#0` and `07_01#1` are one take). A mirror image and a database's time-warped copies
+    /// share their source clip's name, so they are the same take.
+    pub(super) fn take(&self, crop: &Crop) -> &str {
+        let name = &self.clips[crop.clip as usize].name;
+        name.split('#').next().unwrap_or(name)
+    }
+
     /// Where `crop` comes from, resized to `frames`.
     pub fn source(&self, crop: &Crop, frames: usize) -> CandidateSource {
         let clip = &self.clips[crop.clip as usize];
