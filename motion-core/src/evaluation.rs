@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cleanup::FootLockReport;
 use crate::constraints::{Check, CompiledProgram};
+use crate::corpus::family::Family;
 use crate::generation::method::{Generated, GenerationConfig};
 use crate::generation::refine::RefineReport;
 use crate::generation::rgdno::report::RgDnoReport;
@@ -34,6 +35,36 @@ pub struct ConstraintReport {
     pub checks: Vec<Check>,
     /// Whether each sample meets it within the tolerances.
     pub pass: Vec<bool>,
+}
+
+/// The skill the prompt names ([`Family::named_in`]), judged on each written sample by the
+/// family's detector ([`Family::detect`]), the one `mogen report prior` applies to free samples.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SkillReport {
+    /// The family's name ([`Family::name`]).
+    pub family: String,
+    /// What its detector checks ([`Family::detector`]).
+    pub detector: String,
+    /// Whether each sample passes the detector.
+    pub pass: Vec<bool>,
+}
+
+impl SkillReport {
+    /// The skill `prompt` names, judged on `motions`; `None` when it names none with a
+    /// detector (a carry has none).
+    pub fn judge(prompt: &str, motions: &[Vec<Pose>]) -> Option<SkillReport> {
+        let family = Family::named_in(prompt)?;
+        Some(SkillReport {
+            family: family.name().to_owned(),
+            detector: family.detector()?.to_owned(),
+            pass: motions.iter().map(|m| family.detect(m) == Some(true)).collect(),
+        })
+    }
+
+    /// `3/4`: samples that pass, of all.
+    pub fn passed_text(&self) -> String {
+        format!("{}/{}", self.pass.iter().filter(|&&p| p).count(), self.pass.len())
+    }
 }
 
 /// Step counting against a counting constraint's target.
@@ -130,6 +161,10 @@ pub struct TaskReport {
     pub success_rate: f64,
     /// Step counting, for programs with a counting constraint over foot speeds.
     pub steps: Option<StepReport>,
+    /// The skill the prompt names, judged on each sample; absent when it names none with a
+    /// detector, and in reports written before it was judged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skill: Option<SkillReport>,
     /// The motion figures of the samples (foot skate, accelerations, pace, toe flicker, stance
     /// toe height, depth under the floor, hands raised, head–neck lengths, ...).
     #[serde(flatten)]
@@ -289,6 +324,7 @@ pub fn report(
         constraints: judged.constraints,
         success_rate: judged.success_rate,
         steps: judged.steps,
+        skill: SkillReport::judge(&program.text, &judged.motions),
         motion: MetricMeans::of(&judged.motions),
         cleanup,
         rg_dno: None,
@@ -323,6 +359,27 @@ mod tests {
     use super::*;
     use crate::constraints::STANDING;
     use crate::generation::method::Method;
+
+    /// The skill the prompt names is judged per sample by its family's detector: a straight
+    /// walk passes "walks forward", fails "crawls" and "turns left", and a prompt that names no
+    /// skill with a detector (a carry, a reach) gets none.
+    #[test]
+    fn the_skill_the_prompt_names_is_detected_per_sample() {
+        let walk = crate::motion::test_support::walking_poses(120, 0.0);
+        let turn = crate::motion::test_support::walking_poses(120, 0.8);
+        let motions = [walk, turn];
+        let walked = SkillReport::judge("a person walks forward", &motions[..1]).unwrap();
+        assert_eq!(
+            (walked.family.as_str(), walked.pass.as_slice(), walked.passed_text()),
+            ("walk", [true].as_slice(), "1/1".to_owned())
+        );
+        let crawled = SkillReport::judge("a person crawls forward", &motions).unwrap();
+        assert_eq!(crawled.pass, [false, false]);
+        let turned = SkillReport::judge("a person walks and turns left", &motions).unwrap();
+        assert_eq!(turned.pass, [false, true]);
+        assert!(SkillReport::judge("a person carries a box", &motions).is_none());
+        assert!(SkillReport::judge("a person reaches up high", &motions).is_none());
+    }
 
     /// The report's maximum scene penetration is the maximum over the samples, not their mean: of
     /// two standing figures, one with a toe 16 cm under the floor on one frame, the report gives
@@ -400,6 +457,15 @@ impl fmt::Display for Summary<'_> {
             constraint_lines(f, c)?;
         }
         writeln!(f, "  all constraints met by {:.0}% of the samples", 100.0 * report.success_rate)?;
+        if let Some(skill) = &report.skill {
+            writeln!(
+                f,
+                "  the skill the prompt names, {} ({}): detected in {} samples",
+                skill.family,
+                skill.detector,
+                skill.passed_text()
+            )?;
+        }
         if let Some(why) = &report.fallback {
             writeln!(f, "  RG-DNO fell back to DNO: {why}")?;
         }

@@ -207,8 +207,8 @@ fn method_rows(rows: &[ResultRow]) -> String {
          \"all met\", \"max scene penetration\" and \"foot skate\" give the network's motion → the written one. \
          The same figures for held-out capture of each skill are in the prior's report (`mogen report prior`).\n\n",
     );
-    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | leg alternations/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | floating (longest flight, s) | steps as leg alternations (target) / success | time (s) |\n");
-    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | leg alternations/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | floating (longest flight, s) | steps as leg alternations (target) / success | the skill named: detected | time (s) |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         let p = &r.report;
         let steps = p
@@ -229,13 +229,14 @@ fn method_rows(rows: &[ResultRow]) -> String {
                 fmt_opt(p.max_scene_penetration_m, 3),
             )
         };
+        let skill = p.skill.as_ref().map_or("–".to_owned(), |s| format!("{}: {}", s.family, s.passed_text()));
         // With --retry-unmet: how many samples kept a later attempt.
         let met = match &p.attempt {
             Some(kept) => format!("{met} ({} of {} retried)", kept.iter().filter(|&&k| k > 0).count(), kept.len()),
             None => met,
         };
         out.push_str(&format!(
-            "| {} | {} | {:.6} | {met} | {penetration} | {:.3} | {:.2} | {:.3} | {:.4} | {:.3} | {skate} | {:.3} | {:.0}% ({:.2}) | {steps} | {:.1} |\n",
+            "| {} | {} | {:.6} | {met} | {penetration} | {:.3} | {:.2} | {:.3} | {:.4} | {:.3} | {skate} | {:.3} | {:.0}% ({:.2}) | {steps} | {skill} | {:.1} |\n",
             r.task,
             p.config.method,
             p.constraint_error,

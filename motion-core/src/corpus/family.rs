@@ -137,6 +137,48 @@ impl Family {
         }
     }
 
+    /// The family of the skill a prompt names, the most specific first: a crawl, a sit, a hop
+    /// (a jump named by "hop"), a jump, a run, a sideways walk ("side-steps" too), a crouch or a
+    /// duck under something (the crouched walk), a one-leg balance, a carry, a turn to a named
+    /// side, a walk; `None` when it names none of them. Read with the corpus's skill words
+    /// ([`Skill::of`], and "carries", which take descriptions never say), so "walks to a chair
+    /// and sits down" is a sit.
+    pub fn named_in(prompt: &str) -> Option<Family> {
+        let text = prompt.to_lowercase().replace('-', " ");
+        let skills = Skill::of(&text);
+        let names = |skill: Skill| skills.contains(&skill);
+        let word = |w: &str| text.split(|c: char| !c.is_ascii_alphanumeric()).any(|x| x.starts_with(w));
+        Some(if names(Skill::Crawl) {
+            Family::Crawl
+        } else if names(Skill::Sit) {
+            Family::SitDown
+        } else if names(Skill::JumpHop) {
+            if word("hop") {
+                Family::HopOneFoot
+            } else {
+                Family::Jump
+            }
+        } else if names(Skill::Run) {
+            Family::Run
+        } else if names(Skill::Sideways) {
+            Family::Sideways
+        } else if names(Skill::CrouchSneak) || names(Skill::Under) {
+            Family::Sneak
+        } else if names(Skill::Balance) {
+            Family::Balance
+        } else if names(Skill::Carry) || word("carri") {
+            Family::Carry
+        } else if names(Skill::Turn) && word("left") {
+            Family::TurnLeft
+        } else if names(Skill::Turn) && word("right") {
+            Family::TurnRight
+        } else if names(Skill::Walk) {
+            Family::Walk
+        } else {
+            return None;
+        })
+    }
+
     /// The held-out (test-split) windows of `corpus` that are examples of the family
     /// ([`Family::holds`]), in corpus order.
     pub fn held_out<'a>(self, corpus: &'a Corpus) -> impl Iterator<Item = &'a CorpusWindow> + 'a {
@@ -243,6 +285,34 @@ mod tests {
         }
         let names: std::collections::BTreeSet<_> = Family::ALL.iter().map(|f| f.name()).collect();
         assert_eq!(names.len(), Family::ALL.len());
+    }
+
+    /// The rare-skill suite's prompts (`fixtures/tasks/skill_*.json`) and Table 6's name the
+    /// skill a person would read in them.
+    #[test]
+    fn prompts_name_the_most_specific_skill() {
+        let cases = [
+            ("a person crawls forward on hands and knees", Some(Family::Crawl)),
+            ("a person walks to a chair and sits down", Some(Family::SitDown)),
+            ("a person hops forward on the right foot", Some(Family::HopOneFoot)),
+            ("a person jumps forward onto a step", Some(Family::Jump)),
+            ("a person runs forward and jumps over a hurdle", Some(Family::Jump)),
+            ("a man sprints off into the distance", Some(Family::Run)),
+            ("a person side-steps to the left", Some(Family::Sideways)),
+            ("a person ducks under a barrier while walking forward", Some(Family::Sneak)),
+            ("a person balances on one leg", Some(Family::Balance)),
+            ("a person carries a box forward", Some(Family::Carry)),
+            ("a person walks and turns left", Some(Family::TurnLeft)),
+            ("a person walks forward", Some(Family::Walk)),
+            ("a person reaches up high with a hand again and again", None),
+        ];
+        for (prompt, family) in cases {
+            assert_eq!(Family::named_in(prompt), family, "{prompt}");
+        }
+        // Every family's own caption-like prompt names it.
+        for f in Family::ALL {
+            assert_eq!(Family::named_in(f.prompts()[0]), Some(f), "{}", f.prompts()[0]);
+        }
     }
 
     /// A body lowered onto a seat at knee height over `lower` frames, after `stand` frames standing,
