@@ -94,9 +94,10 @@ pub struct GenerationArgs {
     #[arg(long, value_enum, default_value_t = ScheduleArg::Paper)]
     pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
-    /// again from fresh noise (attempt k + 1 from seed + k·restarts) and keeps its best attempt
-    /// (most constraints met, then the lowest error); report.json's `attempt` says which. 0: off
-    /// (default: 0, or 1 with `--schedule until-met`).
+    /// again from fresh noise (attempt k + 1 from seed + k·restarts; with RG-DNO, from the next
+    /// retrieved takes) and keeps its best attempt (most constraints met, then the lowest
+    /// error); report.json's `attempt` says which. 0: off (default: 0, or 1 with `--schedule
+    /// until-met`).
     #[arg(long)]
     pub retry_unmet: Option<usize>,
     /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).
