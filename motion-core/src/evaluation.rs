@@ -543,6 +543,9 @@ fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoRepor
     if let Some(note) = missing_actions_note(rg.missing_actions.iter().map(String::as_str)) {
         writeln!(f, "  {note}: the retrieved motion is a stand-in the prompt's other actions accept")?;
     }
+    if let Some(skills) = &rg.skills {
+        writeln!(f, "  {skills}")?;
+    }
     let restarts = report.config.dno.restarts;
     for (i, m) in rg.masks.iter().enumerate() {
         let restart = rg

@@ -31,6 +31,10 @@ pub struct RetrieveArgs {
     /// alone, as the paper; 0.05 makes "carries a box" retrieve a box carry).
     #[arg(long, default_value_t = RetrievalConfig::default().caption_weight, value_parser = flags::weight)]
     caption_weight: f64,
+    /// The same λ when the prompt asks for a skill other than walking (a crawl, a sit, a jump,
+    /// ...) and only the crops that do it are scored.
+    #[arg(long, default_value_t = RetrievalConfig::default().skill_caption_weight, value_parser = flags::weight)]
+    skill_caption_weight: f64,
 }
 
 pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
@@ -40,6 +44,7 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     let config = RetrievalConfig {
         related_weight: args.related_weight,
         caption_weight: args.caption_weight,
+        skill_caption_weight: args.skill_caption_weight,
         top_k: args.top,
         ..RetrievalConfig::default()
     };
@@ -62,6 +67,9 @@ pub fn run(args: RetrieveArgs) -> anyhow::Result<()> {
     }
     if let Some(note) = missing_actions_note(found.missing_actions.iter().map(|a| a.verb())) {
         println!("{note}");
+    }
+    if let Some(skills) = &found.skills {
+        println!("{skills}");
     }
     let line = |r: &Retrieved| {
         let errors: Vec<String> = r.per_constraint.iter().map(|(id, e)| format!("{id} {e:.4}")).collect();

@@ -137,46 +137,41 @@ impl Family {
         }
     }
 
-    /// The family of the skill a prompt names, the most specific first: a crawl, a sit, a hop
-    /// (a jump named by "hop"), a jump, a run, a sideways walk ("side-steps" too), a crouch or a
-    /// duck under something (the crouched walk), a one-leg balance, a carry, a turn to a named
-    /// side, a walk; `None` when it names none of them. Read with the corpus's skill words
-    /// ([`Skill::of`], and "carries", which take descriptions never say), so "walks to a chair
-    /// and sits down" is a sit.
+    /// The family of the skill a prompt names, the most specific ([`Family::all_named_in`]'s
+    /// first); `None` when it names none.
     pub fn named_in(prompt: &str) -> Option<Family> {
+        Family::all_named_in(prompt).first().copied()
+    }
+
+    /// The families of the skills a prompt names, the most specific first: a crawl, a sit, a
+    /// hop (a jump named by "hop") or else a jump, a run, a sideways walk ("side-steps" too), a
+    /// crouch or a duck under something (the crouched walk), a one-leg balance, a carry, a turn
+    /// to a named side, a walk. Read with the corpus's skill words ([`Skill::of`], and
+    /// "carries", which take descriptions never say), so "walks to a chair and sits down" is a
+    /// sit, then a walk.
+    pub fn all_named_in(prompt: &str) -> Vec<Family> {
         let text = prompt.to_lowercase().replace('-', " ");
         let skills = Skill::of(&text);
         let names = |skill: Skill| skills.contains(&skill);
         let word = |w: &str| text.split(|c: char| !c.is_ascii_alphanumeric()).any(|x| x.starts_with(w));
-        Some(if names(Skill::Crawl) {
-            Family::Crawl
-        } else if names(Skill::Sit) {
-            Family::SitDown
-        } else if names(Skill::JumpHop) {
-            if word("hop") {
-                Family::HopOneFoot
-            } else {
-                Family::Jump
-            }
-        } else if names(Skill::Run) {
-            Family::Run
-        } else if names(Skill::Sideways) {
-            Family::Sideways
-        } else if names(Skill::CrouchSneak) || names(Skill::Under) {
-            Family::Sneak
-        } else if names(Skill::Balance) {
-            Family::Balance
-        } else if names(Skill::Carry) || word("carri") {
-            Family::Carry
-        } else if names(Skill::Turn) && word("left") {
-            Family::TurnLeft
-        } else if names(Skill::Turn) && word("right") {
-            Family::TurnRight
-        } else if names(Skill::Walk) {
-            Family::Walk
-        } else {
-            return None;
-        })
+        let turn = names(Skill::Turn);
+        [
+            (Family::Crawl, names(Skill::Crawl)),
+            (Family::SitDown, names(Skill::Sit)),
+            (Family::HopOneFoot, names(Skill::JumpHop) && word("hop")),
+            (Family::Jump, names(Skill::JumpHop) && !word("hop")),
+            (Family::Run, names(Skill::Run)),
+            (Family::Sideways, names(Skill::Sideways)),
+            (Family::Sneak, names(Skill::CrouchSneak) || names(Skill::Under)),
+            (Family::Balance, names(Skill::Balance)),
+            (Family::Carry, names(Skill::Carry) || word("carri")),
+            (Family::TurnLeft, turn && word("left")),
+            (Family::TurnRight, turn && word("right")),
+            (Family::Walk, names(Skill::Walk)),
+        ]
+        .into_iter()
+        .filter_map(|(family, named)| named.then_some(family))
+        .collect()
     }
 
     /// The held-out (test-split) windows of `corpus` that are examples of the family
@@ -220,6 +215,17 @@ impl Family {
         }
     }
 
+    /// Whether the family's skill may happen in a window (its poses and tags) of a take with
+    /// this description, as retrieval asks: the window is an example of it ([`Family::holds`]),
+    /// or, for sitting down, it is any window of a take that says it sits. A window that holds
+    /// a whole sit-down (standing its first second, seated its last) is rare, since the
+    /// windows' fixed starts cut most sit-downs; a crop of a sitting take that stands at its
+    /// start and sits at its end is one, and `C_R` finds it.
+    pub fn happens_in(self, poses: &[Pose], tags: &MotionTags, description: &str) -> bool {
+        let in_a_sitting_take = self == Family::SitDown && Skill::Sit.named_by(description);
+        in_a_sitting_take || self.holds(poses, tags, description)
+    }
+
     /// What the detector checks, for the report; `None` where there is none.
     pub fn detector(self) -> Option<&'static str> {
         Some(match self {
@@ -259,6 +265,37 @@ impl Family {
             }
             Family::Crawl => action == Action::Crawl,
         })
+    }
+}
+
+/// A set of families: what a window is an example of (a crouched sideways walk is a sneak and a
+/// sideways walk at once).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Families(u16);
+
+impl Families {
+    /// The families whose skill happens in a window (its poses and tags) of a take with this
+    /// description ([`Family::happens_in`]).
+    pub fn happening_in(poses: &[Pose], tags: &MotionTags, description: &str) -> Self {
+        Family::ALL.into_iter().filter(|f| f.happens_in(poses, tags, description)).collect()
+    }
+
+    /// Whether `family` is in the set.
+    pub fn contains(self, family: Family) -> bool {
+        self.0 & family.bit() != 0
+    }
+}
+
+impl FromIterator<Family> for Families {
+    fn from_iter<I: IntoIterator<Item = Family>>(families: I) -> Self {
+        Families(families.into_iter().fold(0, |bits, f| bits | f.bit()))
+    }
+}
+
+impl Family {
+    /// The family's bit in [`Families`]: its place in [`Family::ALL`].
+    fn bit(self) -> u16 {
+        1 << self as u16
     }
 }
 
@@ -309,10 +346,40 @@ mod tests {
         for (prompt, family) in cases {
             assert_eq!(Family::named_in(prompt), family, "{prompt}");
         }
+        assert_eq!(Family::all_named_in("a man runs forwards and jumps over an obstacle"), [Family::Jump, Family::Run]);
+        assert_eq!(Family::all_named_in("a person walks to a chair and sits down"), [Family::SitDown, Family::Walk]);
         // Every family's own caption-like prompt names it.
         for f in Family::ALL {
             assert_eq!(Family::named_in(f.prompts()[0]), Some(f), "{}", f.prompts()[0]);
         }
+    }
+
+    #[test]
+    fn a_set_of_families_holds_each_family_by_its_place() {
+        for (k, f) in Family::ALL.into_iter().enumerate() {
+            assert_eq!(f as usize, k, "{f:?} is out of place in Family::ALL");
+            let one: Families = [f].into_iter().collect();
+            assert!(Family::ALL.into_iter().all(|g| one.contains(g) == (g == f)));
+        }
+        let none = Families::default();
+        assert!(Family::ALL.into_iter().all(|f| !none.contains(f)));
+    }
+
+    #[test]
+    fn sitting_down_may_happen_in_any_window_of_a_take_that_sits() {
+        let standing = put_on_floor(&vec![rest_pose(); 40]);
+        let tags = MotionTags::measure(&standing);
+        assert!(!Family::SitDown.holds(&standing, &tags, "sit down and get up"));
+        assert!(Family::SitDown.happens_in(&standing, &tags, "sit down and get up"));
+        assert!(!Family::SitDown.happens_in(&standing, &tags, "stand still"));
+        assert!(!Families::happening_in(&standing, &tags, "stand still").contains(Family::SitDown));
+        // Other families happen where they hold.
+        let sitting = sitting_down(40, 20, 60);
+        let sat = MotionTags::measure(&sitting);
+        assert!(Family::SitDown.holds(&sitting, &sat, "sit on a chair"));
+        assert!(Family::ALL
+            .into_iter()
+            .all(|f| f.happens_in(&standing, &tags, "walk") == f.holds(&standing, &tags, "walk")));
     }
 
     /// A body lowered onto a seat at knee height over `lower` frames, after `stand` frames standing,

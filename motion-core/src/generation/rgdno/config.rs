@@ -40,6 +40,11 @@ pub struct RetrievalConfig {
     /// Table 6's picks, `fixtures/results/issue60-caption/`). [`super::retrieval`] says what it
     /// reads.
     pub caption_weight: f64,
+    /// `λ` of the same ranking when the prompt asks for a skill and only crops that do it are
+    /// scored ([`super::semantic::Heard::skills`]; default 0.05): among takes that all do the
+    /// skill, a near tie in `C_R` goes to the one whose words match the prompt ("hops on one
+    /// foot forward" over "hops on one foot forward and turns right").
+    pub skill_caption_weight: f64,
 }
 
 impl Default for RetrievalConfig {
@@ -54,6 +59,7 @@ impl Default for RetrievalConfig {
             exact_shortlist: 64,
             proxy_frame_step: 4,
             caption_weight: 0.0,
+            skill_caption_weight: 0.05,
         }
     }
 }

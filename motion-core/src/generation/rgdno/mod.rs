@@ -194,6 +194,7 @@ pub fn generate_rg_dno(
         candidates: found.candidates,
         consistent_candidates: found.consistent,
         missing_actions: found.missing_actions.iter().map(|a| a.verb().to_owned()).collect(),
+        skills: found.skills.clone(),
         retrieved: found
             .retrieved
             .iter()

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use super::candidates::CandidateSource;
 use super::config::RgDnoConfig;
 use super::mask::MaskCandidate;
+use super::retrieval::SoughtSkills;
 use crate::dno;
 use crate::generation::method::pick_rows;
 use crate::numeric::mean;
@@ -176,6 +177,11 @@ pub struct RgDnoReport {
     /// ("crawls"): the retrieved motion is a stand-in that the prompt's other actions accept.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub missing_actions: Vec<String>,
+    /// The skills other than walking the prompt asks for, and how many consistent candidates do
+    /// one (only they were scored when there were any); absent when it asks for none, and in
+    /// reports written before retrieval looked for them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skills: Option<SoughtSkills>,
     /// The retrieved motions, best first, one per take; the stages started from those of
     /// `inverted`.
     pub retrieved: Vec<RetrievedReport>,

@@ -21,7 +21,13 @@
 //! its window contradicts the prompt's direction words (forward/backward, left/right) or its
 //! gait (a walk against a jump or a run; beyond the paper, whose check left a walking task free
 //! to retrieve a two-footed jump and keep its hops) and, for counting tasks, when it lacks the
-//! prompt's action verb.
+//! prompt's action verb. When the prompt names skills other than walking ([`Heard::skills`]: a
+//! crawl, a sit, a jump, …) and some consistent crop's window does one of them by measurement
+//! ([`crate::corpus::family::Family::happens_in`]), only those crops are scored: of a walk that
+//! fits `C_R` a little better and a sit that fits it a little worse, a prompt that sits gets the
+//! sit; of those, one that turns half round unasked is passed over ([`Heard::turns_unasked`]).
+//! When none does, every consistent crop is scored and the outcome says so
+//! ([`SoughtSkills::candidates`] 0).
 //!
 //! **Score.** `Σ_i w_i·E_i` over `C_R`, with `w = 1` for the most difficult constraint `c_D`
 //! and [`RetrievalConfig::related_weight`] for its connected ones (supp. C: "we set a smaller
@@ -35,7 +41,9 @@
 //! encoder, each exactly scored candidate's sentence (its window's caption with the take's
 //! description, [`RetrievalDatabase`]'s words for it) is compared with the prompt and reported,
 //! and the shortlist is ranked by `Σ_i w_i·E_i + λ·(1 − cos(prompt, sentence))`, `λ`
-//! [`RetrievalConfig::caption_weight`] (0 by default: the paper's ranking). With `λ > 0`, of two
+//! [`RetrievalConfig::caption_weight`] (0 by default: the paper's ranking), or
+//! [`RetrievalConfig::skill_caption_weight`] (0.05) when only the crops that do the prompt's
+//! skill are scored. With `λ > 0`, of two
 //! motions that fit `C_R` about equally the one whose take does what the sentence says wins (at
 //! 0.05, "a person carries a box forward" retrieves "walk carrying a box" over a plain walk that
 //! fits 0.004 better). Only the shortlist is read, so meaning re-ranks good fits and never lifts
@@ -43,6 +51,7 @@
 
 use candle_core::{DType, Device, Tensor};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use super::candidates::{CandidateSource, Crop, RetrievalDatabase};
 use super::config::RetrievalConfig;
@@ -81,6 +90,32 @@ pub struct RetrievalOutcome {
     /// The actions the prompt names ([`super::semantic::named_actions`]) that no window of the database does:
     /// the retrieved motion, if any, is a stand-in the prompt's other actions accept.
     pub missing_actions: Vec<Action>,
+    /// The skills the prompt asks for ([`Heard::skills`]), if any, and how many consistent
+    /// crops do one.
+    pub skills: Option<SoughtSkills>,
+}
+
+/// The skills retrieval looked for first, as reports name them.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SoughtSkills {
+    /// Their families' names ([`crate::corpus::family::Family::name`]), the most specific
+    /// first.
+    pub families: Vec<String>,
+    /// Consistent crops whose window does one: the only ones scored when there are any; with
+    /// none, every consistent crop was scored and the retrieved motion is a stand-in.
+    pub candidates: usize,
+}
+
+impl std::fmt::Display for SoughtSkills {
+    /// "the prompt asks for a jump or a run: 1662 consistent candidates do one, only they were
+    /// scored".
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "the prompt asks for a {}: ", self.families.join(" or a "))?;
+        match self.candidates {
+            0 => write!(f, "no consistent candidate does it, so every one was scored and the motion is a stand-in"),
+            n => write!(f, "{n} consistent candidates do it, only they were scored"),
+        }
+    }
 }
 
 /// The task as retrieval sees it: the compiled `C_R`, its most difficult constraint and the
@@ -112,8 +147,12 @@ pub fn retrieve(
     if !(config.related_weight.is_finite() && config.related_weight >= 0.0) {
         return Err(RetrievalError::Setting(format!("related_weight must be ≥ 0, got {}", config.related_weight)));
     }
-    if !(config.caption_weight.is_finite() && config.caption_weight >= 0.0) {
-        return Err(RetrievalError::Setting(format!("caption_weight must be ≥ 0, got {}", config.caption_weight)));
+    for (name, weight) in
+        [("caption_weight", config.caption_weight), ("skill_caption_weight", config.skill_caption_weight)]
+    {
+        if !(weight.is_finite() && weight >= 0.0) {
+            return Err(RetrievalError::Setting(format!("{name} must be ≥ 0, got {weight}")));
+        }
     }
     let frames = query.program.frames();
     let crops = database.crops(frames, config)?;
@@ -121,16 +160,27 @@ pub fn retrieve(
     let windows = database.consistent_windows(&heard);
     let kept: Vec<Crop> = crops.iter().filter(|c| database.crop_is_consistent(c, &windows)).copied().collect();
     let missing_actions = heard.actions().iter().copied().filter(|a| !database.actions_done().contains(a)).collect();
+    let does_a_skill = |c: &Crop| heard.skills().iter().any(|&f| database.crop_does(c, f));
+    let skilled: Vec<Crop> =
+        kept.iter().filter(|c| does_a_skill(c) && !heard.turns_unasked(database.measured(c))).copied().collect();
+    let skills = (!heard.skills().is_empty()).then(|| SoughtSkills {
+        families: heard.skills().iter().map(|f| f.name().to_owned()).collect(),
+        candidates: skilled.len(),
+    });
+    let (pool, caption_weight) = match skilled.is_empty() {
+        true => (&kept, config.caption_weight),
+        false => (&skilled, config.skill_caption_weight),
+    };
     // Rank every candidate on the proxy (joint centres, 5 Hz), then score the best exactly;
     // counts by their soft form throughout, a ranking of near misses rather than a judgement.
     let program = query.program.soft_counts();
     let proxy = program.joints_only().thinned(config.proxy_frame_step, device)?;
-    let mut ranked = score(database, &proxy, &kept, query.most_difficult, config, device)?;
+    let mut ranked = score(database, &proxy, pool, query.most_difficult, config, device)?;
     ranked.sort_by(|a, b| a.total.total_cmp(&b.total));
     let shortlist: Vec<Crop> = ranked.iter().take(config.exact_shortlist.max(config.top_k)).map(|s| s.crop).collect();
     let mut scored = score(database, &program, &shortlist, query.most_difficult, config, device)?;
     scored.retain(|s| s.total.is_finite() && config.threshold.is_none_or(|t| s.total <= t));
-    if config.caption_weight == 0.0 {
+    if caption_weight == 0.0 {
         // Ranked by C_R alone: only the kept few need their similarity, for the report.
         scored.sort_by(|a, b| a.total.total_cmp(&b.total));
         scored = one_per_take(database, scored, config.top_k, |s| &s.crop);
@@ -139,7 +189,7 @@ pub fn retrieve(
         Some(encoder) => caption_similarities(database, encoder, query.prompt, &scored, device)?,
         None => vec![None; scored.len()],
     };
-    let rank = |(s, sim): &(Scored, Option<f64>)| s.total + config.caption_weight * (1.0 - sim.unwrap_or(1.0)).max(0.0);
+    let rank = |(s, sim): &(Scored, Option<f64>)| s.total + caption_weight * (1.0 - sim.unwrap_or(1.0)).max(0.0);
     let mut ranked: Vec<(Scored, Option<f64>)> = scored.into_iter().zip(similarity).collect();
     ranked.sort_by(|a, b| rank(a).total_cmp(&rank(b)));
     let ranked = one_per_take(database, ranked, config.top_k, |(s, _)| &s.crop);
@@ -156,7 +206,7 @@ pub fn retrieve(
             })
         })
         .collect::<Result<_, RetrievalError>>()?;
-    Ok(RetrievalOutcome { retrieved, candidates: crops.len(), consistent: kept.len(), missing_actions })
+    Ok(RetrievalOutcome { retrieved, candidates: crops.len(), consistent: kept.len(), missing_actions, skills })
 }
 
 /// The first `top_k` of `ranked` (best first) whose takes differ: a take's neighbouring crops
@@ -365,7 +415,8 @@ mod tests {
         }
         let database = RetrievalDatabase::from_corpus(&corpus).unwrap();
         let program = pins(&plain[40..=40 + FRAMES]);
-        let prompt = "a person carries a box";
+        // "Holding" names no skill ("carries" would score only the takes that carry).
+        let prompt = "a person walks holding a box";
         let config = RetrievalConfig { related_weight: 1.0, caption_weight: 0.05, ..RetrievalConfig::default() };
         let heard = RetrievalQuery { encoder: Some(&BoxEars), ..query(&program, prompt) };
         let found = retrieve(&database, &heard, &config, &Device::Cpu).unwrap();
@@ -383,6 +434,37 @@ mod tests {
         assert_eq!(found.retrieved[0].source.clip, "plain");
         let negative = RetrievalConfig { caption_weight: -1.0, ..config };
         assert!(retrieve(&database, &heard, &negative, &Device::Cpu).is_err());
+    }
+
+    /// A prompt that asks for a carry scores only the takes that carry, even against a plain
+    /// walk that fits `C_R` exactly; a prompt that asks for a walk, or for a skill that no take
+    /// does, scores every consistent crop and says so.
+    #[test]
+    fn a_prompt_that_asks_for_a_skill_retrieves_a_take_that_does_it() {
+        let plain = walking_poses(200, 0.0);
+        let mut corpus =
+            tiny_corpus(vec![("plain", Split::Train, plain.clone()), ("boxed", Split::Train, walking_poses(200, 0.3))]);
+        corpus.clips[1].description = "walk carrying a box".into();
+        let database = RetrievalDatabase::from_corpus(&corpus).unwrap();
+        let program = pins(&plain[40..=40 + FRAMES]);
+        let config = RetrievalConfig { related_weight: 1.0, ..RetrievalConfig::default() };
+        let found = |prompt| retrieve(&database, &query(&program, prompt), &config, &Device::Cpu).unwrap();
+        let carry = found("a person carries a box forward");
+        let takes: Vec<&str> = carry.retrieved.iter().map(|r| r.source.clip.as_str()).collect();
+        assert_eq!(takes, ["boxed"]);
+        let skills = carry.skills.as_ref().unwrap();
+        assert_eq!(skills.families, ["carry"]);
+        assert!(skills.candidates > 0 && skills.candidates < carry.consistent, "{skills:?}");
+        assert!(skills.to_string().ends_with("consistent candidates do it, only they were scored"), "{skills}");
+        let walk = found("a person walks forward");
+        assert!(walk.skills.is_none());
+        assert_eq!(walk.retrieved[0].source.clip, "plain");
+        let sideways = found("a person side-steps to the left");
+        assert_eq!(sideways.skills.as_ref().map(|s| s.candidates), Some(0));
+        assert!(sideways.skills.unwrap().to_string().contains("no consistent candidate does it"));
+        assert_eq!(sideways.retrieved[0].source.clip, "plain");
+        let negative = RetrievalConfig { skill_caption_weight: -0.1, ..config.clone() };
+        assert!(retrieve(&database, &query(&program, "a person carries a box"), &negative, &Device::Cpu).is_err());
     }
 
     #[test]

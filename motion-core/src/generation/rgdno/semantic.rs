@@ -16,8 +16,16 @@
 //! prompt's actions [`accepts`] it as a stand-in: a walk may be a crawl or a crouched sneak
 //! (the paper retrieves crawling for walking prompts, RG-DNO Fig. 3, to pass under barriers),
 //! but never a jump, a run or a stand; a crawl is never a jump.
+//!
+//! **The skill.** Beyond dropping contradictions, a prompt that names skills other than
+//! walking ([`Heard::skills`]: a crawl, a sit, a hop, a jump, a run, a side-step, a crouch or a
+//! duck, a balance, a carry) is heard as asking for them: retrieval scores only the windows that
+//! do one of them by measurement ([`crate::corpus::family::Family::happens_in`]) when there are any.
+//! Walks and turns are left to `C_R`: they are most of the corpus, and a walking task may take
+//! a crawl or a sneak as its stand-in under a barrier (RG-DNO Fig. 3).
 
 use crate::corpus::caption::Action;
+use crate::corpus::family::Family;
 
 /// Pairs of direction words that contradict each other (either way round).
 const DIRECTION_CONTRADICTIONS: [(&str, &str); 3] = [("forward", "backward"), ("left", "right"), ("up", "down")];
@@ -103,6 +111,13 @@ pub fn accepts(named: Action, measured: Action) -> bool {
     named == measured || stand_ins.contains(&measured)
 }
 
+/// Word stems by which a prompt asks for a turn.
+const TURN_STEMS: [&str; 7] = ["turn", "around", "spin", "rotat", "circl", "twirl", "pivot"];
+
+/// The smallest turn, in degrees, of a window that does a skill the prompt asks for but that
+/// retrieval passes over when the prompt names no turn ([`Heard::turns_unasked`]).
+pub const UNASKED_TURN_DEG: u32 = 180;
+
 /// Action verbs the semantic check of a counting task looks for, by stem.
 const ACTION_VERBS: [&str; 12] =
     ["walk", "run", "jog", "jump", "hop", "crawl", "clap", "kick", "punch", "wave", "step", "touch"];
@@ -131,6 +146,7 @@ impl<'a> Described<'a> {
 pub struct Heard {
     words: Vec<String>,
     actions: Vec<Action>,
+    skills: Vec<Family>,
     counting: bool,
 }
 
@@ -138,12 +154,30 @@ impl Heard {
     /// `prompt` heard for a task that counts actions (`counting`) or not.
     pub fn new(prompt: &str, counting: bool) -> Self {
         let words = words(prompt);
-        Heard { actions: actions_in(&words), words, counting }
+        let mut skills = Family::all_named_in(prompt);
+        skills.retain(|f| !matches!(f, Family::Walk | Family::TurnLeft | Family::TurnRight));
+        Heard { actions: actions_in(&words), words, skills, counting }
+    }
+
+    /// The skills the prompt asks for, which retrieval looks for first, the most specific
+    /// first: the families it names ([`Family::all_named_in`]) other than walks and turns.
+    pub fn skills(&self) -> &[Family] {
+        &self.skills
     }
 
     /// The actions the prompt names ([`named_actions`]).
     pub fn actions(&self) -> &[Action] {
         &self.actions
+    }
+
+    /// Whether a candidate whose measured description is `measured` turns half round or more
+    /// ([`UNASKED_TURN_DEG`]) while the prompt asks for no turn: a take that wheels ("jumps
+    /// forward and turns left by about 225 degrees") does a skill, but not the one "jumps
+    /// forward" asks for. Retrieval passes over such takes only among those that do the prompt's
+    /// skill ([`Self::skills`]); walks keep the paper's ranking, whose crops of long takes turn.
+    pub fn turns_unasked(&self, measured: &str) -> bool {
+        let asked = TURN_STEMS.iter().any(|t| self.words.iter().any(|w| w.starts_with(t)));
+        !asked && turn_deg(&words(measured)) >= UNASKED_TURN_DEG
     }
 
     /// The supplementary's keyword check: `false` when the measured description holds a
@@ -177,6 +211,11 @@ impl Heard {
         }
         true
     }
+}
+
+/// The turn a measured caption states ("turns left by about 225 degrees": 225), 0 for none.
+fn turn_deg(measured: &[String]) -> u32 {
+    measured.windows(3).find(|w| w[0] == "about" && w[2] == "degrees").and_then(|w| w[1].parse().ok()).unwrap_or(0)
 }
 
 fn words(text: &str) -> Vec<String> {
@@ -245,6 +284,29 @@ mod tests {
             "no window of the database crawls or sits"
         );
         assert_eq!(missing_actions_note([]), None);
+    }
+
+    #[test]
+    fn the_skills_sought_are_the_named_families_other_than_walks_and_turns() {
+        let skills = |prompt: &str| Heard::new(prompt, false).skills().to_vec();
+        assert_eq!(skills("a person walks to a chair and sits down"), [Family::SitDown]);
+        assert_eq!(skills("a person jumps forward onto a step"), [Family::Jump]);
+        assert_eq!(skills("a man runs forwards and jumps over an obstacle"), [Family::Jump, Family::Run]);
+        assert_eq!(skills("a person ducks under a barrier while walking forward"), [Family::Sneak]);
+        assert_eq!(skills("a person carries a box forward"), [Family::Carry]);
+        assert!(skills("a man walks forwards").is_empty());
+        assert!(skills("a person walks and turns left").is_empty());
+        assert!(skills("a person reaches up high with a hand again and again").is_empty());
+    }
+
+    #[test]
+    fn half_a_turn_that_the_prompt_does_not_ask_for_is_unasked() {
+        let wheel = "a person jumps forward and turns left by about 225 degrees";
+        assert!(Heard::new("a person jumps forward onto a step", false).turns_unasked(wheel));
+        assert!(!Heard::new("a person jumps forward and turns around", false).turns_unasked(wheel));
+        let quarter = "a person jumps forward and turns left by about 135 degrees";
+        assert!(!Heard::new("a person jumps forward", false).turns_unasked(quarter));
+        assert!(!Heard::new("a person jumps forward", false).turns_unasked("a person jumps forward"));
     }
 
     #[test]

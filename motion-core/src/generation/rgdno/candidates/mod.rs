@@ -43,6 +43,7 @@ use super::error::RetrievalError;
 use super::semantic::{named_actions, Described, Heard};
 use crate::corpus::caption::Action;
 use crate::corpus::caption::{captions, PHRASINGS};
+use crate::corpus::family::{Families, Family};
 use crate::corpus::{file as corpus_file, Corpus, Split};
 use crate::database::{mirror_label, DatabaseSource, MotionDatabase, Window};
 use crate::import::ImportWarning;
@@ -141,6 +142,10 @@ struct StoredWindow {
     frames: usize,
     /// What is said of it as recorded (0) and mirrored (1).
     texts: [WindowText; 2],
+    /// The skill families it is an example of as recorded (0) and mirrored (1): a corpus
+    /// window's by its measurement ([`Families::happening_in`]), a database sequence's by the family
+    /// its label names ([`Family::named_in`]).
+    families: [Families; 2],
 }
 
 #[derive(Debug, Clone)]
@@ -254,12 +259,14 @@ impl RetrievalDatabase {
                         measured,
                     }
                 };
+                let (poses, mirrored_tags) = (corpus.window_joints(w), w.tags.mirrored());
                 StoredWindow {
                     start: w.start,
                     frames: w.frames,
-                    texts: [
-                        text(w.captions.clone()),
-                        text(captions(&w.tags.mirrored(), &mirrored_description, number)),
+                    texts: [text(w.captions.clone()), text(captions(&mirrored_tags, &mirrored_description, number))],
+                    families: [
+                        Families::happening_in(poses, &w.tags, &clip.description),
+                        Families::happening_in(poses, &mirrored_tags, &mirrored_description),
                     ],
                 }
             });
@@ -282,10 +289,12 @@ impl RetrievalDatabase {
             let Some(features) = database.window_slice(&whole, 0, sequence.frames) else { continue };
             let features = Tensor::from_slice(features, (1, sequence.frames, FEATURE_DIM), &Device::Cpu)?;
             let joints = recover_from_ric(&features)?.flatten_all()?.to_vec1::<f32>()?;
+            let mirrored_label = mirror_label(&sequence.label);
             let window = StoredWindow {
                 start: 0,
                 frames: sequence.frames,
-                texts: [WindowText::label(&sequence.label), WindowText::label(&mirror_label(&sequence.label))],
+                texts: [WindowText::label(&sequence.label), WindowText::label(&mirrored_label)],
+                families: [&sequence.label, &mirrored_label].map(|label| Family::named_in(label).into_iter().collect()),
             };
             out.push(&sequence.source, joints, (sequence.mirrored, sequence.speed), [window]);
         }
@@ -447,6 +456,20 @@ impl RetrievalDatabase {
             }
         }
         best.0
+    }
+
+    /// Whether `crop` is an example of `family`: the window sharing the most frames with it is,
+    /// as recorded or mirrored.
+    pub(super) fn crop_does(&self, crop: &Crop, family: Family) -> bool {
+        self.windows
+            .get(self.describing_window(crop))
+            .is_some_and(|w| w.families[usize::from(crop.mirrored)].contains(family))
+    }
+
+    /// What `crop` measurably does: the measured description of the window sharing the most
+    /// frames with it, as recorded or mirrored.
+    pub(super) fn measured(&self, crop: &Crop) -> &str {
+        self.windows.get(self.describing_window(crop)).map_or("", |w| &w.texts[usize::from(crop.mirrored)].measured)
     }
 
     /// The sentence caption similarity reads for `crop`: that of the window sharing the most
