@@ -54,8 +54,9 @@ pub enum ScheduleArg {
     /// stopped improving and the cleaned motion's foot skate and peak acceleration are within
     /// 10 % of capture's walks or of the prior's own sample; RG-DNO's branches once each meets
     /// its group; the inversion and soft blend once their loss stalls. RG-DNO's mask candidates
-    /// are screened by a cheap sampler, the soft blend is skipped when the masks meet the
-    /// program, and the refinement when nothing is left to close. Unless set, the sampler takes
+    /// are scored in the order a cheap sampler ranks them until the masks meet the program
+    /// (the soft blend is then skipped), and the refinement is skipped when nothing is left to
+    /// close. Unless set, the sampler takes
     /// 5 DDIM steps and a sample that misses a constraint is tried once more.
     UntilMet,
 }

@@ -42,9 +42,9 @@ pub enum Schedule {
     /// - the inversion's polishes and RG-DNO's soft blend when their objective has stalled
     ///   (the inversion's joint polish also once the motion is within
     ///   [`INVERSION_TOLERANCE_M`]);
-    /// - RG-DNO's mask search screens its candidates with a cheap sampler and scores only the
-    ///   best few by eq. 13; the soft blend is skipped when the chosen binary masks meet the
-    ///   program;
+    /// - RG-DNO's mask search scores its candidates by eq. 13 in the order a cheap sampler
+    ///   ranks them and ends once every sample's best meets the program (then the soft blend
+    ///   is skipped too);
     /// - the kinematic refinement is skipped when the motion's geometric error is already zero.
     UntilMet,
 }

@@ -2,11 +2,15 @@
 //! every candidate sampled without gradients and scored by `F_C(G(z')) + R(G(z'), z')`; each
 //! sample keeps its best.
 //!
-//! With [`Schedule::UntilMet`] the candidates are screened first: every one is sampled by a
-//! cheap sampler ([`SCREEN_DDIM_STEPS`] unguided DDIM steps: a tenth of the denoiser passes of
-//! ten guided ones) and ranked by `F_C` alone, and only each sample's best [`SCREENED`] are
-//! scored as above. Two steps still rank the small case of this module's test as the full
-//! sampler does; one step does not.
+//! With [`Schedule::UntilMet`] the search is ordered and may end early: every candidate is
+//! first sampled by a cheap sampler ([`SCREEN_DDIM_STEPS`] unguided DDIM steps: a tenth of the
+//! denoiser passes of ten guided ones) and the candidates are put in the order of their best
+//! rank by `F_C` over the samples; they are then scored as above in that order, and the search
+//! ends once at least [`SCREENED`] are scored and every sample's best meets the whole program
+//! at its tolerance (then the soft blend is skipped too). Where no candidate meets it, every
+//! candidate is scored, as the paper does: the cheap sampler only orders, it never drops one.
+//! It used to drop all but each sample's best 16, which lost the masks that make the three
+//! touches touch (`fixtures/results/issue59-mask-order/`).
 
 use candle_core::Tensor;
 use rand::rngs::StdRng;
@@ -26,9 +30,9 @@ use crate::generation::schedule::Schedule;
 use crate::prior::Prior;
 use crate::representation::FEATURE_DIM;
 
-/// Candidates each sample keeps from the screening for the full sampler.
+/// Fewest candidates the until-met search scores before it may end on a met program.
 pub const SCREENED: usize = 16;
-/// DDIM steps of the screening sampler (unguided).
+/// DDIM steps of the sampler that orders the candidates (unguided).
 pub const SCREEN_DDIM_STEPS: usize = 2;
 
 /// The mask search of one restart: eq. 13's binary candidates, then the soft blend.
@@ -40,7 +44,7 @@ pub(super) struct MaskStages<'a, M: Denoiser + ?Sized> {
     pub(super) objective: Objective<'a>,
     pub(super) weights: &'a RewardWeights,
     pub(super) round: usize,
-    /// [`Schedule::UntilMet`] screens the candidates first.
+    /// [`Schedule::UntilMet`] orders the candidates first and ends once the program is met.
     pub(super) schedule: Schedule,
 }
 
@@ -83,18 +87,18 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let (rg, round) = (self.rg, self.round);
         let candidates: Vec<MaskCandidate> =
             MaskCandidate::all(rg.segments).into_iter().filter(|c| rg.mask_kinds.contains(&c.kind)).collect();
-        let candidates = match self.schedule {
-            Schedule::Paper => candidates,
-            Schedule::UntilMet => self.screen(&candidates, (z1, z2))?,
+        let (candidates, stop_when_met) = match self.schedule {
+            Schedule::Paper => (candidates, false),
+            Schedule::UntilMet => (self.ordered(&candidates, (z1, z2))?, true),
         };
-        self.choose(&candidates, (z1, z2), rng, &mut |done| {
+        self.choose(&candidates, (z1, z2), stop_when_met, rng, &mut |done| {
             progress(&StageProgress { stage: Stage::Masks, round, step: done, steps: candidates.len(), loss: 0.0 })
         })
     }
 
-    /// The candidates among the best [`SCREENED`] of some sample by `F_C` of the cheap sampler
-    /// (in their order in `candidates`).
-    fn screen(
+    /// Every candidate, in the order of its best rank over the samples by `F_C` of the cheap
+    /// sampler (equal ranks in their order in `candidates`).
+    fn ordered(
         &self,
         candidates: &[MaskCandidate],
         (z1, z2): (&Tensor, &Tensor),
@@ -118,15 +122,17 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
                 }
             }
         }
-        let mut keep = vec![false; candidates.len()];
+        let mut best_rank = vec![usize::MAX; candidates.len()];
         for sample in &scores {
             let mut order: Vec<usize> = (0..candidates.len()).collect();
             order.sort_by(|&a, &b| sample[a].total_cmp(&sample[b]));
-            for &k in order.iter().take(SCREENED) {
-                keep[k] = true;
+            for (rank, &k) in order.iter().enumerate() {
+                best_rank[k] = best_rank[k].min(rank);
             }
         }
-        Ok(candidates.iter().zip(keep).filter(|(_, k)| *k).map(|(c, _)| *c).collect())
+        let mut order: Vec<usize> = (0..candidates.len()).collect();
+        order.sort_by_key(|&k| best_rank[k]);
+        Ok(order.into_iter().map(|k| candidates[k]).collect())
     }
 
     /// `z' = M z1 + (1 − M) z2` of every candidate of `chunk`, candidate-major: row `k·B + b`
@@ -158,11 +164,14 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
     }
 
     /// Every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient, in batches of
-    /// `mask_batch` candidates) and scored by `F_C + R`; `done` gets the candidates done.
+    /// `mask_batch` candidates) and scored by `F_C + R`, in order; with `stop_when_met`, until
+    /// at least [`SCREENED`] are scored and every sample's best meets the program. `done` gets
+    /// the candidates done.
     fn choose(
         &self,
         candidates: &[MaskCandidate],
         (z1, z2): (&Tensor, &Tensor),
+        stop_when_met: bool,
         rng: &mut StdRng,
         done: &mut dyn FnMut(usize),
     ) -> Result<(Vec<ChosenMask>, Tensor), RgDnoError> {
@@ -173,6 +182,8 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         // keeps no activations for a backward pass.
         let (z1, z2) = (&z1.detach(), &z2.detach());
         let mut best: Vec<Option<(ChosenMask, f64)>> = vec![None; batch];
+        // Each sample's best motion so far `[T, 22, 3]`, kept while the search may end early.
+        let mut best_joints: Vec<Option<Tensor>> = vec![None; batch];
         for (chunk_index, chunk) in candidates.chunks(per_batch).enumerate() {
             // Rows ordered candidate-major: row k·B + b is candidate k on sample b.
             let z = self.blended(chunk, (z1, z2), frames)?;
@@ -187,10 +198,20 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
                     let total = c + r;
                     if total.is_finite() && best[b].as_ref().is_none_or(|(_, t)| total < *t) {
                         best[b] = Some((ChosenMask { candidate: *candidate, constraint_error: c, reward: r }, total));
+                        if stop_when_met {
+                            best_joints[b] = Some(joints.get(k * batch + b)?);
+                        }
                     }
                 }
             }
-            done(((chunk_index + 1) * per_batch).min(candidates.len()));
+            let scored = ((chunk_index + 1) * per_batch).min(candidates.len());
+            done(scored);
+            if stop_when_met && scored >= SCREENED && scored < candidates.len() {
+                let Some(motions) = best_joints.iter().cloned().collect::<Option<Vec<Tensor>>>() else { continue };
+                if self.objective.meets(&Tensor::stack(&motions, 0)?)? {
+                    break;
+                }
+            }
         }
         let chosen: Vec<ChosenMask> = best
             .into_iter()
@@ -215,19 +236,16 @@ mod tests {
     use crate::generation::rgdno::mask::MaskKind;
     use crate::program::TaskProgram;
 
-    /// On a small case (two samples, 32 temporal candidates, no reward so that the scores do not
-    /// depend on how much of the random stream each search draws), the screened search keeps
-    /// each sample's winner among its 16 and so chooses the full search's masks.
-    #[test]
-    fn the_screened_search_chooses_the_full_searchs_masks() {
+    /// Scores two samples' 32 temporal candidates (no reward, so that the scores do not depend
+    /// on how much of the random stream each search draws) under a program given by its one
+    /// constraint: the chosen masks and the candidates scored.
+    fn search(constraint: &str, schedule: Schedule) -> (Vec<MaskCandidate>, usize, bool) {
         let device = Device::Cpu;
         let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures");
         let prior = Prior::load(&fixtures.join("model/prior.safetensors"), &fixtures.join("text"), &device).unwrap();
-        let program = TaskProgram::from_json_validated(
-            r#"{"text": "a person walks forward", "frames": 40, "constraints": [{"id": "c1", "expr": {"op": "equal",
-            "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "z"}, "target": [1.5],
-            "frames": {"keyframes": ["last"]}}}]}"#,
-        )
+        let program = TaskProgram::from_json_validated(&format!(
+            r#"{{"text": "a person walks forward", "frames": 40, "constraints": [{{"id": "c1", "expr": {constraint}}}]}}"#
+        ))
         .unwrap();
         let compiled = CompiledProgram::compile(&program, &device).unwrap();
         let text = prior.encode_text(&[program.text.as_str(); 2], &device).unwrap();
@@ -238,25 +256,46 @@ mod tests {
         let x0 = solver.sampler.sample(solver.denoiser, &z1, &solver.text, solver.guidance).unwrap();
         let initial = prior.to_joints(&x0).unwrap();
         let rg = RgDnoConfig { segments: 5, mask_kinds: vec![MaskKind::Temporal], ..RgDnoConfig::default() };
-        let chosen = |schedule| {
-            let stages = MaskStages {
-                prior: &prior,
-                rg: &rg,
-                solver: &solver,
-                objective: Objective { compiled: &compiled, initial: &initial, guards: Guards::DEFAULT },
-                weights: &RewardWeights::NONE,
-                round: 0,
-                schedule,
-            };
-            let mut rng = StdRng::seed_from_u64(0);
-            let (masks, _) = stages.binary_masks(&z1, &z2, &mut rng, &mut |_| {}).unwrap();
-            let temporal: Vec<MaskCandidate> =
-                MaskCandidate::all(5).into_iter().filter(|c| c.kind == MaskKind::Temporal).collect();
-            let screened = stages.screen(&temporal, (&z1, &z2)).unwrap().len();
-            (masks.into_iter().map(|m| m.candidate).collect::<Vec<_>>(), temporal.len(), screened)
+        let stages = MaskStages {
+            prior: &prior,
+            rg: &rg,
+            solver: &solver,
+            objective: Objective { compiled: &compiled, initial: &initial, guards: Guards::DEFAULT },
+            weights: &RewardWeights::NONE,
+            round: 0,
+            schedule,
         };
-        let (full, all, screened) = chosen(Schedule::Paper);
-        assert!(all == 32 && (SCREENED..all).contains(&screened), "the screen keeps {screened} of {all}");
-        assert_eq!(chosen(Schedule::UntilMet).0, full);
+        let mut rng = StdRng::seed_from_u64(0);
+        let mut scored = 0;
+        let (masks, best) = stages
+            .binary_masks(&z1, &z2, &mut rng, &mut |p: &StageProgress| {
+                assert_eq!(p.steps, 32);
+                scored = p.step;
+            })
+            .unwrap();
+        let met = stages.masks_meet_the_program(&best, &z1, &z2).unwrap();
+        (masks.into_iter().map(|m| m.candidate).collect(), scored, met)
+    }
+
+    /// Where no candidate meets the program, the ordered search scores every candidate and
+    /// chooses the full search's masks.
+    #[test]
+    fn the_ordered_search_chooses_the_full_searchs_masks_when_nothing_meets() {
+        let far = r#"{"op": "equal", "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "z"},
+            "target": [50.0], "frames": {"keyframes": ["last"]}}"#;
+        let (full, scored, met) = search(far, Schedule::Paper);
+        assert_eq!((scored, met), (32, false));
+        assert_eq!(search(far, Schedule::UntilMet), (full, 32, false));
+    }
+
+    /// Where every candidate meets the program, the ordered search ends after the fewest it
+    /// scores, on masks that meet it; the paper's search scores all.
+    #[test]
+    fn the_ordered_search_ends_once_every_sample_meets_the_program() {
+        let standing = r#"{"op": "greater_than", "quantity": {"kind": "position", "of": {"joint": "pelvis"},
+            "axes": "y"}, "min": 0.1, "frames": {"keyframes": ["first"]}}"#;
+        let (_, scored, met) = search(standing, Schedule::UntilMet);
+        assert_eq!((scored, met), (SCREENED, true));
+        assert_eq!(search(standing, Schedule::Paper).1, 32);
     }
 }
