@@ -75,7 +75,9 @@ enum Command {
     /// viewer page).
     Run(commands::run::RunArgs),
     /// RG-DNO's constraint-based retrieval for a program: the crops of the retrieval database
-    /// (by default the corpus's train split) that best satisfy its retrieval set C_R.
+    /// (by default the corpus's train split) that best satisfy its retrieval set C_R; when the
+    /// prompt names a skill other than walking (a crawl, a sit, a jump, ...), only the crops
+    /// that do it, if any do.
     Retrieve(commands::retrieve::RetrieveArgs),
     /// Motions already made (an output folder or a joints.npy) to BVH, GLB (skinned figure and
     /// the task's scene) and the self-contained 3-D viewer page.
