@@ -226,6 +226,11 @@ impl Family {
         in_a_sitting_take || self.holds(poses, tags, description)
     }
 
+    /// The family's bit in [`Families`]: its place in [`Family::ALL`].
+    fn bit(self) -> u16 {
+        1 << self as u16
+    }
+
     /// What the detector checks, for the report; `None` where there is none.
     pub fn detector(self) -> Option<&'static str> {
         Some(match self {
@@ -289,13 +294,6 @@ impl Families {
 impl FromIterator<Family> for Families {
     fn from_iter<I: IntoIterator<Item = Family>>(families: I) -> Self {
         Families(families.into_iter().fold(0, |bits, f| bits | f.bit()))
-    }
-}
-
-impl Family {
-    /// The family's bit in [`Families`]: its place in [`Family::ALL`].
-    fn bit(self) -> u16 {
-        1 << self as u16
     }
 }
 

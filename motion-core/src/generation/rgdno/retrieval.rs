@@ -160,9 +160,11 @@ pub fn retrieve(
     let windows = database.consistent_windows(&heard);
     let kept: Vec<Crop> = crops.iter().filter(|c| database.crop_is_consistent(c, &windows)).copied().collect();
     let missing_actions = heard.actions().iter().copied().filter(|a| !database.actions_done().contains(a)).collect();
-    let does_a_skill = |c: &Crop| heard.skills().iter().any(|&f| database.crop_does(c, f));
-    let skilled: Vec<Crop> =
-        kept.iter().filter(|c| does_a_skill(c) && !heard.turns_unasked(database.measured(c))).copied().collect();
+    let does_a_skill = |c: &Crop| {
+        let (families, turn_deg) = database.crop_skills(c);
+        heard.skills().iter().any(|&f| families.contains(f)) && !heard.turns_unasked(turn_deg)
+    };
+    let skilled: Vec<Crop> = kept.iter().filter(|c| does_a_skill(c)).copied().collect();
     let skills = (!heard.skills().is_empty()).then(|| SoughtSkills {
         families: heard.skills().iter().map(|f| f.name().to_owned()).collect(),
         candidates: skilled.len(),

@@ -115,8 +115,9 @@ pub fn accepts(named: Action, measured: Action) -> bool {
 const TURN_STEMS: [&str; 7] = ["turn", "around", "spin", "rotat", "circl", "twirl", "pivot"];
 
 /// The smallest turn, in degrees, of a window that does a skill the prompt asks for but that
-/// retrieval passes over when the prompt names no turn ([`Heard::turns_unasked`]).
-pub const UNASKED_TURN_DEG: u32 = 180;
+/// retrieval passes over when the prompt names no turn ([`Heard::turns_unasked`]): half round
+/// to the nearest 45°, as the measured captions state turns ("by about 180 degrees").
+pub const UNASKED_TURN_DEG: f64 = 157.5;
 
 /// Action verbs the semantic check of a counting task looks for, by stem.
 const ACTION_VERBS: [&str; 12] =
@@ -170,14 +171,15 @@ impl Heard {
         &self.actions
     }
 
-    /// Whether a candidate whose measured description is `measured` turns half round or more
-    /// ([`UNASKED_TURN_DEG`]) while the prompt asks for no turn: a take that wheels ("jumps
-    /// forward and turns left by about 225 degrees") does a skill, but not the one "jumps
-    /// forward" asks for. Retrieval passes over such takes only among those that do the prompt's
-    /// skill ([`Self::skills`]); walks keep the paper's ranking, whose crops of long takes turn.
-    pub fn turns_unasked(&self, measured: &str) -> bool {
+    /// Whether a candidate that turns `turn_deg` degrees (either way, as measured) turns half
+    /// round or more ([`UNASKED_TURN_DEG`]) while the prompt asks for no turn: a take that
+    /// wheels ("jumps forward and turns left by about 225 degrees") does a skill, but not the one
+    /// "jumps forward" asks for. Retrieval passes over such takes only among those that do the
+    /// prompt's skill ([`Self::skills`]); walks keep the paper's ranking, whose crops of long
+    /// takes turn.
+    pub fn turns_unasked(&self, turn_deg: f64) -> bool {
         let asked = TURN_STEMS.iter().any(|t| self.words.iter().any(|w| w.starts_with(t)));
-        !asked && turn_deg(&words(measured)) >= UNASKED_TURN_DEG
+        !asked && turn_deg.abs() >= UNASKED_TURN_DEG
     }
 
     /// The supplementary's keyword check: `false` when the measured description holds a
@@ -211,11 +213,6 @@ impl Heard {
         }
         true
     }
-}
-
-/// The turn a measured caption states ("turns left by about 225 degrees": 225), 0 for none.
-fn turn_deg(measured: &[String]) -> u32 {
-    measured.windows(3).find(|w| w[0] == "about" && w[2] == "degrees").and_then(|w| w[1].parse().ok()).unwrap_or(0)
 }
 
 fn words(text: &str) -> Vec<String> {
@@ -301,12 +298,12 @@ mod tests {
 
     #[test]
     fn half_a_turn_that_the_prompt_does_not_ask_for_is_unasked() {
-        let wheel = "a person jumps forward and turns left by about 225 degrees";
+        // "jumps forward and turns left by about 225 degrees", "… 135 degrees", no turn.
+        let (wheel, quarter) = (225.0, 135.0);
         assert!(Heard::new("a person jumps forward onto a step", false).turns_unasked(wheel));
         assert!(!Heard::new("a person jumps forward and turns around", false).turns_unasked(wheel));
-        let quarter = "a person jumps forward and turns left by about 135 degrees";
         assert!(!Heard::new("a person jumps forward", false).turns_unasked(quarter));
-        assert!(!Heard::new("a person jumps forward", false).turns_unasked("a person jumps forward"));
+        assert!(!Heard::new("a person jumps forward", false).turns_unasked(0.0));
     }
 
     #[test]

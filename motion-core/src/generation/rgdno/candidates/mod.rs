@@ -146,6 +146,9 @@ struct StoredWindow {
     /// window's by its measurement ([`Families::happening_in`]), a database sequence's by the family
     /// its label names ([`Family::named_in`]).
     families: [Families; 2],
+    /// How far it turns, either way, degrees (`|MotionTags::turn_deg|`; 0 for a database
+    /// sequence, whose label measures nothing).
+    turn_deg: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -268,6 +271,7 @@ impl RetrievalDatabase {
                         Families::happening_in(poses, &w.tags, &clip.description),
                         Families::happening_in(poses, &mirrored_tags, &mirrored_description),
                     ],
+                    turn_deg: w.tags.turn_deg.abs(),
                 }
             });
             database.push(
@@ -295,6 +299,7 @@ impl RetrievalDatabase {
                 frames: sequence.frames,
                 texts: [WindowText::label(&sequence.label), WindowText::label(&mirrored_label)],
                 families: [&sequence.label, &mirrored_label].map(|label| Family::named_in(label).into_iter().collect()),
+                turn_deg: 0.0,
             };
             out.push(&sequence.source, joints, (sequence.mirrored, sequence.speed), [window]);
         }
@@ -458,18 +463,12 @@ impl RetrievalDatabase {
         best.0
     }
 
-    /// Whether `crop` is an example of `family`: the window sharing the most frames with it is,
-    /// as recorded or mirrored.
-    pub(super) fn crop_does(&self, crop: &Crop, family: Family) -> bool {
+    /// What `crop` does by measurement: the skill families of the window sharing the most frames
+    /// with it, as recorded or mirrored, and how far that window turns (degrees, either way).
+    pub(super) fn crop_skills(&self, crop: &Crop) -> (Families, f64) {
         self.windows
             .get(self.describing_window(crop))
-            .is_some_and(|w| w.families[usize::from(crop.mirrored)].contains(family))
-    }
-
-    /// What `crop` measurably does: the measured description of the window sharing the most
-    /// frames with it, as recorded or mirrored.
-    pub(super) fn measured(&self, crop: &Crop) -> &str {
-        self.windows.get(self.describing_window(crop)).map_or("", |w| &w.texts[usize::from(crop.mirrored)].measured)
+            .map_or((Families::default(), 0.0), |w| (w.families[usize::from(crop.mirrored)], w.turn_deg))
     }
 
     /// The sentence caption similarity reads for `crop`: that of the window sharing the most
