@@ -559,11 +559,12 @@ fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoRepor
         };
         writeln!(
             f,
-            "  sample {i}: {:?} mask {:0w$b}, F_C {:.4}, reward {:.4}{restart}",
+            "  sample {i}: {:?} mask {:0w$b}, F_C {:.4}, reward {:.4}, place {} in the scoring order{restart}",
             m.candidate.kind,
             m.candidate.bits,
             m.constraint_error,
             m.reward,
+            m.place + 1,
             w = m.candidate.segments
         )?;
     }

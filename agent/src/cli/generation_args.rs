@@ -155,7 +155,7 @@ pub struct GenerationArgs {
     #[arg(long, value_name = "FILE")]
     pub database: Option<PathBuf>,
     /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
-    /// first_lr, segments, mask_kinds, mask_batch, reward, final_steps, final_lr, ablation,
+    /// first_lr, segments, mask_kinds, mask_batch, mask_patience, reward, final_steps, final_lr, ablation,
     /// retrieved_motions, skip_retrieved; missing fields keep the paper's defaults), e.g.
     /// '{"retrieval": {"related_weight": 0.01}}', '{"retrieved_motions": 2}' (start from the best
     /// crops of two takes in turn, each sample keeping its better attempt),
@@ -218,7 +218,7 @@ impl GenerationArgs {
         if let Some(scale) = self.decorrelate_scale {
             config.dno.decorrelate_scale = scale;
         }
-        config.dno.ddim_steps = self.ddim_steps.unwrap_or(config.schedule.ddim_steps());
+        config.dno.ddim_steps = self.ddim_steps.unwrap_or(config.schedule.ddim_steps(method));
         if let Some(steps) = self.steps {
             config.dno.steps = steps;
             config.direct.steps = steps;

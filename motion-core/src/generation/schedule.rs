@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::constraints::CompiledProgram;
 use crate::dno::{DnoConfig, DnoStep};
+use crate::generation::method::Method;
 use crate::metrics::{foot_skate_ratio, max_acceleration};
 use crate::motion::tensor_to_poses;
 use crate::numeric::mean;
@@ -44,20 +45,23 @@ pub enum Schedule {
     ///   [`INVERSION_TOLERANCE_M`]);
     /// - RG-DNO's mask search scores its candidates by eq. 13 in the order a cheap sampler
     ///   ranks them and ends once every sample's best meets the program (then the soft blend
-    ///   is skipped too);
+    ///   is skipped too) or no sample's best has changed over the last
+    ///   [`crate::generation::rgdno::config::RgDnoConfig::mask_patience`] candidates;
     /// - the kinematic refinement is skipped when the motion's geometric error is already zero.
     UntilMet,
 }
 
 impl Schedule {
-    /// DDIM steps `K` of the sampler DNO differentiates through, where a run does not set them:
-    /// the papers' 10, or 5 under [`Schedule::UntilMet`], half the denoiser passes of every
-    /// step (what it costs on Table 6 and the README's main command:
-    /// `fixtures/results/issue59-fast-default/`).
-    pub fn ddim_steps(self) -> usize {
-        match self {
-            Schedule::Paper => DnoConfig::default().ddim_steps,
-            Schedule::UntilMet => 5,
+    /// DDIM steps `K` of the sampler DNO differentiates through, where a run of `method` does
+    /// not set them: the papers' 10, or 5 for DNO under [`Schedule::UntilMet`], half the
+    /// denoiser passes of every step. RG-DNO keeps 10 under it: at 5 its inversion and mask
+    /// choice on the README's main command gave a motion that skates 0.111 against 0.081 (0.020
+    /// at 10), while DNO's motions keep their look at 5
+    /// (`fixtures/results/issue59-fast-default/`, `fixtures/results/issue59-patience/`).
+    pub fn ddim_steps(self, method: Method) -> usize {
+        match (self, method) {
+            (Schedule::UntilMet, method) if method != Method::RgDno => 5,
+            _ => DnoConfig::default().ddim_steps,
         }
     }
 

@@ -83,6 +83,11 @@ pub struct RgDnoConfig {
     pub mask_kinds: Vec<MaskKind>,
     /// Mask candidates sampled per batch, per sample (default 16).
     pub mask_batch: usize,
+    /// Under [`crate::generation::Schedule::UntilMet`], the mask search also ends once no
+    /// sample's best candidate has changed over this many candidates scored in its order
+    /// (default 64; 0: it ends only when the program is met, or after every candidate). The
+    /// paper's search scores every candidate.
+    pub mask_patience: usize,
     /// The reward weights λ of eq. 14.
     pub reward: RewardWeights,
     /// DNO steps `N2` of the final round (default 400).
@@ -157,6 +162,7 @@ impl Default for RgDnoConfig {
             segments: 8,
             mask_kinds: vec![MaskKind::Temporal, MaskKind::Spatial],
             mask_batch: 16,
+            mask_patience: 64,
             reward: RewardWeights::default(),
             final_steps: 400,
             final_lr: 0.02,

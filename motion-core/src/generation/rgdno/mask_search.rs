@@ -7,8 +7,10 @@
 //! denoiser passes of ten guided ones) and the candidates are put in the order of their best
 //! rank by `F_C` over the samples; they are then scored as above in that order, and the search
 //! ends once at least [`SCREENED`] are scored and every sample's best meets the whole program
-//! at its tolerance (then the soft blend is skipped too). Where no candidate meets it, every
-//! candidate is scored, as the paper does: the cheap sampler only orders, it never drops one.
+//! at its tolerance (then the soft blend is skipped too), or once no sample's best has changed
+//! over the last [`RgDnoConfig::mask_patience`] candidates: the order puts the likely winners
+//! first, so a long run without a change means the rest are unlikely to win. The cheap sampler
+//! only orders; a candidate is passed over only by that patience.
 //! It used to drop all but each sample's best 16, which lost the masks that make the three
 //! touches touch (`fixtures/results/issue59-mask-order/`).
 
@@ -48,6 +50,18 @@ pub(super) struct MaskStages<'a, M: Denoiser + ?Sized> {
     pub(super) schedule: Schedule,
 }
 
+/// Each sample's chosen binary mask.
+pub(super) struct MaskChoice {
+    /// Each sample's best candidate.
+    pub(super) masks: Vec<ChosenMask>,
+    /// The candidates' masks `[B, T, 263]`.
+    pub(super) tensor: Tensor,
+    /// Whether every sample's motion from its chosen mask meets every constraint of the
+    /// program at its tolerance, as the until-met search judged it (always false in the
+    /// paper's search, which never skips the soft blend).
+    pub(super) met: bool,
+}
+
 /// The program objective's parts ([`crate::generation::objective::program_objective`]): the compiled
 /// program, the initial joints `[B or 1, T, 22, 3]` and the guards.
 #[derive(Clone, Copy)]
@@ -83,7 +97,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         z2: &Tensor,
         rng: &mut StdRng,
         progress: &mut dyn FnMut(&StageProgress),
-    ) -> Result<(Vec<ChosenMask>, Tensor), RgDnoError> {
+    ) -> Result<MaskChoice, RgDnoError> {
         let (rg, round) = (self.rg, self.round);
         let candidates: Vec<MaskCandidate> =
             MaskCandidate::all(rg.segments).into_iter().filter(|c| rg.mask_kinds.contains(&c.kind)).collect();
@@ -150,22 +164,10 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         Tensor::cat(&masks.iter().map(|m| blend(m, z1, z2)).collect::<candle_core::Result<Vec<_>>>()?, 0)
     }
 
-    /// Whether every sample's motion from the chosen masks `[B, T, 263]` meets every constraint
-    /// of the program at its tolerance (then the soft blend has nothing to add).
-    pub(super) fn masks_meet_the_program(
-        &self,
-        best_masks: &Tensor,
-        z1: &Tensor,
-        z2: &Tensor,
-    ) -> Result<bool, RgDnoError> {
-        let z = blend(best_masks, &z1.detach(), &z2.detach())?;
-        let x = self.solver.sampler.sample(self.solver.denoiser, &z, &self.solver.text, self.solver.guidance)?;
-        Ok(self.objective.meets(&self.prior.to_joints(&x)?)?)
-    }
-
     /// Every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient, in batches of
     /// `mask_batch` candidates) and scored by `F_C + R`, in order; with `stop_when_met`, until
-    /// at least [`SCREENED`] are scored and every sample's best meets the program. `done` gets
+    /// at least [`SCREENED`] are scored and every sample's best meets the program, or no
+    /// sample's best has changed over [`RgDnoConfig::mask_patience`] candidates. `done` gets
     /// the candidates done.
     fn choose(
         &self,
@@ -174,7 +176,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         stop_when_met: bool,
         rng: &mut StdRng,
         done: &mut dyn FnMut(usize),
-    ) -> Result<(Vec<ChosenMask>, Tensor), RgDnoError> {
+    ) -> Result<MaskChoice, RgDnoError> {
         let per_batch = self.rg.mask_batch.max(1);
         let (batch, frames, _) = z1.dims3()?;
         let device = z1.device();
@@ -184,6 +186,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let mut best: Vec<Option<(ChosenMask, f64)>> = vec![None; batch];
         // Each sample's best motion so far `[T, 22, 3]`, kept while the search may end early.
         let mut best_joints: Vec<Option<Tensor>> = vec![None; batch];
+        let mut met = false;
         for (chunk_index, chunk) in candidates.chunks(per_batch).enumerate() {
             // Rows ordered candidate-major: row k·B + b is candidate k on sample b.
             let z = self.blended(chunk, (z1, z2), frames)?;
@@ -197,7 +200,9 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
                     let (c, r) = (constraint[k * batch + b], terms[k * batch + b]);
                     let total = c + r;
                     if total.is_finite() && best[b].as_ref().is_none_or(|(_, t)| total < *t) {
-                        best[b] = Some((ChosenMask { candidate: *candidate, constraint_error: c, reward: r }, total));
+                        let place = chunk_index * per_batch + k;
+                        best[b] =
+                            Some((ChosenMask { candidate: *candidate, constraint_error: c, reward: r, place }, total));
                         if stop_when_met {
                             best_joints[b] = Some(joints.get(k * batch + b)?);
                         }
@@ -206,9 +211,12 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
             }
             let scored = ((chunk_index + 1) * per_batch).min(candidates.len());
             done(scored);
-            if stop_when_met && scored >= SCREENED && scored < candidates.len() {
+            if stop_when_met && (scored >= SCREENED || scored == candidates.len()) {
                 let Some(motions) = best_joints.iter().cloned().collect::<Option<Vec<Tensor>>>() else { continue };
-                if self.objective.meets(&Tensor::stack(&motions, 0)?)? {
+                met = self.objective.meets(&Tensor::stack(&motions, 0)?)?;
+                let last_change = best.iter().flatten().map(|(m, _)| m.place + 1).max().unwrap_or(0);
+                let patience = self.rg.mask_patience;
+                if met || (patience > 0 && scored - last_change >= patience) {
                     break;
                 }
             }
@@ -222,7 +230,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
             .iter()
             .map(|m| m.candidate.tensor(frames, device)?.broadcast_as((1, frames, FEATURE_DIM))?.contiguous())
             .collect::<candle_core::Result<Vec<_>>>()?;
-        Ok((chosen, Tensor::cat(&tensors, 0)?.to_dtype(z1.dtype())?))
+        Ok(MaskChoice { masks: chosen, tensor: Tensor::cat(&tensors, 0)?.to_dtype(z1.dtype())?, met })
     }
 }
 
@@ -237,9 +245,10 @@ mod tests {
     use crate::program::TaskProgram;
 
     /// Scores two samples' 32 temporal candidates (no reward, so that the scores do not depend
-    /// on how much of the random stream each search draws) under a program given by its one
-    /// constraint: the chosen masks and the candidates scored.
-    fn search(constraint: &str, schedule: Schedule) -> (Vec<MaskCandidate>, usize, bool) {
+    /// on how much of the random stream each search draws) in batches of `mask_batch` under a
+    /// program given by its one constraint: the chosen masks, the candidates scored and
+    /// whether the search judged the program met.
+    fn search(constraint: &str, schedule: Schedule, rg: RgDnoConfig) -> (Vec<ChosenMask>, usize, bool) {
         let device = Device::Cpu;
         let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures");
         let prior = Prior::load(&fixtures.join("model/prior.safetensors"), &fixtures.join("text"), &device).unwrap();
@@ -255,7 +264,7 @@ mod tests {
         let z2 = gaussian((2, 40, FEATURE_DIM), 2, &device).unwrap();
         let x0 = solver.sampler.sample(solver.denoiser, &z1, &solver.text, solver.guidance).unwrap();
         let initial = prior.to_joints(&x0).unwrap();
-        let rg = RgDnoConfig { segments: 5, mask_kinds: vec![MaskKind::Temporal], ..RgDnoConfig::default() };
+        let rg = RgDnoConfig { segments: 5, mask_kinds: vec![MaskKind::Temporal], ..rg };
         let stages = MaskStages {
             prior: &prior,
             rg: &rg,
@@ -267,25 +276,49 @@ mod tests {
         };
         let mut rng = StdRng::seed_from_u64(0);
         let mut scored = 0;
-        let (masks, best) = stages
+        let choice = stages
             .binary_masks(&z1, &z2, &mut rng, &mut |p: &StageProgress| {
                 assert_eq!(p.steps, 32);
                 scored = p.step;
             })
             .unwrap();
-        let met = stages.masks_meet_the_program(&best, &z1, &z2).unwrap();
-        (masks.into_iter().map(|m| m.candidate).collect(), scored, met)
+        (choice.masks, scored, choice.met)
     }
+
+    fn candidates(masks: &[ChosenMask]) -> Vec<MaskCandidate> {
+        masks.iter().map(|m| m.candidate).collect()
+    }
+
+    const FAR: &str = r#"{"op": "equal", "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "z"},
+        "target": [50.0], "frames": {"keyframes": ["last"]}}"#;
 
     /// Where no candidate meets the program, the ordered search scores every candidate and
     /// chooses the full search's masks.
     #[test]
     fn the_ordered_search_chooses_the_full_searchs_masks_when_nothing_meets() {
-        let far = r#"{"op": "equal", "quantity": {"kind": "position", "of": {"joint": "pelvis"}, "axes": "z"},
-            "target": [50.0], "frames": {"keyframes": ["last"]}}"#;
-        let (full, scored, met) = search(far, Schedule::Paper);
+        let (full, scored, met) = search(FAR, Schedule::Paper, RgDnoConfig::default());
         assert_eq!((scored, met), (32, false));
-        assert_eq!(search(far, Schedule::UntilMet), (full, 32, false));
+        let (ordered, scored, met) = search(FAR, Schedule::UntilMet, RgDnoConfig::default());
+        assert_eq!((candidates(&ordered), scored, met), (candidates(&full), 32, false));
+    }
+
+    /// With a patience, the ordered search on a program nothing meets ends once no sample's best
+    /// has changed over that many candidates, before the last, on the masks the search with no
+    /// patience keeps wherever those were scored by then.
+    #[test]
+    fn the_patient_search_ends_once_no_sample_s_best_has_changed() {
+        let patient = RgDnoConfig { mask_batch: 2, mask_patience: 6, ..RgDnoConfig::default() };
+        let (kept, scored, met) = search(FAR, Schedule::UntilMet, patient);
+        let last_change = kept.iter().map(|m| m.place + 1).max().unwrap();
+        assert!(!met && scored < 32, "scored {scored} of 32");
+        let waited = scored - last_change;
+        assert!(waited >= 6 && (waited < 8 || scored == SCREENED), "last change {last_change}, scored {scored}");
+        let (all, _, _) = search(FAR, Schedule::UntilMet, RgDnoConfig { mask_batch: 2, ..RgDnoConfig::default() });
+        for (k, a) in kept.iter().zip(&all) {
+            if a.place < scored {
+                assert_eq!(k.candidate, a.candidate);
+            }
+        }
     }
 
     /// Where every candidate meets the program, the ordered search ends after the fewest it
@@ -294,8 +327,8 @@ mod tests {
     fn the_ordered_search_ends_once_every_sample_meets_the_program() {
         let standing = r#"{"op": "greater_than", "quantity": {"kind": "position", "of": {"joint": "pelvis"},
             "axes": "y"}, "min": 0.1, "frames": {"keyframes": ["first"]}}"#;
-        let (_, scored, met) = search(standing, Schedule::UntilMet);
+        let (_, scored, met) = search(standing, Schedule::UntilMet, RgDnoConfig::default());
         assert_eq!((scored, met), (SCREENED, true));
-        assert_eq!(search(standing, Schedule::Paper).1, 32);
+        assert_eq!(search(standing, Schedule::Paper, RgDnoConfig::default()).1, 32);
     }
 }

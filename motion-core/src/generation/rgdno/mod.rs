@@ -49,7 +49,6 @@ use crate::dno::{self, UnrolledDdim};
 use crate::generation::inversion::InversionConfig;
 use crate::generation::method::{Generated, GenerationConfig, GenerationError, Task};
 use crate::generation::postprocess::{finish, finishing_foot_lock, Unfinished};
-use crate::generation::schedule::Schedule;
 use crate::prior::Prior;
 use crate::program::TaskProgram;
 use crate::representation::FEATURE_DIM;
@@ -58,7 +57,7 @@ use candidates::RetrievalDatabase;
 use config::{Ablation, RgDnoConfig};
 use error::RgDnoError;
 use mask::blend;
-use mask_search::{MaskStages, Objective};
+use mask_search::{MaskChoice, MaskStages, Objective};
 use report::{ChosenMask, InvertedReport, RetrievedReport, RgDnoReport, StageProgress, StageSeconds, StageSteps};
 use retrieval::{retrieve, RetrievalQuery};
 use reward::RewardWeights;
@@ -291,13 +290,12 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
                 // One stream for the reward's random terms of both stages.
                 let mut rng = StdRng::seed_from_u64(seed ^ 0x0052_4744_4e4f);
                 let clock = Instant::now();
-                let (masks, best_masks) = stages.binary_masks(&z1, &z2, &mut rng, progress)?;
+                let MaskChoice { masks, tensor: best_masks, met } =
+                    stages.binary_masks(&z1, &z2, &mut rng, progress)?;
                 seconds.masks += clock.elapsed().as_secs_f64();
                 let clock = Instant::now();
                 // With the until-met schedule, masks whose motion meets the whole program skip
                 // the soft blend; its objective is then the chosen masks' F_C + R.
-                let met =
-                    config.schedule == Schedule::UntilMet && stages.masks_meet_the_program(&best_masks, &z1, &z2)?;
                 let (z_blend, objective) = if met {
                     let chosen = masks.iter().map(|m| m.constraint_error + m.reward).collect();
                     (blend(&best_masks, &z1, &z2)?, chosen)

@@ -46,6 +46,10 @@ pub struct ChosenMask {
     pub constraint_error: f64,
     /// `R` of its motion and noise.
     pub reward: f64,
+    /// Its place in the order the candidates were scored (0: first; the paper's search scores
+    /// them in [`MaskCandidate::all`]'s order, the until-met search in its cheap sampler's).
+    #[serde(default)]
+    pub place: usize,
 }
 
 /// Seconds per stage.
