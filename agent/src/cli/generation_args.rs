@@ -55,9 +55,10 @@ pub enum ScheduleArg {
     /// 10 % of capture's walks or of the prior's own sample; RG-DNO's branches once each meets
     /// its group; the inversion and soft blend once their loss stalls. RG-DNO's mask candidates
     /// are scored in the order a cheap sampler ranks them until the masks meet the program
-    /// (the soft blend is then skipped), and the refinement is skipped when nothing is left to
-    /// close. Unless set, the sampler takes
-    /// 5 DDIM steps and a sample that misses a constraint is tried once more.
+    /// (the soft blend is then skipped) or no sample's best has changed over 64 candidates, and
+    /// the refinement is skipped when nothing is left to close. Unless set, DNO samples with 5
+    /// DDIM steps (RG-DNO with 10) and a sample that misses a constraint is tried once more.
+    /// The default.
     UntilMet,
 }
 
@@ -86,26 +87,25 @@ pub struct GenerationArgs {
     /// Random restarts N_S of DNO and RG-DNO; the best per sample is kept.
     #[arg(long, default_value_t = 1, value_parser = flags::steps)]
     pub restarts: usize,
-    /// When each optimisation stage ends: `paper` (the default) runs every step of the papers'
-    /// budgets with 10 DDIM steps and no retry (their tables' schedule); `until-met` ends each
-    /// stage once its work is done and the motion looks no worse than capture or the prior's
-    /// own sample, samples with 5 DDIM steps and tries a sample that missed a constraint once
-    /// more: 2 to 8 times faster, but on Table 6 it met none of the three touches, and the
-    /// README's main command skates more (fixtures/results/issue59-fast-default/).
-    #[arg(long, value_enum, default_value_t = ScheduleArg::Paper)]
+    /// When each optimisation stage ends: `until-met` (the default) ends each stage once its work
+    /// is done and the motion looks no worse than capture or the prior's own sample, samples
+    /// DNO with 5 DDIM steps (RG-DNO keeps 10) and tries a sample that missed a constraint once
+    /// more; `paper` runs every step of the papers' budgets with 10 DDIM steps and no retry
+    /// (their tables' schedule; fixtures/results/issue59-patience/).
+    #[arg(long, value_enum, default_value_t = ScheduleArg::UntilMet)]
     pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
     /// again from fresh noise (attempt k + 1 from seed + k·restarts; with RG-DNO, from the next
     /// retrieved takes) and keeps its best attempt (most constraints met, then the lowest
-    /// error); report.json's `attempt` says which. 0: off (default: 0, or 1 with `--schedule
-    /// until-met`).
+    /// error); report.json's `attempt` says which. 0: off (default: 1, or 0 with `--schedule
+    /// paper`).
     #[arg(long)]
     pub retry_unmet: Option<usize>,
     /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).
     #[arg(long, value_parser = flags::learning_rate)]
     pub lr: Option<f64>,
-    /// DDIM steps of the sampler that DNO differentiates through (default: 10, or 5 with
-    /// `--schedule until-met`).
+    /// DDIM steps of the sampler that DNO differentiates through (default: 10, or 5 for DNO
+    /// and the baselines under `--schedule until-met`, the default).
     #[arg(long, value_parser = flags::ddim_steps)]
     pub ddim_steps: Option<usize>,
     /// Late start of DNO: optimise the noise of the unconstrained motion noised to this
@@ -218,7 +218,7 @@ impl GenerationArgs {
         if let Some(scale) = self.decorrelate_scale {
             config.dno.decorrelate_scale = scale;
         }
-        config.dno.ddim_steps = self.ddim_steps.unwrap_or(config.schedule.ddim_steps(method));
+        config.dno.ddim_steps = self.ddim_steps.unwrap_or(method.ddim_steps(config.schedule));
         if let Some(steps) = self.steps {
             config.dno.steps = steps;
             config.direct.steps = steps;

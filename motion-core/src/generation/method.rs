@@ -39,6 +39,19 @@ impl Method {
     /// Every method, baselines first.
     pub const ALL: [Method; 5] = [Method::Unconstrained, Method::Ik, Method::IkReg, Method::Dno, Method::RgDno];
 
+    /// DDIM steps `K` of the sampler DNO differentiates through, where a run of this method
+    /// under `schedule` does not set them: the papers' 10, or 5 under [`Schedule::UntilMet`]
+    /// for every method but RG-DNO, half the denoiser passes of every step. RG-DNO keeps 10
+    /// under it: at 5 its inversion and mask choice on the README's main command gave a motion
+    /// that skates 0.111 against 0.081 (0.020 at 10), while DNO's motions keep their look at 5
+    /// (`fixtures/results/issue59-fast-default/`, `fixtures/results/issue59-patience/`).
+    pub fn ddim_steps(self, schedule: Schedule) -> usize {
+        match (schedule, self) {
+            (Schedule::UntilMet, method) if method != Method::RgDno => 5,
+            _ => DnoConfig::default().ddim_steps,
+        }
+    }
+
     /// The kebab-case name used in files and on the command line.
     pub fn name(self) -> &'static str {
         match self {

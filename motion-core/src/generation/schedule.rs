@@ -19,16 +19,16 @@ use serde::{Deserialize, Serialize};
 
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::constraints::CompiledProgram;
-use crate::dno::{DnoConfig, DnoStep};
-use crate::generation::method::Method;
+use crate::dno::DnoStep;
 use crate::metrics::{foot_skate_ratio, max_acceleration};
 use crate::motion::tensor_to_poses;
 use crate::numeric::mean;
 use crate::prior::Prior;
 
 /// When a stage of DNO ends, and the sampler and retries a run gets where it does not set them
-/// ([`Schedule::ddim_steps`], [`Schedule::retries_unmet`]). The papers' schedule is the
-/// default, the library's and `mogen`'s.
+/// ([`crate::generation::method::Method::ddim_steps`], [`Schedule::retries_unmet`]). The papers' schedule is the
+/// library's default, which its tests and tables reproduce; `mogen`'s command line runs
+/// [`Schedule::UntilMet`] unless told `--schedule paper`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Schedule {
@@ -52,19 +52,6 @@ pub enum Schedule {
 }
 
 impl Schedule {
-    /// DDIM steps `K` of the sampler DNO differentiates through, where a run of `method` does
-    /// not set them: the papers' 10, or 5 for DNO under [`Schedule::UntilMet`], half the
-    /// denoiser passes of every step. RG-DNO keeps 10 under it: at 5 its inversion and mask
-    /// choice on the README's main command gave a motion that skates 0.111 against 0.081 (0.020
-    /// at 10), while DNO's motions keep their look at 5
-    /// (`fixtures/results/issue59-fast-default/`, `fixtures/results/issue59-patience/`).
-    pub fn ddim_steps(self, method: Method) -> usize {
-        match (self, method) {
-            (Schedule::UntilMet, method) if method != Method::RgDno => 5,
-            _ => DnoConfig::default().ddim_steps,
-        }
-    }
-
     /// Extra attempts from fresh noise for a sample that misses a constraint, where a run does
     /// not set them ([`crate::pipeline::TaskSettings::retry_unmet`]): none under the papers'
     /// schedule; one under [`Schedule::UntilMet`], which spends part of the time its early ends
