@@ -187,6 +187,8 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         // Each sample's best motion so far `[T, 22, 3]`, kept while the search may end early.
         let mut best_joints: Vec<Option<Tensor>> = vec![None; batch];
         let mut met = false;
+        // Whether a best changed since `met` was last judged (the judgement stands otherwise).
+        let mut unjudged = false;
         for (chunk_index, chunk) in candidates.chunks(per_batch).enumerate() {
             // Rows ordered candidate-major: row k·B + b is candidate k on sample b.
             let z = self.blended(chunk, (z1, z2), frames)?;
@@ -205,6 +207,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
                             Some((ChosenMask { candidate: *candidate, constraint_error: c, reward: r, place }, total));
                         if stop_when_met {
                             best_joints[b] = Some(joints.get(k * batch + b)?);
+                            unjudged = true;
                         }
                     }
                 }
@@ -213,7 +216,10 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
             done(scored);
             if stop_when_met && (scored >= SCREENED || scored == candidates.len()) {
                 let Some(motions) = best_joints.iter().cloned().collect::<Option<Vec<Tensor>>>() else { continue };
-                met = self.objective.meets(&Tensor::stack(&motions, 0)?)?;
+                if unjudged {
+                    met = self.objective.meets(&Tensor::stack(&motions, 0)?)?;
+                    unjudged = false;
+                }
                 let last_change = best.iter().flatten().map(|(m, _)| m.place + 1).max().unwrap_or(0);
                 let patience = self.rg.mask_patience;
                 if met || (patience > 0 && scored - last_change >= patience) {
