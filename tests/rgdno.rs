@@ -223,3 +223,54 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
         assert!(err.contains(field), "{err}");
     }
 }
+
+/// Under the until-met schedule the stages before the final round sample through every other
+/// DDIM timestep; on a program no motion meets, the final round runs its whole budget, first on
+/// that sampler and then on the whole one, its steps and curve counted over both.
+#[test]
+fn the_until_met_final_round_spends_an_unmet_budget_over_both_samplers() {
+    let device = Device::Cpu;
+    let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &device).unwrap();
+    let text = std::fs::read_to_string(fixtures().join("tasks/rgdno_task2_low_barrier.json")).unwrap();
+    // Task-2 at 40 frames with its target 50 m ahead: no motion of 2 s meets it.
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["frames"] = 40.into();
+    for arg in 0..2 {
+        json["constraints"][1]["expr"]["args"][arg]["target"] = serde_json::json!([50.0]);
+    }
+    let program = TaskProgram::from_json_validated(&json.to_string()).unwrap();
+    let compiled = CompiledProgram::compile(&program, &device).unwrap();
+    let database = database();
+    let rg = RgDnoConfig {
+        first_steps: 2,
+        final_steps: 8,
+        segments: 2,
+        mask_kinds: vec![MaskKind::Temporal],
+        inversion: motion_core::generation::inversion::InversionConfig {
+            feature_polish_steps: 1,
+            polish_steps: 1,
+            fixed_point_iterations: 1,
+            ..Default::default()
+        },
+        ..RgDnoConfig::default()
+    };
+    assert_eq!(rg.early_stride, 2);
+    let mut config = GenerationConfig::new(Method::RgDno);
+    config.samples = 1;
+    config.schedule = motion_core::generation::schedule::Schedule::UntilMet;
+    let mut final_steps = Vec::new();
+    let task = RgDnoTask { program: &program, compiled: &compiled, database: &database };
+    use motion_core::generation::rgdno::report::Stage::{FinalRound, FinalRoundCoarse};
+    let (generated, report) = generate_rg_dno(&prior, task, &config, &rg, &device, |p| {
+        if [FinalRoundCoarse, FinalRound].contains(&p.stage) {
+            assert_eq!(p.steps, 8);
+            final_steps.push((p.stage, p.step));
+        }
+    })
+    .unwrap();
+    let expected: Vec<_> = (1..=8).map(|k| (if k <= 6 { FinalRoundCoarse } else { FinalRound }, k)).collect();
+    assert_eq!(final_steps, expected, "6 steps on every other timestep, the last quarter on all, one count");
+    assert_eq!((report.steps.final_round, report.steps.final_round_coarse), (8, 6));
+    assert_eq!(generated.loss_history[0].len(), 8);
+    assert!(!report.final_objective[0].is_nan() && report.final_objective[0] > 1.0, "{:?}", report.final_objective);
+}

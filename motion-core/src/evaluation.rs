@@ -576,9 +576,13 @@ fn rg_dno_lines(f: &mut fmt::Formatter<'_>, report: &TaskReport, rg: &RgDnoRepor
         s.retrieval, s.inversion, s.branches, s.masks, s.soft_blend, s.final_round
     )?;
     let n = &rg.steps;
+    let coarse = match n.final_round_coarse {
+        0 => String::new(),
+        k => format!(" ({k} on the coarse sampler)"),
+    };
     writeln!(
         f,
-        "  RG-DNO steps: inversion {}, branches {}, masks {} candidates, soft blend {}, final round {}",
+        "  RG-DNO steps: inversion {}, branches {}, masks {} candidates, soft blend {}, final round {}{coarse}",
         n.inversion, n.branches, n.masks, n.soft_blend, n.final_round
     )
 }

@@ -77,7 +77,13 @@ pub fn save(corpus: &Corpus, path: &Path) -> Result<(), FileError> {
 pub fn load(path: &Path) -> Result<Corpus, FileError> {
     let format = |message: String| FileError::format(path, message);
     let packed = read_bytes(path, &MOCAP_FILE_BYTES)?;
-    let mut bytes = Vec::new();
+    // gzip's trailer holds the unpacked size (mod 2^32): the buffer is made once, at that size,
+    // instead of growing by doubling (each growth a copy and fresh pages for the kernel to zero).
+    let unpacked = match packed.len().checked_sub(4).map(|at| &packed[at..]) {
+        Some(&[a, b, c, d]) => u32::from_le_bytes([a, b, c, d]) as usize,
+        _ => 0,
+    };
+    let mut bytes = Vec::with_capacity(unpacked.min(usize::try_from(MOCAP_FILE_BYTES.max).unwrap_or(usize::MAX)));
     flate2::read::GzDecoder::new(packed.as_slice())
         .take(MOCAP_FILE_BYTES.max)
         .read_to_end(&mut bytes)
@@ -102,7 +108,8 @@ pub fn load(path: &Path) -> Result<Corpus, FileError> {
             tensor.shape()
         )));
     }
-    let values: Vec<i16> = tensor.data().chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]])).collect();
+    let data = tensor.data();
+    let value = |i: usize| i16::from_le_bytes([data[2 * i], data[2 * i + 1]]);
     let mut joints = vec![[DVec3::ZERO; NUM_JOINTS]; frames];
     let mut offset = 0;
     for (i, clip) in header.clips.iter().enumerate() {
@@ -116,7 +123,7 @@ pub fn load(path: &Path) -> Result<Corpus, FileError> {
             let mut mm = 0i64;
             for t in 0..clip.frames {
                 let row = clip.offset + t;
-                let stored = i64::from(values[c * frames + row]);
+                let stored = i64::from(value(c * frames + row));
                 mm = if t == 0 { stored } else { mm + stored };
                 joints[row][c / 3][c % 3] = mm as f64 / 1000.0;
             }

@@ -71,6 +71,21 @@ impl DdimSampler {
         Self { timesteps: self.timesteps[..kept].to_vec(), alphas_cumprod: self.alphas_cumprod[..kept].to_vec() }
     }
 
+    /// The same sampler on every `stride`-th of its timesteps, counted down from the one it
+    /// starts at (ddim10 by 2: timesteps 900, 700, 500, 300, 100, its last x̂0 taken at t =
+    /// 100). It starts from the same latent, so a noise fitted through it means the same
+    /// start for the whole sampler, at 1/`stride` of the denoiser passes (`stride` 0 or 1:
+    /// unchanged).
+    pub fn every(&self, stride: usize) -> Self {
+        let stride = stride.max(1);
+        let last = self.steps() - 1;
+        let kept: Vec<usize> = (0..=last).filter(|k| (last - k) % stride == 0).collect();
+        Self {
+            timesteps: kept.iter().map(|&k| self.timesteps[k]).collect(),
+            alphas_cumprod: kept.iter().map(|&k| self.alphas_cumprod[k]).collect(),
+        }
+    }
+
     /// Number of DDIM steps K (= denoiser evaluations per sample, without guidance).
     pub fn steps(&self) -> usize {
         self.timesteps.len()
@@ -256,6 +271,11 @@ mod tests {
         assert_eq!(late.alphas_cumprod(), &ddim10.alphas_cumprod()[..6]);
         assert_eq!(ddim10.starting_at(999), ddim10);
         assert_eq!(DdimSampler::new(&s, 2)?.starting_at(300).timesteps(), &[0]);
+        assert_eq!(ddim10.every(2).timesteps(), &[100, 300, 500, 700, 900]);
+        assert_eq!(ddim10.every(3).timesteps(), &[0, 300, 600, 900]);
+        assert_eq!(ddim10.every(1), ddim10);
+        assert_eq!(ddim10.every(20).timesteps(), &[900]);
+        assert_eq!(ddim10.every(2).alphas_cumprod()[4], ddim10.alphas_cumprod()[9]);
         Ok(())
     }
 

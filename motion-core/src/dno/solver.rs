@@ -70,6 +70,18 @@ impl<'a, D: Denoiser + ?Sized> UnrolledDdim<'a, D> {
         Ok(self)
     }
 
+    /// This solver on every `stride`-th timestep of its sampler, counted down from its start
+    /// ([`DdimSampler::every`]): the same start noise at 1/`stride` of the denoiser passes.
+    pub fn every(&self, stride: usize) -> Self {
+        Self {
+            sampler: self.sampler.every(stride),
+            denoiser: self.denoiser,
+            text: self.text.clone(),
+            guidance: self.guidance,
+            late_start: self.late_start.clone(),
+        }
+    }
+
     /// [`Self::new`] with `config.ddim_steps`.
     pub fn from_config(denoiser: &'a D, text: Tensor, guidance: Guidance, config: &DnoConfig) -> Result<Self> {
         Self::new(denoiser, text, guidance, config.ddim_steps)

@@ -28,6 +28,9 @@ use crate::prior::Prior;
 pub struct InversionConfig {
     /// DDIM steps of the sampler the noise is for (default 10, DNO's).
     pub ddim_steps: usize,
+    /// The noise is for every `sampler_stride`-th timestep of that sampler, counted down
+    /// from its start ([`crate::diffusion::DdimSampler::every`]; default 1: every one).
+    pub sampler_stride: usize,
     /// Fixed-point iterations per inversion step (default 8; 0 = classic DDIM inversion).
     pub fixed_point_iterations: usize,
     /// DNO steps polishing the noise against the normalised-feature MSE (default 100; 0 =
@@ -62,6 +65,7 @@ impl Default for InversionConfig {
     fn default() -> Self {
         Self {
             ddim_steps: 10,
+            sampler_stride: 1,
             fixed_point_iterations: 8,
             feature_polish_steps: 100,
             feature_polish_lr: 0.05,
@@ -95,7 +99,7 @@ pub fn invert_motion(
     mut on_polish_step: impl FnMut(&DnoStep),
 ) -> Result<Inverted> {
     let guidance = Guidance { scale: config.guidance }.for_text(text)?;
-    let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.ddim_steps)?;
+    let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.ddim_steps)?.every(config.sampler_stride);
     let z = solver.sampler.invert(&prior.mdm, x0, text, guidance, config.fixed_point_iterations)?;
     if config.feature_polish_steps == 0 && config.polish_steps == 0 {
         let x = solver.sampler.sample(&prior.mdm, &z, text, guidance)?;

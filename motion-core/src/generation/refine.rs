@@ -141,15 +141,16 @@ pub struct RefineReport {
     /// Mean distance the joints moved, m.
     pub mean_offset_m: f64,
     /// Adam steps run (0 where none did: off, nothing to refine, or under
-    /// [`Schedule::UntilMet`] a motion whose geometric error was already zero).
+    /// [`Schedule::UntilMet`] a batch that already met every geometric constraint at its
+    /// tolerance).
     #[serde(default)]
     pub steps: usize,
 }
 
 /// Refines `joints` `[B, T, 22, 3]` (m, rigid bones) against `compiled`'s geometric
 /// constraints; `initial` as for [`CompiledProgram::evaluate`]. Runs `config.steps` Adam steps;
-/// under [`Schedule::UntilMet`] none when every sample's geometric error is already zero (the
-/// layer has nothing to close). Returns the joints (the input rows where not applied) and one
+/// under [`Schedule::UntilMet`] none when every sample already meets every geometric
+/// constraint at its tolerance (the judgement of `report.json`: the stage's work is done). Returns the joints (the input rows where not applied) and one
 /// report per sample.
 pub fn refine(
     joints: &Tensor,
@@ -173,9 +174,7 @@ pub fn refine(
     let (Some(rest), true, false) = (rest, config.enabled && config.steps > 0, geometric.is_empty()) else {
         return Ok((joints.clone(), before.iter().map(unchanged).collect()));
     };
-    if schedule == Schedule::UntilMet
-        && per_sample(&geometric.evaluate(joints, initial)?.total)?.iter().all(|&e| e <= 0.0)
-    {
+    if schedule == Schedule::UntilMet && geometric.met_by_every_sample(joints, initial)? {
         return Ok((joints.clone(), before.iter().map(unchanged).collect()));
     }
     let start = joints.detach().to_dtype(DType::F32)?;

@@ -47,7 +47,12 @@ pub enum Schedule {
     ///   ranks them and ends once every sample's best meets the program (then the soft blend
     ///   is skipped too) or no sample's best has changed over the last
     ///   [`crate::generation::rgdno::config::RgDnoConfig::mask_patience`] candidates;
-    /// - the kinematic refinement is skipped when the motion's geometric error is already zero.
+    /// - for a program without counts, RG-DNO's stages before its final round sample through
+    ///   every other DDIM timestep
+    ///   ([`crate::generation::rgdno::config::RgDnoConfig::early_stride`]), and the final
+    ///   round starts on that sampler until the program is met, then finishes on the whole one;
+    /// - the kinematic refinement is skipped when every sample already meets every geometric
+    ///   constraint at its tolerance.
     UntilMet,
 }
 

@@ -7,6 +7,7 @@ use super::reward::RewardWeights;
 use crate::dno::DnoConfig;
 use crate::generation::inversion::InversionConfig;
 use crate::generation::method::GenerationError;
+use crate::generation::schedule::Schedule;
 use crate::program::ConstraintGroups;
 
 /// Settings of constraint-based retrieval ([`super::retrieval::retrieve`]).
@@ -83,11 +84,19 @@ pub struct RgDnoConfig {
     pub mask_kinds: Vec<MaskKind>,
     /// Mask candidates sampled per batch, per sample (default 16).
     pub mask_batch: usize,
-    /// Under [`crate::generation::Schedule::UntilMet`], the mask search also ends once no
+    /// Under [`crate::generation::schedule::Schedule::UntilMet`], the mask search also ends once no
     /// sample's best candidate has changed over this many candidates scored in its order
     /// (default 64; 0: it ends only when the program is met, or after every candidate). The
     /// paper's search scores every candidate.
     pub mask_patience: usize,
+    /// Under [`crate::generation::schedule::Schedule::UntilMet`], for a program without
+    /// counts, the inversion, the branches, the mask search and the soft blend sample through
+    /// every `early_stride`-th timestep of the run's DDIM sampler, counted down from its start
+    /// ([`crate::diffusion::DdimSampler::every`]: ddim10 by 2 is 900, 700, …, 100); the final
+    /// round starts on that sampler and finishes on the whole one (default 2; 1: every stage on
+    /// the whole sampler, as the paper's schedule and a counting program always run). The noise
+    /// they hand on starts the same sampler, so the final round refines the same motion.
+    pub early_stride: usize,
     /// The reward weights λ of eq. 14.
     pub reward: RewardWeights,
     /// DNO steps `N2` of the final round (default 400).
@@ -163,6 +172,7 @@ impl Default for RgDnoConfig {
             mask_kinds: vec![MaskKind::Temporal, MaskKind::Spatial],
             mask_batch: 16,
             mask_patience: 64,
+            early_stride: 2,
             reward: RewardWeights::default(),
             final_steps: 400,
             final_lr: 0.02,
@@ -232,6 +242,17 @@ impl RgDnoConfig {
         Ok(())
     }
 
+    /// The stride of the stages before the final round under `schedule`, for a program that
+    /// `counts` (steps, counted extrema or events) or not: 1 under the paper's schedule, and
+    /// for a count, which is made of discrete events that the whole sampler may not place where
+    /// the coarser one did (`fixtures/results/issue59-early-stride/`).
+    pub(super) fn early_stride_under(&self, schedule: Schedule, counts: bool) -> usize {
+        match schedule {
+            Schedule::UntilMet if !counts => self.early_stride.max(1),
+            _ => 1,
+        }
+    }
+
     /// The retrieval settings that keep enough takes for the motions the stages start from.
     pub(super) fn retrieval_keeping_used(&self) -> RetrievalConfig {
         let top_k = self.retrieval.top_k.max(self.skip_retrieved + self.retrieved_motions);
@@ -262,6 +283,16 @@ mod tests {
         let mut unpolished = paper.clone();
         unpolished.inversion.polish_steps = 0;
         assert_eq!(unpolished.scaled_to(50).inversion.polish_steps, 0);
+    }
+
+    #[test]
+    fn the_early_stride_applies_under_the_until_met_schedule_to_programs_without_counts() {
+        let config = RgDnoConfig::default();
+        let under = |config: &RgDnoConfig, schedule, counts| config.early_stride_under(schedule, counts);
+        assert_eq!(under(&config, Schedule::UntilMet, false), 2);
+        assert_eq!(under(&config, Schedule::UntilMet, true), 1, "a counting program");
+        assert_eq!(under(&config, Schedule::Paper, false), 1);
+        assert_eq!(under(&RgDnoConfig { early_stride: 0, ..config }, Schedule::UntilMet, false), 1);
     }
 
     #[test]

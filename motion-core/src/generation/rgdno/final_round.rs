@@ -1,4 +1,10 @@
 //! Stage 6 (eq. 12): DNO on the whole task from the blended noise `z'`, `N2` steps.
+//!
+//! Where the stages before it sample through fewer timesteps
+//! ([`super::config::RgDnoConfig::early_stride`], under the until-met schedule), the round
+//! starts on that coarse sampler until the motion meets every constraint (or all but a quarter
+//! of `N2`, at least one step, are spent), then finishes on the whole sampler, which makes the
+//! motion it hands on, under the shown stage's stopping rule ([`StageEnd::shown`]).
 
 use candle_core::Tensor;
 
@@ -12,7 +18,8 @@ use crate::generation::schedule::StageEnd;
 
 impl<M: Denoiser + ?Sized> Stages<'_, M> {
     /// The final round from `z_blend` `[B, T, 263]` on `F_C` with the jitter guard, keeping the
-    /// best iterate: its `x` is the motion of its `z` and its `loss` that motion's `F_C`.
+    /// best iterate (of the whole sampler's steps): its `x` is the motion of its `z` through the
+    /// whole sampler, its `loss` that motion's `F_C`, its history every step of both samplers.
     pub(super) fn final_round(
         &self,
         z_blend: &Tensor,
@@ -21,7 +28,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         round: usize,
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<DnoResult, RgDnoError> {
-        let Stages { prior, compiled, config, rg, solver, foot_lock, .. } = *self;
+        let Stages { prior, compiled, config, rg, solver, early, foot_lock, .. } = *self;
         let full = program_objective(prior, compiled, initial_joints, config.guards);
         let last = DnoConfig {
             steps: rg.final_steps,
@@ -31,10 +38,36 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             keep_best: true,
             ..config.dno.clone()
         };
+        let mut report = |stage: Stage, offset: usize, s: &DnoStep| {
+            let p = StageProgress::of_dno(stage, round, s);
+            progress(&StageProgress { step: offset + p.step, steps: rg.final_steps, ..p })
+        };
+        let (mut z, mut last, mut offset, mut coarse_history) = (z_blend.clone(), last, 0, None);
+        if early.sampler != solver.sampler && rg.final_steps >= 2 {
+            let fine = (rg.final_steps / 4).max(1);
+            let coarse = DnoConfig { steps: rg.final_steps - fine, keep_best: false, ..last.clone() };
+            let parts = vec![(compiled, None)];
+            let mut end = StageEnd::intermediate(config.schedule, prior, parts, initial_joints, 0);
+            let done = |s: &DnoStep, x: &Tensor| end.done(round, s, x);
+            let run = dno::optimize_until(early, &full, &z, &coarse, |s| report(Stage::FinalRoundCoarse, 0, s), done)?;
+            offset = run.history.first().map_or(0, |h| h.loss.len());
+            // The rest of the budget on the whole sampler, its learning rate decayed over it.
+            (z, coarse_history) = (run.z, Some(run.history));
+            last = DnoConfig { steps: rg.final_steps - offset, lr_warmup_steps: 0, lr_decay_steps: None, ..last };
+        }
         let mut end =
             StageEnd::shown(config.schedule, prior, compiled, initial_joints, last.lr_warmup_steps, foot_lock);
         let done = |s: &DnoStep, x: &Tensor| end.done(round, s, x);
-        let progress = |s: &DnoStep| progress(&StageProgress::of_dno(Stage::FinalRound, round, s));
-        Ok(dno::optimize_until(solver, &full, z_blend, &last, progress, done)?)
+        let mut run = dno::optimize_until(solver, &full, &z, &last, |s| report(Stage::FinalRound, offset, s), done)?;
+        if let Some(coarse) = coarse_history {
+            // The round's curves over both samplers, step by step.
+            for (whole, mut first) in run.history.iter_mut().zip(coarse) {
+                first.loss.append(&mut whole.loss);
+                first.decorrelation.append(&mut whole.decorrelation);
+                first.grad_norm.append(&mut whole.grad_norm);
+                *whole = first;
+            }
+        }
+        Ok(run)
     }
 }

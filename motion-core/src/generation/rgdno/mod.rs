@@ -125,11 +125,15 @@ pub fn generate_rg_dno(
     // The solver, as DNO's, for the batch and for both branches side by side.
     let text = prior.encode_text(&vec![program.text.as_str(); batch], device)?;
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
+    // The stages before the final round may sample through fewer of the sampler's timesteps.
+    let stride = rg.early_stride_under(config.schedule, !compiled.count_targets().is_empty());
     let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.dno.ddim_steps)?;
-    let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, guidance, config.dno.ddim_steps)?;
+    let early = solver.every(stride);
+    let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, guidance, config.dno.ddim_steps)?.every(stride);
     let inversion = InversionConfig {
         guidance: config.guidance,
         ddim_steps: config.dno.ddim_steps,
+        sampler_stride: stride,
         schedule: config.schedule,
         ..rg.inversion.clone()
     };
@@ -158,6 +162,7 @@ pub fn generate_rg_dno(
             config,
             rg,
             solver: &solver,
+            early: &early,
             both: &both,
             z_r: &z_r,
             foot_lock: &foot_lock,
@@ -264,7 +269,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         seconds: &mut StageSeconds,
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<Attempt, RgDnoError> {
-        let Stages { prior, compiled, config, rg, solver, z_r, .. } = *self;
+        let Stages { prior, compiled, config, rg, solver, early, z_r, .. } = *self;
         let (batch, frames, _) = z_r.dims3()?;
         let z0 = gaussian((batch, frames, FEATURE_DIM), seed, z_r.device())?;
         let initial_joints =
@@ -281,7 +286,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
                 let stages = MaskStages {
                     prior,
                     rg,
-                    solver,
+                    solver: early,
                     objective: Objective { compiled, initial: &initial_joints, guards: config.guards },
                     weights: &reward_weights,
                     round,

@@ -84,6 +84,10 @@ pub struct StageSteps {
     pub soft_blend: usize,
     /// The final round.
     pub final_round: usize,
+    /// Of the final round's steps, those on the coarser sampler of the stages before it
+    /// ([`super::config::RgDnoConfig::early_stride`]; 0 where the round ran on one sampler).
+    #[serde(default)]
+    pub final_round_coarse: usize,
 }
 
 impl StageSteps {
@@ -100,6 +104,10 @@ impl StageSteps {
             }
             Stage::SoftBlend => self.soft_blend += 1,
             Stage::FinalRound => self.final_round += 1,
+            Stage::FinalRoundCoarse => {
+                self.final_round += 1;
+                self.final_round_coarse += 1;
+            }
         }
     }
 
@@ -111,6 +119,7 @@ impl StageSteps {
             masks: self.masks + other.masks,
             soft_blend: self.soft_blend + other.soft_blend,
             final_round: self.final_round + other.final_round,
+            final_round_coarse: self.final_round_coarse + other.final_round_coarse,
         }
     }
 }
@@ -233,6 +242,8 @@ pub enum Stage {
     SoftBlend,
     /// The final DNO round.
     FinalRound,
+    /// The final DNO round's start on the coarser sampler of the stages before it.
+    FinalRoundCoarse,
 }
 
 impl Stage {
@@ -244,6 +255,7 @@ impl Stage {
             Stage::Masks => "masks",
             Stage::SoftBlend => "soft blend",
             Stage::FinalRound => "final round",
+            Stage::FinalRoundCoarse => "final round (coarse sampler)",
         }
     }
 }

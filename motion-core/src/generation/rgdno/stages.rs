@@ -11,8 +11,8 @@ use crate::generation::method::GenerationConfig;
 use crate::prior::Prior;
 use crate::program::ConstraintGroups;
 
-/// What every restart shares: the compiled task and its groups, the settings, the two solvers
-/// (batch `B` and `2B`), the inverted noise `z_R` `[B, T, 263]` and the clean-up the generation
+/// What every restart shares: the compiled task and its groups, the settings, the solvers
+/// (batch `B` and, for the branches, `2B`), the inverted noise `z_R` `[B, T, 263]` and the clean-up the generation
 /// ends with.
 pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
     pub(super) prior: &'a Prior,
@@ -20,7 +20,11 @@ pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
     pub(super) groups: &'a ConstraintGroups,
     pub(super) config: &'a GenerationConfig,
     pub(super) rg: &'a RgDnoConfig,
+    /// The final round's solver (batch `B`), which also samples the restart's unoptimised motion.
     pub(super) solver: &'a UnrolledDdim<'a, M>,
+    /// The solver of the mask search and the soft blend (batch `B`; `solver` on fewer
+    /// timesteps under [`crate::generation::rgdno::config::RgDnoConfig::early_stride`]).
+    pub(super) early: &'a UnrolledDdim<'a, M>,
     pub(super) both: &'a UnrolledDdim<'a, M>,
     pub(super) z_r: &'a Tensor,
     pub(super) foot_lock: &'a FootLockConfig,
