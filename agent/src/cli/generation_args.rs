@@ -89,9 +89,10 @@ pub struct GenerationArgs {
     pub restarts: usize,
     /// When each optimisation stage ends: `until-met` (the default) ends each stage once its work
     /// is done and the motion looks no worse than capture or the prior's own sample, samples
-    /// DNO with 5 DDIM steps (RG-DNO keeps 10) and tries a sample that missed a constraint once
-    /// more; `paper` runs every step of the papers' budgets with 10 DDIM steps and no retry
-    /// (their tables' schedule; fixtures/results/issue59-patience/).
+    /// DNO with 5 DDIM steps (RG-DNO keeps 10, its stages before the final round on every other
+    /// one for a program without counts) and tries a sample that missed a constraint once more;
+    /// `paper` runs every step of the papers' budgets with 10 DDIM steps and no retry (their
+    /// tables' schedule; fixtures/results/issue59-early-stride/).
     #[arg(long, value_enum, default_value_t = ScheduleArg::UntilMet)]
     pub schedule: ScheduleArg,
     /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
@@ -155,9 +156,9 @@ pub struct GenerationArgs {
     #[arg(long, value_name = "FILE")]
     pub database: Option<PathBuf>,
     /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
-    /// first_lr, segments, mask_kinds, mask_batch, mask_patience, reward, final_steps,
-    /// final_lr, ablation, retrieved_motions, skip_retrieved; missing fields keep the paper's
-    /// defaults), e.g.
+    /// first_lr, segments, mask_kinds, mask_batch, mask_patience, early_stride, reward,
+    /// final_steps, final_lr, ablation, retrieved_motions, skip_retrieved; missing fields keep
+    /// the paper's defaults), e.g.
     /// '{"retrieval": {"related_weight": 0.01}}', '{"retrieved_motions": 2}' (start from the best
     /// crops of two takes in turn, each sample keeping its better attempt),
     /// the supplementary's reward for a task '{"reward": "steps_raising_hands"}' (also
