@@ -33,6 +33,35 @@ fn pinned_program(joints: &candle_core::Tensor) -> TaskProgram {
     TaskProgram::from_json_validated(&pinned_program_json(joints, "a person moves", true).unwrap()).unwrap()
 }
 
+/// The shipped Task 2 at 40 frames, edited by `edit` (its JSON), compiled.
+fn task2_at_40_frames(edit: impl FnOnce(&mut serde_json::Value), device: &Device) -> (TaskProgram, CompiledProgram) {
+    let text = std::fs::read_to_string(fixtures().join("tasks/rgdno_task2_low_barrier.json")).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["frames"] = 40.into();
+    edit(&mut json);
+    let program = TaskProgram::from_json_validated(&json.to_string()).unwrap();
+    let compiled = CompiledProgram::compile(&program, device).unwrap();
+    (program, compiled)
+}
+
+/// RG-DNO in miniature: `first` steps for the branches and the blend, `last` final steps,
+/// `polish` steps for each inversion polish, 2 temporal segments.
+fn tiny_rg(first: usize, last: usize, polish: usize) -> RgDnoConfig {
+    RgDnoConfig {
+        first_steps: first,
+        final_steps: last,
+        segments: 2,
+        mask_kinds: vec![MaskKind::Temporal],
+        inversion: motion_core::generation::inversion::InversionConfig {
+            feature_polish_steps: polish,
+            polish_steps: polish,
+            fixed_point_iterations: 1,
+            ..Default::default()
+        },
+        ..RgDnoConfig::default()
+    }
+}
+
 #[test]
 fn retrieval_finds_a_planted_crop_and_the_semantic_check_filters() {
     let device = Device::Cpu;
@@ -116,30 +145,18 @@ fn the_shipped_corpus_retrieves_a_low_motion_from_its_train_split_for_the_barrie
 fn a_tiny_rg_dno_run_goes_through_every_stage() {
     let device = Device::Cpu;
     let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &device).unwrap();
-    let text = std::fs::read_to_string(fixtures().join("tasks/rgdno_task2_low_barrier.json")).unwrap();
     // Task-2 shortened to 40 frames: the barrier at 0.5 < z < 1.0, the target at z = 1.5.
-    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
-    json["frames"] = 40.into();
-    json["constraints"][0]["expr"]["args"][0]["primitive"]["z_range_m"] = serde_json::json!([0.5, 1.0]);
-    for arg in 0..2 {
-        json["constraints"][1]["expr"]["args"][arg]["target"] = serde_json::json!([1.5]);
-    }
-    let program = TaskProgram::from_json_validated(&json.to_string()).unwrap();
-    let compiled = CompiledProgram::compile(&program, &device).unwrap();
-    let database = database();
-    let rg = RgDnoConfig {
-        first_steps: 3,
-        final_steps: 3,
-        segments: 2,
-        mask_kinds: vec![MaskKind::Temporal],
-        inversion: motion_core::generation::inversion::InversionConfig {
-            feature_polish_steps: 2,
-            polish_steps: 2,
-            fixed_point_iterations: 1,
-            ..Default::default()
+    let (program, compiled) = task2_at_40_frames(
+        |json| {
+            json["constraints"][0]["expr"]["args"][0]["primitive"]["z_range_m"] = serde_json::json!([0.5, 1.0]);
+            for arg in 0..2 {
+                json["constraints"][1]["expr"]["args"][arg]["target"] = serde_json::json!([1.5]);
+            }
         },
-        ..RgDnoConfig::default()
-    };
+        &device,
+    );
+    let database = database();
+    let rg = tiny_rg(3, 3, 2);
     let mut config = GenerationConfig::new(Method::RgDno);
     config.samples = 2;
     config.guidance = 1.0;
@@ -231,29 +248,17 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
 fn the_until_met_final_round_spends_an_unmet_budget_over_both_samplers() {
     let device = Device::Cpu;
     let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &device).unwrap();
-    let text = std::fs::read_to_string(fixtures().join("tasks/rgdno_task2_low_barrier.json")).unwrap();
     // Task-2 at 40 frames with its target 50 m ahead: no motion of 2 s meets it.
-    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
-    json["frames"] = 40.into();
-    for arg in 0..2 {
-        json["constraints"][1]["expr"]["args"][arg]["target"] = serde_json::json!([50.0]);
-    }
-    let program = TaskProgram::from_json_validated(&json.to_string()).unwrap();
-    let compiled = CompiledProgram::compile(&program, &device).unwrap();
-    let database = database();
-    let rg = RgDnoConfig {
-        first_steps: 2,
-        final_steps: 8,
-        segments: 2,
-        mask_kinds: vec![MaskKind::Temporal],
-        inversion: motion_core::generation::inversion::InversionConfig {
-            feature_polish_steps: 1,
-            polish_steps: 1,
-            fixed_point_iterations: 1,
-            ..Default::default()
+    let (program, compiled) = task2_at_40_frames(
+        |json| {
+            for arg in 0..2 {
+                json["constraints"][1]["expr"]["args"][arg]["target"] = serde_json::json!([50.0]);
+            }
         },
-        ..RgDnoConfig::default()
-    };
+        &device,
+    );
+    let database = database();
+    let rg = tiny_rg(2, 8, 1);
     assert_eq!(rg.early_stride, 2);
     let mut config = GenerationConfig::new(Method::RgDno);
     config.samples = 1;
