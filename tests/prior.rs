@@ -12,7 +12,8 @@ use motion_core::corpus::{file as corpus_file, Corpus};
 use motion_core::database::catalog::SourceClip;
 use motion_core::database::{DatabaseConfig, MotionDatabase};
 use motion_core::diffusion::Guidance;
-use motion_core::generation::inversion::{invert_motion, InversionConfig};
+use motion_core::generation::inversion::{invert_motion, mean_joint_distance, InversionConfig};
+use motion_core::generation::schedule::Schedule;
 use motion_core::import::MocapClip;
 use motion_core::prior::{Prior, Sampling};
 use motion_core::quality::families::{family_report, FamilyConfig};
@@ -162,6 +163,30 @@ fn the_polish_starts_on_the_unit_rms_shell_and_stays_near_it() {
     for r in rms(&polished.z) {
         assert!((0.8..1.25).contains(&r), "RMS {r} after polishing");
     }
+}
+
+/// Under the until-met schedule the inversion stops polishing once its motion is within 5 cm of
+/// the window (the constraints' position tolerance): in fewer steps than the papers' budgets,
+/// its motion still within 5 cm, and with the feature polish getting there the joint polish is
+/// skipped (every reported step is one run's, counted from 0).
+#[test]
+fn the_until_met_inversion_stops_polishing_once_within_5cm() {
+    let (p, db) = (prior(), database());
+    let window = db.windows().iter().find(|w| w.frames >= 120).unwrap();
+    let x0 = db.window_tensor(window, &Device::Cpu).unwrap().narrow(0, 0, 120).unwrap();
+    let x0 = p.mean_std.normalize(&x0).unwrap().unsqueeze(0).unwrap();
+    let text = p.encode_text(&[WALK], &Device::Cpu).unwrap();
+    let config = InversionConfig { schedule: Schedule::UntilMet, ..InversionConfig::default() };
+    let mut steps = Vec::new();
+    let inverted = invert_motion(&p, &x0, &text, &config, |s| steps.push(s.step)).unwrap();
+    let error = mean_joint_distance(&p.to_joints(&inverted.x).unwrap(), &p.to_joints(&x0).unwrap())
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap()[0];
+    println!("{} polish steps, mean joint error {error:.4} m", steps.len());
+    assert!(error <= 0.05, "mean joint error {error} m");
+    assert!(steps.len() < config.feature_polish_steps, "{} steps", steps.len());
+    assert!(steps.iter().enumerate().all(|(k, &step)| step == k), "the joint polish ran: {steps:?}");
 }
 
 fn walk_samples() -> Vec<Vec<Pose>> {

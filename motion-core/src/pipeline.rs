@@ -99,19 +99,54 @@ pub enum PipelineError {
     Json(#[from] serde_json::Error),
 }
 
+/// RG-DNO's retrieval database opened from a run's [`TaskSettings::database`], with the note that
+/// says what it holds and how long it took to open.
+pub struct OpenedDatabase {
+    database: RetrievalDatabase,
+    note: String,
+}
+
+impl OpenedDatabase {
+    /// Opens `settings.database` (its crops are made per query).
+    pub fn open(settings: &TaskSettings) -> Result<Self, PipelineError> {
+        let clock = Instant::now();
+        let source = &settings.database;
+        let (database, warnings) = source.open()?;
+        // Import warnings (quaternions normalised on read) are `mogen data build`'s to list.
+        let warned = if warnings.is_empty() { String::new() } else { format!(", {} import warnings", warnings.len()) };
+        let note = format!(
+            "retrieval database: {} clips ({:.2} h) of {source}, {:.0} MB held (opened in {:.1} s{warned})",
+            database.clips(),
+            database.seconds() / 3600.0,
+            database.bytes() as f64 / 1e6,
+            clock.elapsed().as_secs_f64()
+        );
+        Ok(OpenedDatabase { database, note })
+    }
+}
+
+/// Whether a run of `program` with `settings` retrieves: RG-DNO with a relational parse. Only
+/// such a run opens the database, and only for such a run may a caller open it beforehand.
+pub fn retrieves(program: &TaskProgram, settings: &TaskSettings) -> bool {
+    settings.generation.method == Method::RgDno && program.relational_parse.is_some()
+}
+
 /// Runs `program` with `settings` on `device` and writes every output into `folder`, which is
 /// committed only when everything is made (a failure leaves the target as it was): the one
-/// call behind every command that generates for a task. `on` gets every optimisation step and
-/// the notes a user should read.
+/// call behind every command that generates for a task. `database`, when given, is
+/// `settings.database` already opened (a command opens it beside its own loading, or once for
+/// many runs); otherwise the run opens it when it [`retrieves`]. `on` gets every optimisation
+/// step and the notes a user should read.
 pub fn run_task(
     prior: &Prior,
     program: &CheckedProgram,
     settings: &TaskSettings,
+    database: Option<&OpenedDatabase>,
     folder: OutputFolder,
     device: &Device,
     on: impl FnMut(Event<'_>),
 ) -> Result<TaskOutcome, PipelineError> {
-    let run = generate_task(prior, program, settings, device, on)?;
+    let run = generate_task(prior, program, settings, database, device, on)?;
     let exports = write_task(&folder, prior, program, &run, &settings.exports)?;
     let folder = folder.commit()?;
     Ok(TaskOutcome { report: run.report, exports, folder })
@@ -125,6 +160,7 @@ fn generate_task(
     prior: &Prior,
     checked: &CheckedProgram,
     settings: &TaskSettings,
+    database: Option<&OpenedDatabase>,
     device: &Device,
     mut on: impl FnMut(Event<'_>),
 ) -> Result<TaskRun, PipelineError> {
@@ -132,12 +168,19 @@ fn generate_task(
     let task = Task { program, compiled };
     let mut config = settings.generation.clone();
     // The database is opened once for every attempt, and only when RG-DNO can use it.
-    let database = if config.method == Method::RgDno && program.relational_parse.is_some() {
-        Some(rg_dno_database(settings, &mut on)?)
-    } else {
-        None
+    let opened;
+    let database = match database {
+        _ if !retrieves(program, settings) => None,
+        Some(database) => Some(database),
+        None => {
+            opened = OpenedDatabase::open(settings)?;
+            Some(&opened)
+        }
     };
-    let retrieval = database.as_ref().map(|database| Retrieval { database, rg_dno: &settings.rg_dno });
+    if let Some(database) = database {
+        on(Event::Note(database.note.clone()));
+    }
+    let retrieval = database.map(|opened| Retrieval { database: &opened.database, rg_dno: &settings.rg_dno });
     let first = generate(prior, task, retrieval, &config, device, &mut on)?;
     // After a fallback, the report and every retry are DNO's.
     config.method = first.method;
@@ -195,26 +238,6 @@ fn retry_seed(config: &GenerationConfig, k: usize) -> u64 {
 /// earlier attempts, so that a sample a take did not serve is tried from another.
 fn retry_rg_dno(rg: &RgDnoConfig, k: usize) -> RgDnoConfig {
     RgDnoConfig { skip_retrieved: rg.skip_retrieved + k * rg.retrieved_motions, ..rg.clone() }
-}
-
-/// RG-DNO's retrieval database, opened (its crops are made per query).
-fn rg_dno_database(
-    settings: &TaskSettings,
-    on: &mut impl FnMut(Event<'_>),
-) -> Result<RetrievalDatabase, PipelineError> {
-    let clock = Instant::now();
-    let source = &settings.database;
-    let (database, warnings) = source.open()?;
-    // Import warnings (quaternions normalised on read) are `mogen data build`'s to list.
-    let warned = if warnings.is_empty() { String::new() } else { format!(", {} import warnings", warnings.len()) };
-    on(Event::Note(format!(
-        "retrieval database: {} clips ({:.2} h) of {source}, {:.0} MB held ({:.1} s{warned})",
-        database.clips(),
-        database.seconds() / 3600.0,
-        database.bytes() as f64 / 1e6,
-        clock.elapsed().as_secs_f64()
-    )));
-    Ok(database)
 }
 
 /// Choices about the exported files (default: no GIF, BVH in metres, the motion's frame rate, no

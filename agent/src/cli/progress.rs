@@ -9,7 +9,7 @@ use motion_core::constraints::checked::CheckedProgram;
 use motion_core::evaluation::TaskReport;
 use motion_core::export::OutputFolder;
 use motion_core::generation::Event;
-use motion_core::pipeline::{run_task, TaskSettings};
+use motion_core::pipeline::{run_task, OpenedDatabase, TaskSettings};
 use motion_core::prior::Prior;
 
 use super::export_formats::print_exports;
@@ -64,17 +64,19 @@ impl Progress {
     }
 }
 
-/// Runs `program` with `settings` ([`motion_core::pipeline::run_task`]) into `folder` with
-/// progress on stderr, and says on stderr what was written.
+/// Runs `program` with `settings` ([`motion_core::pipeline::run_task`], with `settings.database`
+/// already opened when given) into `folder` with progress on stderr, and says on stderr what was
+/// written.
 pub fn run_with_progress(
     prior: &Prior,
     program: &CheckedProgram,
     settings: &TaskSettings,
+    database: Option<&OpenedDatabase>,
     folder: OutputFolder,
     device: &Device,
 ) -> anyhow::Result<TaskReport> {
     let mut progress = Progress::new();
-    let outcome = run_task(prior, program, settings, folder, device, |event| progress.show(event))?;
+    let outcome = run_task(prior, program, settings, database, folder, device, |event| progress.show(event))?;
     progress.finish();
     print_exports(&outcome.folder, &outcome.exports, settings.exports.gif);
     eprintln!("wrote {}/{{program.json,features.npy,joints.npy,report.json,strip.png}}", outcome.folder.display());

@@ -10,7 +10,7 @@ use motion_core::evaluation::TaskReport;
 use motion_core::export::{write_atomically, OutputFolder};
 use motion_core::generation::method::{GenerationConfig, Method};
 use motion_core::generation::schedule::Schedule;
-use motion_core::pipeline::TaskSettings;
+use motion_core::pipeline::{retrieves, OpenedDatabase, TaskSettings};
 use motion_core::prior::PriorIdentity;
 use serde::{Deserialize, Serialize};
 
@@ -108,6 +108,8 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
         Ok(text) => StoredRow::read(&text).with_context(|| format!("reading {}", json_path.display()))?,
         Err(_) => Vec::new(),
     };
+    // RG-DNO's database, opened by the first run that retrieves and kept for the others.
+    let mut database = None;
     for file in &files {
         let task = file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let program = load_program(file, &device)?;
@@ -127,7 +129,12 @@ pub fn run_tasks(args: BenchTasksArgs) -> anyhow::Result<()> {
             }
             eprintln!("{task} / {method}");
             let folder = OutputFolder::create(&args.out.join(&task).join(method.name()))?;
-            let report = run_with_progress(&prior, &program, &settings, folder, &device)?;
+            let opened = match &mut database {
+                _ if !retrieves(program.program(), &settings) => None,
+                Some(opened) => Some(&*opened),
+                None => Some(&*database.insert(OpenedDatabase::open(&settings)?)),
+            };
+            let report = run_with_progress(&prior, &program, &settings, opened, folder, &device)?;
             rows.push(StoredRow::new(ResultRow { task: task.clone(), report })?);
             write_atomically(&json_path, StoredRow::json(&rows)?.as_bytes())?;
             let table: Vec<ResultRow> = rows.iter().map(|r| r.row.clone()).collect();

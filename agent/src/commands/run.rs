@@ -6,7 +6,7 @@ use clap::Args;
 use motion_core::export::OutputFolder;
 
 use crate::cli::generation_args::{GenerationArgs, MethodArg};
-use crate::cli::load::{device, load_prior, load_program};
+use crate::cli::load::{device, load_prior_and_database, load_program};
 use crate::cli::progress::run_with_progress;
 
 #[derive(Debug, Args)]
@@ -33,9 +33,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let device = device()?;
     let program = load_program(&args.program, &device)?;
     let folder = OutputFolder::create(&args.out)?;
-    let prior = load_prior(&args.generation.prior, &device)?;
     let settings = args.generation.settings(args.method.into())?;
-    let report = run_with_progress(&prior, &program, &settings, folder, &device)?;
+    let (prior, database) = load_prior_and_database(&args.generation.prior, &program, &settings, &device)?;
+    let report = run_with_progress(&prior, &program, &settings, database.as_ref(), folder, &device)?;
     print!("{}", report.summary());
     Ok(())
 }

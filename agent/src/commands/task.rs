@@ -13,7 +13,7 @@ use motion_core::export::OutputFolder;
 
 use crate::cli::flags;
 use crate::cli::generation_args::{GenerationArgs, MethodArg};
-use crate::cli::load::{device, load_prior};
+use crate::cli::load::{device, load_prior_and_database};
 use crate::cli::progress::run_with_progress;
 use agent::paths;
 
@@ -149,9 +149,9 @@ pub fn run(args: TaskArgs) -> anyhow::Result<()> {
     };
     // RG-DNO, through the plan's relational parse and Algorithm 1's groups, falls back to DNO and
     // says why without them.
-    let prior = load_prior(&args.generation.prior, &device)?;
     let settings = args.generation.settings(args.method.into())?;
-    let report = run_with_progress(&prior, &planned.program, &settings, out, &device)?;
+    let (prior, database) = load_prior_and_database(&args.generation.prior, &planned.program, &settings, &device)?;
+    let report = run_with_progress(&prior, &planned.program, &settings, database.as_ref(), out, &device)?;
     print!("{}", report.summary());
     Ok(())
 }

@@ -13,8 +13,12 @@
 //!    (no integrated trajectory) and brings the motion close from any start;
 //! 3. the joint polish: DNO on the mean world-frame joint error, which weighs the
 //!    trajectory as the user sees it.
+//!
+//! Under [`Schedule::UntilMet`] each polish also ends once the motion is within
+//! [`INVERSION_TOLERANCE_M`] of the target (the feature polish judges it at its checks), and
+//! the joint polish is skipped when the feature polish got there.
 
-use candle_core::{Result, Tensor};
+use candle_core::{DType, Result, Tensor};
 
 use crate::diffusion::Guidance;
 use crate::dno::{self, DnoConfig, DnoStep, UnrolledDdim};
@@ -107,6 +111,11 @@ pub fn invert_motion(
     }
     let rms = z.sqr()?.mean_keepdim((1, 2))?.sqrt()?;
     let mut z = z.broadcast_div(&rms)?;
+    let fast = config.schedule == Schedule::UntilMet;
+    // Under until-met both polishes end once the motion is within the tolerance of the
+    // retrieved one: the feature polish at its checks, the joint polish at any step (its
+    // criterion is that distance), so that it is skipped when the feature polish got there.
+    // Each then hands on its best iterate, the one judged, not the noise one update past it.
     let polish = |steps: usize, lr: f64| DnoConfig {
         steps,
         lr,
@@ -114,25 +123,33 @@ pub fn invert_motion(
         lr_decay_steps: Some(steps),
         decorrelate_scale: 0.0,
         ddim_steps: config.ddim_steps,
+        keep_best: fast,
         ..DnoConfig::default()
     };
     let target = x0.detach();
-    let fast = config.schedule == Schedule::UntilMet;
+    let joints = prior.to_joints(&target)?.detach();
+    let mut reproduced = false;
     if config.feature_polish_steps > 0 {
         let criterion = |x: &Tensor| (x - &target)?.sqr()?.mean((1, 2));
         let settings = polish(config.feature_polish_steps, config.feature_polish_lr);
         let mut stall = Stall::default();
-        let done = |s: &DnoStep, _: &Tensor| Ok(fast && stall.stalled_after(mean(&s.loss), 0));
+        let done = |s: &DnoStep, x: &Tensor| {
+            let stalled = stall.stalled_after(mean(&s.loss), 0);
+            if fast && stall.at_check(0) {
+                let error_m = mean_joint_distance(&prior.to_joints(x)?, &joints)?.to_dtype(DType::F64)?.to_vec1()?;
+                reproduced = mean(&error_m) <= INVERSION_TOLERANCE_M;
+            }
+            Ok(fast && (stalled || reproduced))
+        };
         z = dno::optimize_until(&solver, criterion, &z, &settings, &mut on_polish_step, done)?.z;
     }
-    if config.polish_steps > 0 {
-        let joints = prior.to_joints(&target)?.detach();
+    if config.polish_steps > 0 && !reproduced {
         let criterion = |x: &Tensor| mean_joint_distance(&prior.to_joints(x)?, &joints);
         let settings = polish(config.polish_steps, config.polish_lr);
         let mut stall = Stall::default();
         let done = |s: &DnoStep, _: &Tensor| {
             let error_m = mean(&s.loss);
-            Ok(fast && (stall.stalled_after(error_m, 0) || (stall.at_check(0) && error_m <= INVERSION_TOLERANCE_M)))
+            Ok(fast && (stall.stalled_after(error_m, 0) || error_m <= INVERSION_TOLERANCE_M))
         };
         z = dno::optimize_until(&solver, criterion, &z, &settings, &mut on_polish_step, done)?.z;
     }

@@ -40,9 +40,9 @@ pub enum Schedule {
     ///   ([`Stall`]) and the motion looks no worse than its bar ([`LookBar`]);
     /// - RG-DNO's branches when each branch meets its own group (the final round finishes
     ///   the motion);
-    /// - the inversion's polishes and RG-DNO's soft blend when their objective has stalled
-    ///   (the inversion's joint polish also once the motion is within
-    ///   [`INVERSION_TOLERANCE_M`]);
+    /// - the inversion's polishes and RG-DNO's soft blend when their objective has stalled;
+    ///   the inversion's polishes also once the motion is within [`INVERSION_TOLERANCE_M`] of
+    ///   the retrieved one (the joint polish is then skipped);
     /// - RG-DNO's mask search scores its candidates by eq. 13 in the order a cheap sampler
     ///   ranks them and ends once every sample's best meets the program (then the soft blend
     ///   is skipped too) or no sample's best has changed over the last
@@ -71,12 +71,11 @@ impl Schedule {
 
 /// Steps between two judgements of the motion.
 pub const CHECK_EVERY: usize = 10;
-/// The criterion has stopped improving when it fell by less than this fraction over the last
-/// [`CHECK_EVERY`] steps.
+/// The criterion has stopped improving when it fell by less than this fraction of its
+/// [`StallScale`] over the last [`CHECK_EVERY`] steps.
 pub const STALL_FRACTION: f64 = 0.01;
-/// The inversion's joint polish has reproduced the retrieved motion once its mean joint
-/// distance is under this, m: the position tolerance of the constraints
-/// ([`crate::constraints`]' 0.05 m).
+/// The inversion has reproduced the retrieved motion once its mean joint distance is under
+/// this, m: the position tolerance of the constraints ([`crate::constraints`]' 0.05 m).
 pub const INVERSION_TOLERANCE_M: f64 = 0.05;
 
 /// Foot skate ratio of the corpus's held-out walks ([`foot_skate_ratio`];
@@ -87,16 +86,38 @@ pub const CAPTURE_MAX_ACCELERATION: f64 = 0.111;
 /// How far above its bar a figure may lie, as a fraction of the bar.
 pub const LOOK_SLACK: f64 = 0.10;
 
+/// What a fall of the criterion is measured against when asking whether it has stalled.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum StallScale {
+    /// Its value [`CHECK_EVERY`] steps before: for a stage whose stall is its only end (the
+    /// inversion's polishes short of their tolerance, the soft blend), which goes on while it
+    /// still gains a part of what is left.
+    #[default]
+    Recent,
+    /// The larger of that and its value at the stage's first step: for a stage that also
+    /// needs its program met ([`StageEnd`]). Once met, the criterion's residue is far below
+    /// where the stage started, and its step-to-step noise would pass for progress against a
+    /// fraction of itself.
+    StageStart,
+}
+
 /// A criterion's record over one stage, asked whether it has stopped improving.
 #[derive(Debug, Clone, Default)]
 pub struct Stall {
     losses: Vec<f64>,
+    scale: StallScale,
 }
 
 impl Stall {
+    /// A record judged against `scale`.
+    pub fn with_scale(scale: StallScale) -> Self {
+        Stall { losses: Vec::new(), scale }
+    }
+
     /// Records the criterion after a step. True when this step is a check (a multiple of
     /// [`CHECK_EVERY`] steps, past the first `after`) at which the criterion fell by less than
-    /// [`STALL_FRACTION`] over the last [`CHECK_EVERY`] steps (a rise counts as stalled).
+    /// [`STALL_FRACTION`] of its [`StallScale`] over the last [`CHECK_EVERY`] steps (a rise
+    /// counts as stalled).
     pub fn stalled_after(&mut self, loss: f64, after: usize) -> bool {
         self.losses.push(loss);
         if !self.at_check(after) {
@@ -104,7 +125,11 @@ impl Stall {
         }
         let taken = self.losses.len();
         let (before, now) = (self.losses[taken - 1 - CHECK_EVERY], self.losses[taken - 1]);
-        before - now <= STALL_FRACTION * before.abs()
+        let scale = match self.scale {
+            StallScale::Recent => before.abs(),
+            StallScale::StageStart => before.abs().max(self.losses[0].abs()),
+        };
+        before - now <= STALL_FRACTION * scale
     }
 
     /// Whether this step (the last recorded) is a check past the first `after` steps.
@@ -230,7 +255,16 @@ impl<'a> StageEnd<'a> {
         warmup: usize,
         goal: Goal<'a>,
     ) -> Self {
-        StageEnd { schedule, prior, parts, initial, warmup, goal, stall: Stall::default(), round: 0 }
+        StageEnd {
+            schedule,
+            prior,
+            parts,
+            initial,
+            warmup,
+            goal,
+            stall: Stall::with_scale(StallScale::StageStart),
+            round: 0,
+        }
     }
 
     /// Whether restart `round`'s stage is done after `step`, handing on motion `x`.
@@ -302,6 +336,19 @@ mod tests {
         assert_eq!((1..=20).filter(|_| flat.stalled_after(1.0, 0)).count(), 1, "flat: stalled at step 20");
         let mut rising = Stall::default();
         assert!((1..=20).any(|step| rising.stalled_after(step as f64, 0)));
+        // From 1 down to a residue halving every step: each check sees the last ten steps fall
+        // by 99.9 % of themselves but by under 1 % of the stage's start.
+        let residue = |step: i32| if step == 1 { 1.0 } else { 0.5f64.powi(step) };
+        let mut against_start = Stall::with_scale(StallScale::StageStart);
+        let stalls: Vec<i32> = (1..=30).filter(|&step| against_start.stalled_after(residue(step), 0)).collect();
+        assert_eq!(stalls, [20, 30], "against the start, a residue under 1 % of it has stalled");
+        let mut against_itself = Stall::default();
+        assert!(!(1..=30).any(|step| against_itself.stalled_after(residue(step), 0)), "against itself it falls");
+        let mut halving = Stall::with_scale(StallScale::StageStart);
+        assert!(
+            !(1..=20).any(|step| halving.stalled_after(0.5f64.powi(step / 4), 0)),
+            "falling by more than 1 % of the start every ten steps"
+        );
     }
 
     /// 40 frames standing still, or with both feet on the floor sliding sideways at `speed`

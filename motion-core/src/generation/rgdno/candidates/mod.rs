@@ -28,8 +28,8 @@
 //! the corpus's 5.8 h train split, 116 MB with the clips and captions). A crop is 16 bytes of
 //! index, made per query (1.3 MB for the 78,678 crops of a 100-frame task); its joints exist only
 //! while its batch is scored ([`RetrievalDatabase::place`]), and features are made only for the
-//! retrieved few ([`RetrievalDatabase::features`]). Opening reads the whole corpus file first
-//! (every split, f64): about 650 MB at the peak, returned once the train split is copied out.
+//! retrieved few ([`RetrievalDatabase::features`]). Opening unpacks the corpus file (83 MB) and
+//! decodes its train clips one at a time ([`PackedCorpus`]), never every split's f64 poses.
 
 use std::ops::Range;
 use std::path::PathBuf;
@@ -44,7 +44,8 @@ use super::semantic::{named_actions, Described, Heard};
 use crate::corpus::caption::Action;
 use crate::corpus::caption::{captions, PHRASINGS};
 use crate::corpus::family::{Families, Family};
-use crate::corpus::{file as corpus_file, Corpus, Split};
+use crate::corpus::file::PackedCorpus;
+use crate::corpus::{Corpus, CorpusClip, CorpusWindow, Split};
 use crate::database::{mirror_label, DatabaseSource, MotionDatabase, Window};
 use crate::import::ImportWarning;
 use crate::motion::mirror;
@@ -82,7 +83,7 @@ impl RetrievalSource {
     pub fn open(&self) -> Result<(RetrievalDatabase, Vec<ImportWarning>), RetrievalError> {
         match self {
             RetrievalSource::Corpus(path) => {
-                Ok((RetrievalDatabase::from_corpus(&corpus_file::load(path)?)?, Vec::new()))
+                Ok((RetrievalDatabase::from_packed_corpus(&PackedCorpus::open(path)?)?, Vec::new()))
             }
             RetrievalSource::Database(source) => {
                 let (database, warnings) = source.open().map_err(|error| RetrievalError::Database {
@@ -250,38 +251,60 @@ impl RetrievalDatabase {
     /// The train split of `corpus`, every clip also mirrored. Validation and test clips are
     /// left out.
     pub fn from_corpus(corpus: &Corpus) -> Result<Self, RetrievalError> {
-        let mut database = Self::empty(true);
-        for (index, clip) in corpus.clips.iter().enumerate().filter(|(_, c)| c.split == Split::Train) {
-            let mirrored_description = mirror_label(&clip.description);
-            let windows = corpus.windows.iter().enumerate().filter(|(_, w)| w.clip == index).map(|(number, w)| {
-                let text = |captions: Vec<String>| {
-                    let measured = captions.first().cloned().unwrap_or_default();
-                    WindowText {
-                        sentence: captions.get(PHRASINGS).cloned().unwrap_or_else(|| measured.clone()),
-                        said: captions.join(" | "),
-                        measured,
-                    }
-                };
-                let (poses, mirrored_tags) = (corpus.window_joints(w), w.tags.mirrored());
-                StoredWindow {
-                    start: w.start,
-                    frames: w.frames,
-                    texts: [text(w.captions.clone()), text(captions(&mirrored_tags, &mirrored_description, number))],
-                    families: [
-                        Families::happening_in(poses, &w.tags, &clip.description),
-                        Families::happening_in(poses, &mirrored_tags, &mirrored_description),
-                    ],
-                    turn_deg: w.tags.turn_deg.abs(),
-                }
-            });
-            database.push(
-                &clip.name,
-                corpus.clip_joints(clip).iter().flat_map(pose_coordinates),
-                (false, 1.0),
-                windows,
-            );
+        let mut database = Self::for_train_split(&corpus.clips);
+        for (index, clip) in train_split(&corpus.clips) {
+            database.push_corpus_clip(index, clip, &corpus.windows, corpus.clip_joints(clip));
         }
         database.checked()
+    }
+
+    /// The same database as [`RetrievalDatabase::from_corpus`] of the whole corpus, made from
+    /// the file's packed joints one train clip at a time.
+    pub fn from_packed_corpus(corpus: &PackedCorpus) -> Result<Self, RetrievalError> {
+        let mut database = Self::for_train_split(&corpus.clips);
+        let mut poses = Vec::new();
+        for (index, clip) in train_split(&corpus.clips) {
+            poses.clear();
+            corpus.decode_clip(clip, &mut poses);
+            database.push_corpus_clip(index, clip, &corpus.windows, &poses);
+        }
+        database.checked()
+    }
+
+    /// An empty database with every clip mirrored, its joints sized for the train split of
+    /// `clips` (grown by doubling, the 111 MB would be copied and its pages zeroed again).
+    fn for_train_split(clips: &[CorpusClip]) -> Self {
+        let mut database = Self::empty(true);
+        database.joints.reserve_exact(train_split(clips).map(|(_, c)| c.frames * POSE).sum());
+        database
+    }
+
+    /// Appends corpus clip `index` with its `poses` and its windows among `windows`, each
+    /// described as recorded and mirrored.
+    fn push_corpus_clip(&mut self, index: usize, clip: &CorpusClip, windows: &[CorpusWindow], poses: &[Pose]) {
+        let mirrored_description = mirror_label(&clip.description);
+        let windows = windows.iter().enumerate().filter(|(_, w)| w.clip == index).map(|(number, w)| {
+            let text = |captions: Vec<String>| {
+                let measured = captions.first().cloned().unwrap_or_default();
+                WindowText {
+                    sentence: captions.get(PHRASINGS).cloned().unwrap_or_else(|| measured.clone()),
+                    said: captions.join(" | "),
+                    measured,
+                }
+            };
+            let (window_poses, mirrored_tags) = (&poses[w.start..w.start + w.frames], w.tags.mirrored());
+            StoredWindow {
+                start: w.start,
+                frames: w.frames,
+                texts: [text(w.captions.clone()), text(captions(&mirrored_tags, &mirrored_description, number))],
+                families: [
+                    Families::happening_in(window_poses, &w.tags, &clip.description),
+                    Families::happening_in(window_poses, &mirrored_tags, &mirrored_description),
+                ],
+                turn_deg: w.tags.turn_deg.abs(),
+            }
+        });
+        self.push(&clip.name, poses.iter().flat_map(pose_coordinates), (false, 1.0), windows);
     }
 
     /// Every sequence of `database` (its augmentations included), its joints recovered from its
@@ -586,6 +609,11 @@ impl RetrievalDatabase {
         let flat: Vec<f32> = extracted.features.iter().flatten().copied().collect();
         Ok(Tensor::from_vec(flat, (frames, FEATURE_DIM), device)?)
     }
+}
+
+/// The clips of the train split, with their indices.
+fn train_split(clips: &[CorpusClip]) -> impl Iterator<Item = (usize, &CorpusClip)> {
+    clips.iter().enumerate().filter(|(_, c)| c.split == Split::Train)
 }
 
 fn pose_coordinates(pose: &Pose) -> impl Iterator<Item = f32> + '_ {

@@ -54,6 +54,22 @@ fn crops_start_every_stride_for_each_factor_and_a_short_clip_is_taken_whole() {
 }
 
 #[test]
+fn the_database_of_a_packed_corpus_file_is_the_database_of_the_corpus_it_holds() {
+    let corpus = tiny_corpus(vec![
+        ("first", Split::Train, walking_poses(150, 0.0)),
+        ("held", Split::Test, walking_poses(120, 0.3)),
+        ("third", Split::Train, walking_poses(180, -0.5)),
+    ]);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("corpus.safetensors.gz");
+    crate::corpus::file::save(&corpus, &path).unwrap();
+    let packed = RetrievalDatabase::from_packed_corpus(&PackedCorpus::open(&path).unwrap()).unwrap();
+    let whole = RetrievalDatabase::from_corpus(&crate::corpus::file::load(&path).unwrap()).unwrap();
+    assert_eq!(packed.clips(), 2, "the test clip is held out");
+    assert_eq!(format!("{packed:?}"), format!("{whole:?}"));
+}
+
+#[test]
 fn a_placed_crop_is_what_its_features_recover() {
     let corpus = tiny_corpus(vec![("turn", Split::Train, walking_poses(200, 0.8))]);
     let database = RetrievalDatabase::from_corpus(&corpus).unwrap();
