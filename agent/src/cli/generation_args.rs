@@ -54,8 +54,8 @@ pub enum ScheduleArg {
     /// stopped improving (it fell by under 1 % of the stage's first loss over 10 steps) and the
     /// cleaned motion's foot skate and peak acceleration are within 10 % of capture's walks or
     /// of the prior's own sample; RG-DNO's branches once each meets its group; the inversion
-    /// once its motion is within 0.05 m of the retrieved one or its loss stalls; the soft blend
-    /// once its loss stalls. RG-DNO's mask candidates
+    /// once its loss stalls or, for a program without counts, its motion is within 0.05 m of
+    /// the retrieved one; the soft blend once its loss stalls. RG-DNO's mask candidates
     /// are scored in the order a cheap sampler ranks them until the masks meet the program
     /// (the soft blend is then skipped) or no sample's best has changed over 64 candidates, and
     /// the refinement is skipped when nothing is left to close. Unless set, DNO samples with 5

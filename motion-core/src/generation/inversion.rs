@@ -14,9 +14,10 @@
 //! 3. the joint polish: DNO on the mean world-frame joint error, which weighs the
 //!    trajectory as the user sees it.
 //!
-//! Under [`Schedule::UntilMet`] each polish also ends once the motion is within
-//! [`INVERSION_TOLERANCE_M`] of the target (the feature polish judges it at its checks), and
-//! the joint polish is skipped when the feature polish got there.
+//! Under [`Schedule::UntilMet`] each polish ends once its loss stalls, the joint polish also at
+//! a check within [`INVERSION_TOLERANCE_M`] of the target; with
+//! [`InversionConfig::stop_within_tolerance`] the feature polish also ends within that distance
+//! (the joint polish is then skipped) and the joint polish at any step within it.
 
 use candle_core::{DType, Result, Tensor};
 
@@ -53,9 +54,14 @@ pub struct InversionConfig {
     pub guidance: f64,
     /// When each polish ends (default [`Schedule::Paper`]: its whole budget; RG-DNO passes its
     /// run's schedule). Under [`Schedule::UntilMet`] a polish ends once its loss has stalled
-    /// ([`Stall`]), the joint polish also once the motion is within [`INVERSION_TOLERANCE_M`]
-    /// of the target.
+    /// ([`Stall`]), the joint polish also at a check within [`INVERSION_TOLERANCE_M`] of the
+    /// target.
     pub schedule: Schedule,
+    /// Under [`Schedule::UntilMet`], also end the feature polish at a check within
+    /// [`INVERSION_TOLERANCE_M`] (then skipping the joint polish) and the joint polish at any
+    /// step within it, each handing on the iterate judged (default false; RG-DNO sets it for a
+    /// program without counts, whose counted extrema a mean joint distance does not judge).
+    pub stop_within_tolerance: bool,
 }
 
 impl InversionConfig {
@@ -77,6 +83,7 @@ impl Default for InversionConfig {
             polish_lr: 0.02,
             guidance: 1.0,
             schedule: Schedule::Paper,
+            stop_within_tolerance: false,
         }
     }
 }
@@ -112,10 +119,11 @@ pub fn invert_motion(
     let rms = z.sqr()?.mean_keepdim((1, 2))?.sqrt()?;
     let mut z = z.broadcast_div(&rms)?;
     let fast = config.schedule == Schedule::UntilMet;
-    // Under until-met both polishes end once the motion is within the tolerance of the
-    // retrieved one: the feature polish at its checks, the joint polish at any step (its
+    // With `stop_within_tolerance` both polishes end once the motion is within the tolerance
+    // of the target: the feature polish at its checks, the joint polish at any step (its
     // criterion is that distance), so that it is skipped when the feature polish got there.
     // Each then hands on its best iterate, the one judged, not the noise one update past it.
+    let within = fast && config.stop_within_tolerance;
     let polish = |steps: usize, lr: f64| DnoConfig {
         steps,
         lr,
@@ -123,7 +131,7 @@ pub fn invert_motion(
         lr_decay_steps: Some(steps),
         decorrelate_scale: 0.0,
         ddim_steps: config.ddim_steps,
-        keep_best: fast,
+        keep_best: within,
         ..DnoConfig::default()
     };
     let target = x0.detach();
@@ -135,7 +143,7 @@ pub fn invert_motion(
         let mut stall = Stall::default();
         let done = |s: &DnoStep, x: &Tensor| {
             let stalled = stall.stalled_after(mean(&s.loss), 0);
-            if fast && stall.at_check(0) {
+            if within && stall.at_check(0) {
                 let error_m = mean_joint_distance(&prior.to_joints(x)?, &joints)?.to_dtype(DType::F64)?.to_vec1()?;
                 reproduced = mean(&error_m) <= INVERSION_TOLERANCE_M;
             }
@@ -149,7 +157,9 @@ pub fn invert_motion(
         let mut stall = Stall::default();
         let done = |s: &DnoStep, _: &Tensor| {
             let error_m = mean(&s.loss);
-            Ok(fast && (stall.stalled_after(error_m, 0) || error_m <= INVERSION_TOLERANCE_M))
+            Ok(fast
+                && (stall.stalled_after(error_m, 0)
+                    || ((within || stall.at_check(0)) && error_m <= INVERSION_TOLERANCE_M)))
         };
         z = dno::optimize_until(&solver, criterion, &z, &settings, &mut on_polish_step, done)?.z;
     }

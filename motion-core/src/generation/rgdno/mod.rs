@@ -126,7 +126,8 @@ pub fn generate_rg_dno(
     let text = prior.encode_text(&vec![program.text.as_str(); batch], device)?;
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
     // The stages before the final round may sample through fewer of the sampler's timesteps.
-    let stride = rg.early_stride_under(config.schedule, !compiled.count_targets().is_empty());
+    let counts = !compiled.count_targets().is_empty();
+    let stride = rg.early_stride_under(config.schedule, counts);
     let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.dno.ddim_steps)?;
     let early = solver.every(stride);
     let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, guidance, config.dno.ddim_steps)?.every(stride);
@@ -135,6 +136,7 @@ pub fn generate_rg_dno(
         ddim_steps: config.dno.ddim_steps,
         sampler_stride: stride,
         schedule: config.schedule,
+        stop_within_tolerance: !counts,
         ..rg.inversion.clone()
     };
     let foot_lock = finishing_foot_lock(program, config);
