@@ -626,6 +626,15 @@ fn cleanup_line(f: &mut fmt::Formatter<'_>, cleanup: &CleanupReport) -> fmt::Res
     if !undone.is_empty() {
         writeln!(f, "  foot clean-up undone for {}: the motion before it is kept", undone.join("; "))?;
     }
+    let given_up: Vec<String> =
+        cleanup.samples.iter().enumerate().filter(|(_, s)| s.locks_given_up).map(|(i, _)| i.to_string()).collect();
+    if !given_up.is_empty() {
+        writeln!(
+            f,
+            "  foot locks given up for sample {}: they would raise the foot skate or jerk the motion; it is only set on the floor",
+            given_up.join(", ")
+        )?;
+    }
     writeln!(
         f,
         "  foot clean-up: {locked} joint-frames locked ({shortened} sliding contacts cut to their steadiest \

@@ -53,7 +53,8 @@ pub enum ScheduleArg {
     /// the warm-up): DNO and the final round once every constraint is met, the loss has
     /// stopped improving (it fell by under 1 % of the stage's first loss over 10 steps) and the
     /// cleaned motion's foot skate and peak acceleration are within 10 % of capture's walks or
-    /// of the prior's own sample; RG-DNO's branches once each meets its group; the inversion
+    /// of the prior's own sample (or have come no nearer to that over three checks: a crawl's
+    /// own skate); RG-DNO's branches once each meets its group; the inversion
     /// once its loss stalls or, for a program without counts, its motion is within 0.05 m of
     /// the retrieved one; the soft blend once its loss stalls. RG-DNO's mask candidates
     /// are scored in the order a cheap sampler ranks them until the masks meet the program

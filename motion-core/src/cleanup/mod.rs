@@ -34,6 +34,9 @@
 //!    eased fraction is checked again). (Without these checks a lock lowering a stance ankle to
 //!    its standing height pushes its toe, or a crawl's knee, up to 7 cm through the floor; both
 //!    figures are in `fixtures/results/README.md`.)
+//! 5. **Judged** ([`locks_help`]): the locks and IK are kept only where they do not raise the
+//!    foot skate of the motion on the floor nor jerk it beyond capture's peak acceleration;
+//!    otherwise the motion is only set on the floor (a crawl's feet drag along it by design).
 //!
 //! Only the knees, ankles and toes move (and the whole body by the floor offset), so a
 //! constraint on any other joint keeps its error exactly unless the body is lowered. A
@@ -54,7 +57,7 @@ use std::ops::Range;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::metrics::foot_skate_ratio;
+use crate::metrics::{foot_skate_ratio, max_acceleration, CAPTURE_MAX_ACCELERATION};
 use crate::motion::leg_ik::{knee_poles, solve_leg, Leg, LegSolution};
 use crate::skeleton::{bone_lengths, Joint, Pose, CONTACT_JOINTS, FPS, NUM_JOINTS};
 use crate::MotionError;
@@ -75,6 +78,10 @@ pub const FLOOR_FRACTION_STEP: f64 = 0.25;
 
 /// How far below the floor, or below where it was, the IK may leave a joint, m (round-off).
 const FLOOR_SLACK_M: f64 = 1e-3;
+
+/// How far above the floored motion's peak acceleration (or capture's, when larger) the locks
+/// may take it, as a fraction of it, before they are given up ([`locks_help`]).
+pub const LOCK_ACCELERATION_SLACK: f64 = 0.10;
 
 /// Settings of [`foot_lock`]. Heights and speeds were measured on the shipped walking clips
 /// (`fixtures/mocap`, the DeepMimic walks): standing ankles at 5.9–7.2 cm (median per clip),
@@ -234,6 +241,11 @@ pub struct FootLockReport {
     /// is the one before it; the figures above are of the undone clean-up).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub undone_for: Vec<String>,
+    /// Whether the locks were given up because they would raise the foot skate or jerk the
+    /// motion ([`locks_help`]): the motion is then only set on the floor (the contacts and
+    /// counts above are of the locks given up).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub locks_given_up: bool,
 }
 
 /// A cleaned motion and its report.
@@ -296,6 +308,7 @@ pub fn foot_lock(
     for (pose, r) in out.iter_mut().zip(&raise) {
         *pose = pose.map(|v| v + DVec3::Y * *r);
     }
+    let floored = out.clone();
 
     // 2–3. Contacts and the correction of each foot joint.
     let mut locked: [Vec<Range<usize>>; 4] = Default::default();
@@ -381,8 +394,23 @@ pub fn foot_lock(
     }
     let raised_m = raise.iter().copied().fold(0.0, f64::max);
     let counts = Counts { shortened, unreachable, held_above_floor };
-    let report = report(poses, &out, (floor_m, lowered_m, raised_m), Some(locked), counts);
+    let locks_given_up = !locks_help(&floored, &out);
+    if locks_given_up {
+        out = floored;
+    }
+    let mut report = report(poses, &out, (floor_m, lowered_m, raised_m), Some(locked), counts);
+    report.locks_given_up = locks_given_up;
     Ok(FootLocked { poses: out, report })
+}
+
+/// Whether the locks and the leg IK (giving `locked`) improve on the motion on the floor they
+/// start from (`floored`): no more foot skate ([`foot_skate_ratio`]), and a peak acceleration
+/// ([`max_acceleration`]) at most [`LOCK_ACCELERATION_SLACK`] above the larger of the floored
+/// motion's and capture's walks' ([`CAPTURE_MAX_ACCELERATION`]). Locks that pin a crawl's
+/// dragging feet into the skate band, or jerk a leg towards an out-of-reach hold, are given up.
+fn locks_help(floored: &[Pose], locked: &[Pose]) -> bool {
+    let acceleration_bar = (1.0 + LOCK_ACCELERATION_SLACK) * max_acceleration(floored).max(CAPTURE_MAX_ACCELERATION);
+    foot_skate_ratio(locked) <= foot_skate_ratio(floored) && max_acceleration(locked) <= acceleration_bar
 }
 
 /// The largest fraction in [0, `at_most`] of a leg's correction whose solve (`solve(fraction)`
@@ -469,5 +497,6 @@ fn report(
         skate_after: foot_skate_ratio(after),
         max_bone_length_change_m,
         undone_for: Vec::new(),
+        locks_given_up: false,
     }
 }

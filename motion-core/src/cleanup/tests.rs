@@ -127,6 +127,20 @@ fn a_sliding_stance_foot_is_held_with_every_bone_kept() {
 }
 
 #[test]
+fn locks_are_kept_only_where_they_skate_no_more_and_jerk_no_harder() {
+    let slide = sliding(0.03);
+    let held = foot_lock(&slide, None, &FootLockConfig::default()).unwrap();
+    assert!(!held.report.locks_given_up);
+    assert!(locks_help(&slide, &held.poses), "the held foot skates less");
+    assert!(locks_help(&slide, &slide), "no change");
+    assert!(!locks_help(&held.poses, &slide), "a still foot made to slide skates more");
+    let mut jerked = held.poses.clone();
+    jerked[5][Joint::LeftKnee.index()].x += 0.3;
+    assert!(max_acceleration(&jerked) > 1.1 * CAPTURE_MAX_ACCELERATION);
+    assert!(!locks_help(&held.poses, &jerked), "a knee thrown 30 cm for one frame");
+}
+
+#[test]
 fn a_slide_longer_than_the_cap_is_held_only_over_its_steadiest_stretch() {
     // 5 cm per frame for 10 frames: 45 cm. Held at the mean, the ends would move 22.5 cm.
     let poses = sliding(0.05);
@@ -261,6 +275,7 @@ fn real_walks_move_little_keep_their_bones_and_do_not_skate_more() {
             && bone_change(&poses, &out.poses) < 1e-9
             && bone_length_range(&out.poses) <= bone_length_range(&poses) + 1e-9
             && r.skate_after <= r.skate_before
+            && !r.locks_given_up
             && jitter.1 <= 1.02 * jitter.0
             && max_acceleration(&out.poses) <= 1.05 * max_acceleration(&poses))
         {
@@ -309,6 +324,7 @@ fn sliding_walks_get_their_skate_cut() {
         // Locks let go of no faster than 0.5 m/s and the soft reach keeps knees from snapping:
         // no new acceleration peaks.
         if !(r.skate_before > 0.1
+            && !r.locks_given_up
             && r.skate_after < 0.75 * r.skate_before
             && r.max_displacement_m < 0.25
             && bone_change(&sliding, &out.poses) < 1e-9

@@ -7,10 +7,12 @@
 //! free fall in flight, no joint under the floor). Foot skate and peak acceleration are not in
 //! it and move as the optimiser keeps going (DNO's raw foot skate on Task 1 rises from 0.02 to
 //! 0.41 over its 500 steps, and the cleaned figure moves between 0.11 and 0.20), so a stage
-//! whose motion is shown also judges them, on the motion after the foot clean-up. The stop is
-//! only asked after the learning rate's warm-up and every [`CHECK_EVERY`] steps, when the
-//! judgement's cost (the motion's joints, the program's checks and the clean-up, no denoiser
-//! pass) is small beside a step's.
+//! whose motion is shown also judges them, on the motion after the foot clean-up: under their
+//! bars, or no nearer to them over the last [`LOOK_PATIENCE`] judgements (a crawl's own skate,
+//! far above a walk's bar, that more steps do not lower). The stop is only asked after the
+//! learning rate's warm-up and every [`CHECK_EVERY`] steps, when the judgement's cost (the
+//! motion's joints, the program's checks and the clean-up, no denoiser pass) is small beside a
+//! step's.
 
 use std::ops::Range;
 
@@ -20,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::constraints::CompiledProgram;
 use crate::dno::DnoStep;
-use crate::metrics::{foot_skate_ratio, max_acceleration};
+use crate::metrics::{foot_skate_ratio, max_acceleration, CAPTURE_FOOT_SKATE, CAPTURE_MAX_ACCELERATION};
 use crate::motion::tensor_to_poses;
 use crate::numeric::mean;
 use crate::prior::Prior;
@@ -37,7 +39,8 @@ pub enum Schedule {
     Paper,
     /// Every stage ends when its work is done, or at its budget:
     /// - DNO and RG-DNO's final round when every constraint is met, the criterion has stalled
-    ///   ([`Stall`]) and the motion looks no worse than its bar ([`LookBar`]);
+    ///   ([`Stall`]) and the motion looks no worse than its bar ([`LookBar`]) or no longer
+    ///   comes nearer to it ([`LookFloor`]);
     /// - RG-DNO's branches when each branch meets its own group (the final round finishes
     ///   the motion);
     /// - the inversion's polishes and RG-DNO's soft blend when their objective has stalled;
@@ -78,13 +81,11 @@ pub const STALL_FRACTION: f64 = 0.01;
 /// this, m: the position tolerance of the constraints ([`crate::constraints`]' 0.05 m).
 pub const INVERSION_TOLERANCE_M: f64 = 0.05;
 
-/// Foot skate ratio of the corpus's held-out walks ([`foot_skate_ratio`];
-/// `fixtures/model/report.md`, the walk family's held-out capture).
-pub const CAPTURE_FOOT_SKATE: f64 = 0.121;
-/// Peak joint acceleration of the same held-out walks, m/frame² ([`max_acceleration`]).
-pub const CAPTURE_MAX_ACCELERATION: f64 = 0.111;
 /// How far above its bar a figure may lie, as a fraction of the bar.
 pub const LOOK_SLACK: f64 = 0.10;
+/// Judgements of a met, stalled motion above its look bar, with no sample's look coming nearer
+/// its bar by [`STALL_FRACTION`] of the bar, after which the look counts as at its floor.
+pub const LOOK_PATIENCE: usize = 3;
 
 /// What a fall of the criterion is measured against when asking whether it has stalled.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -182,21 +183,52 @@ impl LookBar {
         Ok(LookBar { foot_skate, max_acceleration })
     }
 
-    /// Whether every sample of `joints` `[B, T, 22, 3]`, after the clean-up `foot_lock`, stays
-    /// under its bars.
-    pub fn passes(&self, joints: &Tensor, foot_lock: &FootLockConfig) -> candle_core::Result<bool> {
+    /// How far each sample of `joints` `[B, T, 22, 3]`, after the clean-up `foot_lock`, lies
+    /// from its bars: the larger of its foot skate and peak acceleration, each over its bar
+    /// (at most 1 under both bars).
+    pub fn excess(&self, joints: &Tensor, foot_lock: &FootLockConfig) -> candle_core::Result<Vec<f64>> {
         Ok(looks(joints, foot_lock)?
             .iter()
             .zip(self.foot_skate.iter().zip(&self.max_acceleration))
-            .all(|(&(skate, acc), (&skate_bar, &acc_bar))| skate <= skate_bar && acc <= acc_bar))
+            .map(|(&(skate, acc), (&skate_bar, &acc_bar))| (skate / skate_bar).max(acc / acc_bar))
+            .collect())
+    }
+}
+
+/// A shown motion's look over the judgements of one restart: done once every sample is under
+/// its bars, or when for [`LOOK_PATIENCE`] judgements in a row no sample above its bar came
+/// nearer to it than its best by [`STALL_FRACTION`] of the bar.
+#[derive(Debug, Clone, Default)]
+pub struct LookFloor {
+    best: Vec<f64>,
+    without_gain: usize,
+}
+
+impl LookFloor {
+    /// Records one judgement's [`LookBar::excess`] per sample; true when the look is done.
+    pub fn done_after(&mut self, excess: &[f64]) -> bool {
+        if excess.iter().all(|&e| e <= 1.0) {
+            return true;
+        }
+        if self.best.len() != excess.len() {
+            self.best = excess.to_vec();
+            return false;
+        }
+        let gained = excess.iter().zip(&self.best).any(|(&now, &best)| now > 1.0 && now < best - STALL_FRACTION);
+        for (best, &now) in self.best.iter_mut().zip(excess) {
+            *best = best.min(now);
+        }
+        self.without_gain = if gained { 0 } else { self.without_gain + 1 };
+        self.without_gain >= LOOK_PATIENCE
     }
 }
 
 /// What ends a stage under [`Schedule::UntilMet`].
 enum Goal<'a> {
     /// A shown motion: every constraint met, the criterion stalled, and the look under its bars
-    /// (made at the first judgement from the unoptimised motion and the generation's clean-up).
-    Shown { foot_lock: &'a FootLockConfig, bar: Option<LookBar> },
+    /// (made at the first judgement from the unoptimised motion and the generation's clean-up)
+    /// or at its floor.
+    Shown { foot_lock: &'a FootLockConfig, bar: Option<LookBar>, floor: LookFloor },
     /// An intermediate one: every program met on its rows.
     Met,
 }
@@ -232,7 +264,7 @@ impl<'a> StageEnd<'a> {
         warmup: usize,
         foot_lock: &'a FootLockConfig,
     ) -> Self {
-        let goal = Goal::Shown { foot_lock, bar: None };
+        let goal = Goal::Shown { foot_lock, bar: None, floor: LookFloor::default() };
         Self::with_goal(schedule, prior, vec![(compiled, None)], initial, warmup, goal)
     }
 
@@ -275,6 +307,9 @@ impl<'a> StageEnd<'a> {
         if round != self.round {
             self.round = round;
             self.stall.clear();
+            if let Goal::Shown { floor, .. } = &mut self.goal {
+                *floor = LookFloor::default();
+            }
         }
         let stalled = self.stall.stalled_after(mean(&step.loss), self.warmup);
         let judged = match self.goal {
@@ -289,12 +324,12 @@ impl<'a> StageEnd<'a> {
             return Ok(false);
         }
         match &mut self.goal {
-            Goal::Shown { foot_lock, bar } => {
+            Goal::Shown { foot_lock, bar, floor } => {
                 let bar = match bar {
                     Some(bar) => bar,
                     None => bar.insert(LookBar::of_initial(self.initial, foot_lock)?),
                 };
-                bar.passes(&joints, foot_lock)
+                Ok(floor.done_after(&bar.excess(&joints, foot_lock)?))
             }
             Goal::Met => Ok(true),
         }
@@ -375,7 +410,23 @@ mod tests {
         let still = standing(0.0);
         let off = FootLockConfig { enabled: false, ..FootLockConfig::default() };
         let bar = LookBar::of_initial(&still, &off).unwrap();
-        assert!(bar.passes(&still, &off).unwrap());
-        assert!(!bar.passes(&standing(1.5), &off).unwrap(), "feet sliding at 1.5 m/s on every frame");
+        assert!(bar.excess(&still, &off).unwrap()[0] <= 1.0);
+        assert!(bar.excess(&standing(1.5), &off).unwrap()[0] > 1.0, "feet sliding at 1.5 m/s on every frame");
+    }
+
+    #[test]
+    fn a_look_above_its_bar_is_at_its_floor_after_three_judgements_without_gain() {
+        let judged = |excesses: &[[f64; 2]]| {
+            let mut floor = LookFloor::default();
+            excesses.iter().position(|e| floor.done_after(e)).map(|at| at + 1)
+        };
+        assert_eq!(judged(&[[0.9, 1.0]]), Some(1), "under both bars at once");
+        assert_eq!(judged(&[[2.7, 1.2], [2.8, 1.2], [2.9, 1.2], [2.9, 1.21]]), Some(4), "no sample nearer");
+        assert_eq!(judged(&[[2.7, 1.2], [2.8, 1.2], [2.8, 1.1], [2.9, 1.2], [2.9, 1.2]]), None, "one gained");
+        assert_eq!(judged(&[[2.7, 1.2], [2.695, 1.2], [2.69, 1.2], [2.685, 1.2]]), Some(4), "gains under 1 %");
+        // A sample's gain under its bar does not hold the other's floor back.
+        assert_eq!(judged(&[[2.0, 1.0], [2.0, 0.5], [2.0, 0.2], [2.0, 0.1]]), Some(4));
+        let steady = [[3.0, 1.0], [2.5, 1.0], [2.0, 1.0], [1.5, 1.0], [1.2, 1.0], [1.0, 1.0]];
+        assert_eq!(judged(&steady), Some(6), "coming down to its bar");
     }
 }

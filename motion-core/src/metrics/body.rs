@@ -42,6 +42,12 @@ pub fn foot_skate_ratio(poses: &[Pose]) -> f64 {
     skating.iter().filter(|s| **s).count() as f64 / pairs as f64
 }
 
+/// Foot skate ratio of the corpus's held-out walks ([`foot_skate_ratio`];
+/// `fixtures/model/report.md`, the walk family's held-out capture).
+pub const CAPTURE_FOOT_SKATE: f64 = 0.121;
+/// Peak joint acceleration of the same held-out walks, m/frame² ([`max_acceleration`]).
+pub const CAPTURE_MAX_ACCELERATION: f64 = 0.111;
+
 /// Maximum acceleration (ProgMoGen `get_jittor_stat(order=2, "max")`): the largest norm of the
 /// second time difference of any joint, in **m/frame²** (not scaled by fps²).
 pub fn max_acceleration(poses: &[Pose]) -> f64 {
