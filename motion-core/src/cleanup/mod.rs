@@ -147,6 +147,10 @@ pub struct FootLockConfig {
     /// A body floating less than this above the floor is not lowered, m (default 0.02): its
     /// stance feet come within `height_tolerance_m` of the floor through the leg IK.
     pub float_tolerance_m: f64,
+    /// Keep the locks only where they help ([`locks_help`]; default true): otherwise the motion
+    /// is only set on the floor. Off, the locks stay whatever they do (the papers' schedule,
+    /// whose motions stay those of the builds before this judgement).
+    pub judge_locks: bool,
 }
 
 impl Default for FootLockConfig {
@@ -168,6 +172,7 @@ impl Default for FootLockConfig {
             plant_on_floor: true,
             keep_above_floor: true,
             float_tolerance_m: 0.02,
+            judge_locks: true,
         }
     }
 }
@@ -394,7 +399,7 @@ pub fn foot_lock(
     }
     let raised_m = raise.iter().copied().fold(0.0, f64::max);
     let counts = Counts { shortened, unreachable, held_above_floor };
-    let locks_given_up = !locks_help(&floored, &out);
+    let locks_given_up = config.judge_locks && !locks_help(&floored, &out);
     if locks_given_up {
         out = floored;
     }

@@ -86,11 +86,13 @@ fn keep_what_was_met(
 }
 
 /// The clean-up a generation of `program` ends with: `config.foot_lock`, with its floor planting
-/// off for programs on a raised support and its floor guard off over a pit.
+/// off for programs on a raised support, its floor guard off over a pit, and its locks judged
+/// only under [`Schedule::UntilMet`] (the papers' schedule writes the motions it always wrote).
 pub fn finishing_foot_lock(program: &TaskProgram, config: &GenerationConfig) -> FootLockConfig {
     let mut lock = config.foot_lock.clone();
     lock.plant_on_floor &= !has_raised_support(program);
     lock.keep_above_floor &= !has_sunk_ground(program);
+    lock.judge_locks &= config.schedule == Schedule::UntilMet;
     lock
 }
 
@@ -180,6 +182,16 @@ mod tests {
             pose[joint.index()] = DVec3::new(pelvis.x, p.y, pelvis.z + (p.z - foot.z));
         }
         (0..40).map(|t| pose.map(|p| p + DVec3::new(speed * t as f64, 0.0, 0.0))).collect()
+    }
+
+    #[test]
+    fn the_locks_are_judged_under_the_until_met_schedule_only() {
+        let program = TaskProgram::from_json(r#"{"text": "walk", "frames": 40, "constraints": []}"#).unwrap();
+        let mut config = GenerationConfig::new(crate::generation::method::Method::Dno);
+        for (schedule, judged) in [(Schedule::Paper, false), (Schedule::UntilMet, true)] {
+            config.schedule = schedule;
+            assert_eq!(finishing_foot_lock(&program, &config).judge_locks, judged, "{schedule:?}");
+        }
     }
 
     #[test]
