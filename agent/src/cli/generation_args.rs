@@ -93,7 +93,8 @@ pub struct GenerationArgs {
     /// When each optimisation stage ends: `until-met` (the default) ends each stage once its work
     /// is done and the motion looks no worse than capture or the prior's own sample, samples
     /// DNO with 5 DDIM steps (RG-DNO keeps 10, its stages before the final round on every other
-    /// one for a program without counts) and tries a sample that missed a constraint once more;
+    /// one and unguided for a program without counts) and tries a sample that missed a
+    /// constraint once more;
     /// `paper` runs every step of the papers' budgets with 10 DDIM steps and no retry (their
     /// tables' schedule; fixtures/results/issue59-early-stride/).
     #[arg(long, value_enum, default_value_t = ScheduleArg::UntilMet)]
@@ -159,7 +160,7 @@ pub struct GenerationArgs {
     #[arg(long, value_name = "FILE")]
     pub database: Option<PathBuf>,
     /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
-    /// first_lr, segments, mask_kinds, mask_batch, mask_patience, early_stride, reward,
+    /// first_lr, segments, mask_kinds, mask_batch, mask_patience, early_stride, early_unguided, reward,
     /// final_steps, final_lr, ablation, retrieved_motions, skip_retrieved; missing fields keep
     /// the paper's defaults), e.g.
     /// '{"retrieval": {"related_weight": 0.01}}', '{"retrieved_motions": 2}' (start from the best

@@ -51,9 +51,11 @@ pub enum Schedule {
     ///   is skipped too) or no sample's best has changed over the last
     ///   [`crate::generation::rgdno::config::RgDnoConfig::mask_patience`] candidates;
     /// - for a program without counts, RG-DNO's stages before its final round sample through
-    ///   every other DDIM timestep
-    ///   ([`crate::generation::rgdno::config::RgDnoConfig::early_stride`]), and the final
-    ///   round starts on that sampler until the program is met, then finishes on the whole one;
+    ///   every other DDIM timestep without guidance
+    ///   ([`crate::generation::rgdno::config::RgDnoConfig::early_stride`],
+    ///   [`crate::generation::rgdno::config::RgDnoConfig::early_unguided`]), and the final
+    ///   round starts on that sampler until the program is met, then finishes on the whole,
+    ///   guided one;
     /// - the kinematic refinement is skipped when every sample already meets every geometric
     ///   constraint at its tolerance.
     UntilMet,

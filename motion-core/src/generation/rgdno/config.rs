@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use super::mask::MaskKind;
 use super::reward::RewardWeights;
+use crate::diffusion::Guidance;
 use crate::dno::DnoConfig;
 use crate::generation::inversion::InversionConfig;
 use crate::generation::method::GenerationError;
@@ -97,6 +98,13 @@ pub struct RgDnoConfig {
     /// the whole sampler, as the paper's schedule and a counting program always run). The noise
     /// they hand on starts the same sampler, so the final round refines the same motion.
     pub early_stride: usize,
+    /// Under the same conditions as [`Self::early_stride`], the stages before the final round
+    /// also sample without classifier-free guidance: the conditional prediction alone, one
+    /// denoiser pass per timestep instead of two (default true; false: the run's guidance, as
+    /// the paper's schedule and a counting program always run). The restart's unoptimised
+    /// motion and the final round's whole sampler keep the run's guidance, so the motion handed
+    /// on is a guided sample of its noise.
+    pub early_unguided: bool,
     /// The reward weights λ of eq. 14.
     pub reward: RewardWeights,
     /// DNO steps `N2` of the final round (default 400).
@@ -173,6 +181,7 @@ impl Default for RgDnoConfig {
             mask_batch: 16,
             mask_patience: 64,
             early_stride: 2,
+            early_unguided: true,
             reward: RewardWeights::default(),
             final_steps: 400,
             final_lr: 0.02,
@@ -247,10 +256,28 @@ impl RgDnoConfig {
     /// for a count, which is made of discrete events that the whole sampler may not place where
     /// the coarser one did (`fixtures/results/issue59-early-stride/`).
     pub(super) fn early_stride_under(&self, schedule: Schedule, counts: bool) -> usize {
-        match schedule {
-            Schedule::UntilMet if !counts => self.early_stride.max(1),
-            _ => 1,
+        if Self::early_stages_eased(schedule, counts) {
+            self.early_stride.max(1)
+        } else {
+            1
         }
+    }
+
+    /// The guidance of the stages before the final round under `schedule`, for a program that
+    /// `counts` or not, in a run guided by `guidance`: none where [`Self::early_unguided`]
+    /// applies (as [`Self::early_stride_under`]), else `guidance`.
+    pub(super) fn early_guidance_under(&self, schedule: Schedule, counts: bool, guidance: Guidance) -> Guidance {
+        if self.early_unguided && Self::early_stages_eased(schedule, counts) {
+            Guidance::none()
+        } else {
+            guidance
+        }
+    }
+
+    /// Whether the stages before the final round may run a cheaper sampler: under the
+    /// until-met schedule, for a program without counts.
+    fn early_stages_eased(schedule: Schedule, counts: bool) -> bool {
+        schedule == Schedule::UntilMet && !counts
     }
 
     /// The retrieval settings that keep enough takes for the motions the stages start from.
@@ -293,6 +320,17 @@ mod tests {
         assert_eq!(under(&config, Schedule::UntilMet, true), 1, "a counting program");
         assert_eq!(under(&config, Schedule::Paper, false), 1);
         assert_eq!(under(&RgDnoConfig { early_stride: 0, ..config }, Schedule::UntilMet, false), 1);
+    }
+
+    #[test]
+    fn the_early_stages_go_unguided_where_the_early_stride_applies() {
+        let config = RgDnoConfig::default();
+        let guided = Guidance::default();
+        let under = |config: &RgDnoConfig, schedule, counts| config.early_guidance_under(schedule, counts, guided);
+        assert_eq!(under(&config, Schedule::UntilMet, false), Guidance::none());
+        assert_eq!(under(&config, Schedule::UntilMet, true), guided, "a counting program");
+        assert_eq!(under(&config, Schedule::Paper, false), guided);
+        assert_eq!(under(&RgDnoConfig { early_unguided: false, ..config }, Schedule::UntilMet, false), guided);
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! Stage 6 (eq. 12): DNO on the whole task from the blended noise `z'`, `N2` steps.
 //!
-//! Where the stages before it sample through fewer timesteps
-//! ([`super::config::RgDnoConfig::early_stride`], under the until-met schedule), the round
+//! Where the stages before it sample through fewer timesteps, unguided
+//! ([`super::config::RgDnoConfig::early_stride`], [`super::config::RgDnoConfig::early_unguided`],
+//! under the until-met schedule), the round
 //! starts on that coarse sampler until the motion meets every constraint (or all but a quarter
 //! of `N2`, at least one step, are spent), then finishes on the whole sampler, which makes the
 //! motion it hands on, under the shown stage's stopping rule ([`StageEnd::shown`]).

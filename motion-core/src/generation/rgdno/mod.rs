@@ -125,14 +125,17 @@ pub fn generate_rg_dno(
     // The solver, as DNO's, for the batch and for both branches side by side.
     let text = prior.encode_text(&vec![program.text.as_str(); batch], device)?;
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
-    // The stages before the final round may sample through fewer of the sampler's timesteps.
+    // The stages before the final round may sample through fewer of the sampler's timesteps,
+    // and without guidance.
     let counts = !compiled.count_targets().is_empty();
     let stride = rg.early_stride_under(config.schedule, counts);
-    let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, config.dno.ddim_steps)?;
-    let early = solver.every(stride);
-    let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, guidance, config.dno.ddim_steps)?.every(stride);
+    let early_guidance = rg.early_guidance_under(config.schedule, counts, guidance);
+    let ddim_steps = config.dno.ddim_steps;
+    let solver = UnrolledDdim::new(&prior.mdm, text.clone(), guidance, ddim_steps)?;
+    let early = UnrolledDdim::new(&prior.mdm, text.clone(), early_guidance, ddim_steps)?.every(stride);
+    let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, early_guidance, ddim_steps)?.every(stride);
     let inversion = InversionConfig {
-        guidance: config.guidance,
+        guidance: early_guidance.scale,
         ddim_steps: config.dno.ddim_steps,
         sampler_stride: stride,
         schedule: config.schedule,

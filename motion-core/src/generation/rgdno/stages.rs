@@ -22,8 +22,10 @@ pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
     pub(super) rg: &'a RgDnoConfig,
     /// The final round's solver (batch `B`), which also samples the restart's unoptimised motion.
     pub(super) solver: &'a UnrolledDdim<'a, M>,
-    /// The solver of the mask search and the soft blend (batch `B`; `solver` on fewer
-    /// timesteps under [`crate::generation::rgdno::config::RgDnoConfig::early_stride`]).
+    /// The solver of the mask search, the soft blend and the final round's start (batch `B`;
+    /// `solver` on fewer timesteps and without guidance under
+    /// [`crate::generation::rgdno::config::RgDnoConfig::early_stride`] and
+    /// [`crate::generation::rgdno::config::RgDnoConfig::early_unguided`]).
     pub(super) early: &'a UnrolledDdim<'a, M>,
     pub(super) both: &'a UnrolledDdim<'a, M>,
     pub(super) z_r: &'a Tensor,
