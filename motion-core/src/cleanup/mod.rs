@@ -313,7 +313,8 @@ pub fn foot_lock(
     for (pose, r) in out.iter_mut().zip(&raise) {
         *pose = pose.map(|v| v + DVec3::Y * *r);
     }
-    let floored = out.clone();
+    // The motion on the floor, kept only when the locks are to be judged against it.
+    let floored = config.judge_locks.then(|| out.clone());
 
     // 2–3. Contacts and the correction of each foot joint.
     let mut locked: [Vec<Range<usize>>; 4] = Default::default();
@@ -399,8 +400,9 @@ pub fn foot_lock(
     }
     let raised_m = raise.iter().copied().fold(0.0, f64::max);
     let counts = Counts { shortened, unreachable, held_above_floor };
-    let locks_given_up = config.judge_locks && !locks_help(&floored, &out);
-    if locks_given_up {
+    let given_up = floored.filter(|floored| !locks_help(floored, &out));
+    let locks_given_up = given_up.is_some();
+    if let Some(floored) = given_up {
         out = floored;
     }
     let mut report = report(poses, &out, (floor_m, lowered_m, raised_m), Some(locked), counts);
