@@ -57,7 +57,7 @@ use std::ops::Range;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::metrics::{foot_skate_ratio, max_acceleration, CAPTURE_MAX_ACCELERATION};
+use crate::metrics::{foot_skate_ratio, max_acceleration, CAPTURE_MAX_ACCELERATION, LOOK_SLACK};
 use crate::motion::leg_ik::{knee_poles, solve_leg, Leg, LegSolution};
 use crate::skeleton::{bone_lengths, Joint, Pose, CONTACT_JOINTS, FPS, NUM_JOINTS};
 use crate::MotionError;
@@ -78,10 +78,6 @@ pub const FLOOR_FRACTION_STEP: f64 = 0.25;
 
 /// How far below the floor, or below where it was, the IK may leave a joint, m (round-off).
 const FLOOR_SLACK_M: f64 = 1e-3;
-
-/// How far above the floored motion's peak acceleration (or capture's, when larger) the locks
-/// may take it, as a fraction of it, before they are given up ([`locks_help`]).
-pub const LOCK_ACCELERATION_SLACK: f64 = 0.10;
 
 /// Settings of [`foot_lock`]. Heights and speeds were measured on the shipped walking clips
 /// (`fixtures/mocap`, the DeepMimic walks): standing ankles at 5.9–7.2 cm (median per clip),
@@ -412,11 +408,11 @@ pub fn foot_lock(
 
 /// Whether the locks and the leg IK (giving `locked`) improve on the motion on the floor they
 /// start from (`floored`): no more foot skate ([`foot_skate_ratio`]), and a peak acceleration
-/// ([`max_acceleration`]) at most [`LOCK_ACCELERATION_SLACK`] above the larger of the floored
+/// ([`max_acceleration`]) at most [`LOOK_SLACK`] above the larger of the floored
 /// motion's and capture's walks' ([`CAPTURE_MAX_ACCELERATION`]). Locks that pin a crawl's
 /// dragging feet into the skate band, or jerk a leg towards an out-of-reach hold, are given up.
 fn locks_help(floored: &[Pose], locked: &[Pose]) -> bool {
-    let acceleration_bar = (1.0 + LOCK_ACCELERATION_SLACK) * max_acceleration(floored).max(CAPTURE_MAX_ACCELERATION);
+    let acceleration_bar = (1.0 + LOOK_SLACK) * max_acceleration(floored).max(CAPTURE_MAX_ACCELERATION);
     foot_skate_ratio(locked) <= foot_skate_ratio(floored) && max_acceleration(locked) <= acceleration_bar
 }
 

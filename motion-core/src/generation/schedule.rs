@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use crate::cleanup::{foot_lock, FootLockConfig};
 use crate::constraints::CompiledProgram;
 use crate::dno::DnoStep;
-use crate::metrics::{foot_skate_ratio, max_acceleration, CAPTURE_FOOT_SKATE, CAPTURE_MAX_ACCELERATION};
+use crate::metrics::{foot_skate_ratio, max_acceleration, CAPTURE_FOOT_SKATE, CAPTURE_MAX_ACCELERATION, LOOK_SLACK};
 use crate::motion::tensor_to_poses;
 use crate::numeric::mean;
 use crate::prior::Prior;
@@ -83,8 +83,6 @@ pub const STALL_FRACTION: f64 = 0.01;
 /// this, m: the position tolerance of the constraints ([`crate::constraints`]' 0.05 m).
 pub const INVERSION_TOLERANCE_M: f64 = 0.05;
 
-/// How far above its bar a figure may lie, as a fraction of the bar.
-pub const LOOK_SLACK: f64 = 0.10;
 /// Judgements of a met, stalled motion above its look bar, with no sample's look coming nearer
 /// its bar by [`STALL_FRACTION`] of the bar, after which the look counts as at its floor.
 pub const LOOK_PATIENCE: usize = 3;

@@ -47,6 +47,10 @@ pub fn foot_skate_ratio(poses: &[Pose]) -> f64 {
 pub const CAPTURE_FOOT_SKATE: f64 = 0.121;
 /// Peak joint acceleration of the same held-out walks, m/frame² ([`max_acceleration`]).
 pub const CAPTURE_MAX_ACCELERATION: f64 = 0.111;
+/// How far above its bar (capture's figure, or the figure of the motion a step starts from)
+/// a generated motion's foot skate or peak acceleration may lie, as a fraction of the bar:
+/// the optimiser's look bars and the foot clean-up's judgement of its locks share it.
+pub const LOOK_SLACK: f64 = 0.10;
 
 /// Maximum acceleration (ProgMoGen `get_jittor_stat(order=2, "max")`): the largest norm of the
 /// second time difference of any joint, in **m/frame²** (not scaled by fps²).

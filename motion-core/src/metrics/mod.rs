@@ -12,7 +12,7 @@ mod means;
 pub use body::{
     bone_length_range, foot_contact_ratio, foot_skate_ratio, ground_penetration, hands_raised, head_neck_incorrect,
     max_acceleration, mean_foot_acceleration, root_travel, CAPTURE_FOOT_SKATE, CAPTURE_MAX_ACCELERATION,
-    HEAD_NECK_REST_M, HEAD_NECK_VALID_M, SKATE_CONTACT_HEIGHT_M, SKATE_SPEED_M_PER_S,
+    HEAD_NECK_REST_M, HEAD_NECK_VALID_M, LOOK_SLACK, SKATE_CONTACT_HEIGHT_M, SKATE_SPEED_M_PER_S,
 };
 pub use events::event_count;
 pub use gait::{
