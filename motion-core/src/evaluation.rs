@@ -70,26 +70,29 @@ impl SkillReport {
 /// Step counting against a counting constraint's target.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StepReport {
-    /// The counting constraint's target.
+    /// The counting constraint's target, in footfalls.
     pub target: u32,
-    /// Steps counted per sample ([`crate::metrics::step_count`]).
+    /// Leg alternations per sample ([`crate::metrics::step_count`]), a reported figure beside
+    /// the footfalls: from feet side by side, usually one fewer.
     pub counts: Vec<usize>,
     /// Footfalls per sample ([`crate::metrics::footfalls`]: every swing of either foot, as a
-    /// person or the RG-DNO paper counts steps; usually one more than `counts`). Absent in
-    /// reports written before it was measured.
+    /// person, the RG-DNO paper and the `steps` constraint count steps). Absent in reports
+    /// written before it was measured.
     #[serde(default)]
     pub footfalls: Vec<usize>,
-    /// Fraction of samples with exactly `target` steps.
+    /// Fraction of samples with exactly `target` footfalls (in reports written before footfalls
+    /// were the constraint's count, `target` leg alternations).
     pub success_rate: f64,
 }
 
 impl StepReport {
-    /// The counts, with the footfalls beside them where measured: `[6, 5] (footfalls [7, 6])`.
+    /// The footfalls, with the leg alternations beside them: `[6, 7] (leg alternations [5, 6])`
+    /// (the alternations alone in reports written before footfalls were measured).
     pub fn counts_text(&self) -> String {
         if self.footfalls.is_empty() {
-            format!("{:?}", self.counts)
+            format!("leg alternations {:?}", self.counts)
         } else {
-            format!("{:?} (footfalls {:?})", self.counts, self.footfalls)
+            format!("{:?} (leg alternations {:?})", self.footfalls, self.counts)
         }
     }
 }
@@ -226,10 +229,10 @@ fn judge(
     let penetration = compiled.max_scene_penetration(joints)?.map(|t| to_f64(&t)).transpose()?;
     let motions = tensor_to_poses(joints)?;
     let steps = compiled.count_targets().into_iter().find(|(id, _)| is_step_count(program, id)).map(|(_, target)| {
-        let counts: Vec<usize> = motions.iter().map(|m| step_count(m)).collect();
-        let hits = counts.iter().filter(|&&c| c == target as usize).count();
-        let footfalls = motions.iter().map(|m| footfalls(m)).collect();
-        StepReport { target, success_rate: hits as f64 / counts.len().max(1) as f64, counts, footfalls }
+        let counts = motions.iter().map(|m| step_count(m)).collect();
+        let footfalls: Vec<usize> = motions.iter().map(|m| footfalls(m)).collect();
+        let hits = footfalls.iter().filter(|&&c| c == target as usize).count();
+        StepReport { target, success_rate: hits as f64 / footfalls.len().max(1) as f64, counts, footfalls }
     });
     let success_rate = successes as f64 / samples.max(1) as f64;
     Ok(Judged { per_sample, constraints, success_rate, penetration, steps, motions })
@@ -486,7 +489,7 @@ impl fmt::Display for Summary<'_> {
         if let Some(steps) = &report.steps {
             writeln!(
                 f,
-                "  steps (leg alternations) {} (target {}), success {:.2}",
+                "  steps (footfalls) {} (target {}), success {:.2}",
                 steps.counts_text(),
                 steps.target,
                 steps.success_rate

@@ -214,7 +214,7 @@ fn method_rows(rows: &[ResultRow]) -> String {
          \"all met\", \"max scene penetration\" and \"foot skate\" give the network's motion → the written one. \
          The same figures for held-out capture of each skill are in the prior's report (`mogen report prior`).\n\n",
     );
-    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | leg alternations/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | floating (longest flight, s) | steps as leg alternations (target) / success | the skill named: detected | time (s) |\n");
+    out.push_str("| task | method | constraint error | all met | max scene penetration (m) | under floor (m) | leg alternations/s | toe flicker | mean acc (m/frame²) | max acc (m/frame²) | foot skate | lower toe (m) | floating (longest flight, s) | steps as footfalls (leg alternations) (target) / success | the skill named: detected | time (s) |\n");
     out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         let p = &r.report;

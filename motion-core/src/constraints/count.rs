@@ -1,15 +1,17 @@
 //! Differentiable counting (RG-DNO supp. D, eqs. 15–16): soft counts of the peaks or valleys of
 //! scalar signals, e.g. steps as peaks of the foot speed, claps as valleys of the hand distance;
-//! steps as leg alternations; events as entries into a region of a signal (hands that meet).
-//! Steps and events are judged by state machines with hysteresis ([`crate::metrics::step_count`],
-//! [`crate::metrics::event_count`]); their errors take the judge's count as their value and the
-//! soft count's gradient ([`judged_error`]), so the optimiser's minimum is where the judge passes.
+//! steps as footfalls (every swing of either foot); events as entries into a region of a signal
+//! (hands that meet). Steps and events are judged by state machines with hysteresis
+//! ([`crate::metrics::footfalls`], [`crate::metrics::event_count`]); their errors take the
+//! judge's count as their value and the soft count's gradient ([`judged_error`]), so the
+//! optimiser's minimum is where the judge passes.
 
 use candle_core::{Result, Tensor, D};
 
 use super::geometry::sigmoid;
+use crate::metrics::{SWING_ENTER_M_PER_S, SWING_LEAVE_M_PER_S};
 use crate::program::{EventRegion, Extremum};
-use crate::skeleton::Joint;
+use crate::skeleton::{Joint, FPS};
 
 /// Soft number of extrema of `s` `[B, n]` at the interior frames listed in `frames` (indices of
 /// `s`; frames 0 and n − 1 have no two neighbours and are skipped), `[B]`:
@@ -37,38 +39,41 @@ pub fn soft_count(s: &Tensor, frames: &[usize], extremum: Extremum, threshold: f
     score.sum(D::Minus1)
 }
 
-/// Half-width of the dead zone of the soft leg lead in [`soft_step_count`], m: the step
-/// metric's hysteresis ([`crate::metrics::ALTERNATION_HYSTERESIS_M`]).
-pub const STEP_LEAD_M: f64 = 0.05;
-/// Width of the sigmoids at the edges of the dead zone, m.
-pub const STEP_LEAD_EDGE_M: f64 = 0.005;
+/// Frames of the box filter over each toe's speed in [`soft_footfalls`]: a swing's speed may
+/// dip for a frame before the toe lands, which the judge's state machine rides through.
+const FOOTFALL_SMOOTHING: usize = 3;
 
-/// Soft number of steps of joints `[B, T, 22, 3]`, `[B]`: `Σ_t ½·√((l[t+1] − l[t])² + ε)` with
-/// the soft lead `l = σ((d − h)/w) − σ((−d − h)/w)` ∈ [−1, 1], `d` the left-minus-right toe
-/// separation along the horizontal facing direction (from hips and shoulders, as the step
-/// metric), `h` = [`STEP_LEAD_M`] and `w` = [`STEP_LEAD_EDGE_M`]. A change of the leading leg
-/// from beyond +h to beyond −h adds 1; feet shuffling within ±h add nothing (the soft form of
-/// the metric's hysteresis; a lead given up and taken again by the same foot adds 1 where the
-/// metric adds 0).
-pub fn soft_step_count(joints: &Tensor) -> Result<Tensor> {
-    let frames = joints.dim(1)?;
+/// Smallest squared horizontal toe displacement per frame under the square root of
+/// [`soft_footfalls`], m²: keeps the speed of a still toe differentiable.
+const STILL_TOE_M2: f64 = 1e-10;
+
+/// Soft number of footfalls of joints `[B, T, 22, 3]`, `[B]`: for each toe, its horizontal speed
+/// `v[t] = √(|Δxz|² + ε)·fps` (m/s) over [`FOOTFALL_SMOOTHING`] frames, counted as events of
+/// the region above [`SWING_ENTER_M_PER_S`] + b with the hysteresis band b =
+/// [`SWING_ENTER_M_PER_S`] − [`SWING_LEAVE_M_PER_S`] below it ([`soft_event_count`]: above
+/// 1.5 m/s in a swing, under 1 m/s out of it), the two toes added; each swing of either foot
+/// adds one. The soft state has no memory of the judge's, so its band sits one band above the
+/// judge's: a toe wiggling inside the judge's band before it swings adds nothing. The soft form
+/// of [`crate::metrics::footfalls`] (within 0.2 of it on the shipped walks and run), which also
+/// asks a swing to travel [`crate::metrics::FOOTFALL_MIN_M`] and ends it at any frame under
+/// 0.5 m/s; where the two differ, the error of a steps constraint takes the judge's count as
+/// its value ([`judged_error`]).
+pub fn soft_footfalls(joints: &Tensor) -> Result<Tensor> {
+    let (batch, frames) = (joints.dim(0)?, joints.dim(1)?);
     if frames < 2 {
-        return Tensor::zeros(joints.dim(0)?, joints.dtype(), joints.device());
+        return Tensor::zeros(batch, joints.dtype(), joints.device());
     }
-    let at = |j: Joint| joints.narrow(2, j.index(), 1)?.squeeze(2); // [B, T, 3]
-    let across =
-        ((at(Joint::RightHip)? - at(Joint::LeftHip)?)? + (at(Joint::RightShoulder)? - at(Joint::LeftShoulder)?)?)?;
-    let (ax, az) = (across.narrow(D::Minus1, 0, 1)?, across.narrow(D::Minus1, 2, 1)?);
-    // forward = ŷ × across = (a_z, 0, −a_x), normalised horizontally.
-    let length = ((ax.sqr()? + az.sqr()?)? + 1e-12)?.sqrt()?;
-    let toe = (at(Joint::LeftFoot)? - at(Joint::RightFoot)?)?;
-    let (tx, tz) = (toe.narrow(D::Minus1, 0, 1)?, toe.narrow(D::Minus1, 2, 1)?);
-    let d = ((tx * &az)? - (tz * &ax)?)?.div(&length)?.squeeze(D::Minus1)?; // [B, T], m
-    let left = sigmoid(&((&d - STEP_LEAD_M)? / STEP_LEAD_EDGE_M)?)?;
-    let right = sigmoid(&((d.neg()? - STEP_LEAD_M)? / STEP_LEAD_EDGE_M)?)?;
-    let lead = (left - right)?;
-    let change = (lead.narrow(1, 1, frames - 1)? - lead.narrow(1, 0, frames - 1)?)?;
-    ((change.sqr()? + 1e-8)?.sqrt()? * 0.5)?.sum(D::Minus1)
+    let band = SWING_ENTER_M_PER_S - SWING_LEAVE_M_PER_S;
+    let mut total = Tensor::zeros(batch, joints.dtype(), joints.device())?;
+    for toe in [Joint::LeftFoot, Joint::RightFoot] {
+        let path = joints.narrow(2, toe.index(), 1)?.squeeze(2)?; // [B, T, 3]
+        let step = (path.narrow(1, 1, frames - 1)? - path.narrow(1, 0, frames - 1)?)?;
+        let (dx, dz) = (step.narrow(D::Minus1, 0, 1)?, step.narrow(D::Minus1, 2, 1)?);
+        let speed = (((dx.sqr()? + dz.sqr()?)? + STILL_TOE_M2)?.sqrt()? * FPS)?.squeeze(D::Minus1)?; // [B, T − 1]
+        let speed = if frames > FOOTFALL_SMOOTHING { box_filter(&speed, FOOTFALL_SMOOTHING)? } else { speed };
+        total = (total + soft_event_count(&speed, EventRegion::Above(SWING_ENTER_M_PER_S + band), band)?)?;
+    }
+    Ok(total)
 }
 
 /// Soft number of events of `s` `[B, n]` (the frames searched, in order), `[B]`: with `e` the
@@ -103,10 +108,10 @@ pub fn soft_event_count(s: &Tensor, region: EventRegion, hysteresis: f64) -> Res
     (changes + ends)? * 0.5
 }
 
-/// Steps of joints `[B, T, 22, 3]` as the judge counts them ([`crate::metrics::step_count`]),
-/// per sample.
-pub fn judged_steps(joints: &Tensor) -> Result<Vec<f64>> {
-    Ok(crate::motion::tensor_to_poses(joints)?.iter().map(|m| crate::metrics::step_count(m) as f64).collect())
+/// Steps of joints `[B, T, 22, 3]` as the judge counts them, footfalls
+/// ([`crate::metrics::footfalls`]), per sample.
+pub fn judged_footfalls(joints: &Tensor) -> Result<Vec<f64>> {
+    Ok(crate::motion::tensor_to_poses(joints)?.iter().map(|m| crate::metrics::footfalls(m) as f64).collect())
 }
 
 /// Events of `s` `[B, n]` as the judge counts them ([`crate::metrics::event_count`]), per sample.
@@ -217,10 +222,10 @@ mod tests {
         (poses, t)
     }
 
-    /// The soft count agrees with the step metric (leg alternations) within one step on 10 s of
-    /// every real walk and the run, and both with the real steps (2 per cycle).
+    /// The soft count agrees with the footfall metric within half a footfall on 10 s of every
+    /// real walk and the run (16 and 26 footfalls).
     #[test]
-    fn soft_steps_agree_with_the_metric_on_the_real_clips() {
+    fn soft_footfalls_agree_with_the_metric_on_the_real_clips() {
         for name in [
             "humanoid3d_walk.txt",
             "walker_0walk_forward.txt",
@@ -231,35 +236,33 @@ mod tests {
             "humanoid3d_run.txt",
         ] {
             let (poses, joints) = clip_tensor(name);
-            let soft = soft_step_count(&joints).unwrap().to_vec1::<f64>().unwrap()[0];
-            let hard = crate::metrics::step_count(&poses) as f64;
-            assert!((soft - hard).abs() <= 1.0, "{name}: soft {soft:.2}, metric {hard}");
+            let soft = soft_footfalls(&joints).unwrap().to_vec1::<f64>().unwrap()[0];
+            let hard = crate::metrics::footfalls(&poses) as f64;
+            assert!(hard >= 10.0, "{name}: {hard} footfalls in 10 s");
+            assert!((soft - hard).abs() <= 0.5, "{name}: soft {soft:.2}, metric {hard}");
         }
-        // Feet shuffling ±4 cm every frame: no steps (the metric's hysteresis, in soft form).
+        // A foot shuffling 4 cm back and forth every frame (0.8 m/s, inside the band): under
+        // one footfall, and none for the metric.
         let (poses, _) = clip_tensor("walker_0walk_forward.txt");
         let mut shuffle = vec![poses[0]; 40];
         for (t, p) in shuffle.iter_mut().enumerate() {
-            let facing = crate::representation::facing_direction(p).unwrap();
-            let lead = if t % 2 == 0 { 0.02 } else { -0.02 };
-            let base = (p[crate::skeleton::Joint::LeftFoot.index()] - p[crate::skeleton::Joint::RightFoot.index()])
-                .dot(facing);
-            p[crate::skeleton::Joint::LeftFoot.index()] += facing * (lead - base);
+            p[crate::skeleton::Joint::LeftFoot.index()].z += if t % 2 == 0 { 0.02 } else { -0.02 };
         }
         let flat: Vec<f64> = shuffle.iter().flatten().flat_map(|v| [v.x, v.y, v.z]).collect();
         let shuffle_t = Tensor::from_vec(flat, (1, 40, 22, 3), &Device::Cpu).unwrap();
-        let shuffled = soft_step_count(&shuffle_t).unwrap().to_vec1::<f64>().unwrap()[0];
-        assert!(shuffled < 0.5, "shuffling counts {shuffled}");
-        assert_eq!(crate::metrics::step_count(&shuffle), 0);
-        // Standing still: no steps.
+        let shuffled = soft_footfalls(&shuffle_t).unwrap().to_vec1::<f64>().unwrap()[0];
+        assert!(shuffled < 1.0, "shuffling counts {shuffled}");
+        assert_eq!(crate::metrics::footfalls(&shuffle), 0);
+        // Standing still: no footfalls.
         let still: Vec<f64> = std::iter::repeat_n(poses[0], 40).flatten().flat_map(|v| [v.x, v.y, v.z]).collect();
         let still = Tensor::from_vec(still, (1, 40, 22, 3), &Device::Cpu).unwrap();
-        assert!(soft_step_count(&still).unwrap().to_vec1::<f64>().unwrap()[0] < 0.01);
+        assert!(soft_footfalls(&still).unwrap().to_vec1::<f64>().unwrap()[0] < 0.05);
     }
 
     #[test]
-    fn soft_steps_have_the_finite_difference_gradient() {
+    fn soft_footfalls_have_the_finite_difference_gradient() {
         let (_, joints) = clip_tensor("walker_0walk_forward.txt");
         let joints = joints.narrow(1, 0, 30).unwrap();
-        crate::testing::finite_difference_check(&joints, |j| soft_step_count(j)?.sum_all(), 1e-6, 1e-4).unwrap();
+        crate::testing::finite_difference_check(&joints, |j| soft_footfalls(j)?.sum_all(), 1e-6, 1e-4).unwrap();
     }
 }

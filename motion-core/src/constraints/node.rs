@@ -25,7 +25,7 @@ pub(super) enum Comparison {
 /// takes as `n`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum CountValue {
-    /// The judge's own count ([`count::judged_steps`], [`count::judged_events`]) as the value,
+    /// The judge's own count ([`count::judged_footfalls`], [`count::judged_events`]) as the value,
     /// with the soft count's gradient ([`count::judged_error`]): the error is 0 exactly when the
     /// judge passes the count, so the optimiser's minimum is the judge's.
     Judged,
@@ -249,9 +249,9 @@ impl Node {
                 (total - *target)?.sqr()?
             }
             Node::Steps { target, value } => {
-                let soft = count::soft_step_count(joints)?;
+                let soft = count::soft_footfalls(joints)?;
                 match value {
-                    CountValue::Judged => count::judged_error(&soft, count::judged_steps(joints)?, *target)?,
+                    CountValue::Judged => count::judged_error(&soft, count::judged_footfalls(joints)?, *target)?,
                     CountValue::Soft => (soft - *target)?.sqr()?,
                 }
             }

@@ -147,9 +147,9 @@ impl Node {
             }
             Node::Steps { target, .. } => {
                 let counted: Vec<f64> =
-                    super::count::judged_steps(joints)?.into_iter().map(|n| (n - target).abs()).collect();
+                    super::count::judged_footfalls(joints)?.into_iter().map(|n| (n - target).abs()).collect();
                 leaf(Check {
-                    what: format!("steps (leg alternations) off the target {target}"),
+                    what: format!("steps (footfalls) off the target {target}"),
                     unit: Unit::Count,
                     value: counted,
                     tolerance: COUNT_TOLERANCE,

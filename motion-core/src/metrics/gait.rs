@@ -60,9 +60,9 @@ pub fn alternation_frames(poses: &[Pose]) -> Vec<usize> {
     frames
 }
 
-/// Steps taken: leg alternations ([`alternation_frames`]). The one definition of a step used by
-/// the reports and checked against the counting constraint. From feet side by side it counts
-/// one fewer than [`footfalls`]: the first swing only takes the lead.
+/// Leg alternations ([`alternation_frames`]): a reported figure beside [`footfalls`], the count
+/// of the `steps` constraint. From feet side by side it counts one fewer than [`footfalls`]: the
+/// first swing only takes the lead.
 pub fn step_count(poses: &[Pose]) -> usize {
     alternation_frames(poses).len()
 }
@@ -80,11 +80,11 @@ pub const FOOTFALL_MIN_M: f64 = 0.15;
 /// RG-DNO paper counts walking steps (the edges of a foot's speed crossing a threshold; the
 /// paper's supplement does not give its threshold): a swing runs while the toe's horizontal
 /// speed stays above [`SWING_LEAVE_M_PER_S`] after rising above [`SWING_ENTER_M_PER_S`], and
-/// counts when the toe travels at least [`FOOTFALL_MIN_M`] in it. Reported beside
-/// [`step_count`], which the first swing does not raise when the feet start side by side
-/// (within its 5 cm hysteresis) or when the leading foot swings first: "6 steps" by leg
-/// alternations are usually 7 footfalls. A foot sliding fast over the floor counts as a swing
-/// too.
+/// counts when the toe travels at least [`FOOTFALL_MIN_M`] in it. The count of the `steps`
+/// constraint and its judge; [`step_count`] (leg alternations), reported beside it, is not
+/// raised by the first swing when the feet start side by side (within its 5 cm hysteresis) or
+/// when the leading foot swings first, so 6 footfalls are usually 5 alternations. A foot
+/// sliding fast over the floor counts as a swing too.
 pub fn footfalls(poses: &[Pose]) -> usize {
     [Joint::LeftFoot, Joint::RightFoot]
         .iter()

@@ -35,11 +35,11 @@ pub enum Expr {
     Not(Not),
     /// Counting (RG-DNO eqs. 15–16): `(n − target_count)²` with `n` a soft count of extrema.
     Count(Count),
-    /// Steps taken, counted as leg alternations (the one step definition of the reports,
-    /// `metrics::step_count`): `(n − target_count)²` with the soft count `n = Σ_t ½·|l[t+1] − l[t]|`
-    /// of the soft lead `l = σ((d − 5 cm)/5 mm) − σ((−d − 5 cm)/5 mm)`, `d` the left-minus-right
-    /// toe separation along the facing direction (the metric's ±5 cm hysteresis, smoothed), so
-    /// feet shuffling within ±5 cm count nothing.
+    /// Steps taken, counted as footfalls, as a person counts steps (`metrics::footfalls`: every
+    /// swing of either foot, its toe faster than 1 m/s until it slows under 0.5 m/s, travelling at
+    /// least 15 cm): `(n − target_count)²` with `n` the judge's count and the gradient of the soft
+    /// count (each toe's horizontal speed over 3 frames as events above 1.5 m/s with the band
+    /// down to 1 m/s). Leg alternations stay a reported figure.
     Steps(Steps),
     /// Counted events (claps, touches, hops): `(n − target_count)²` with `n` the soft number of
     /// times a scalar signal enters the event region (below or above a threshold) and leaves it
@@ -244,7 +244,8 @@ pub struct Count {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Steps {
-    /// Required number of steps (leg alternations) over the whole motion.
+    /// Required number of steps over the whole motion, counted as footfalls: every step of either
+    /// foot, the first from a standing start included ("6 steps" is 6).
     #[schemars(range(max = 1000))]
     pub target_count: u32,
 }
