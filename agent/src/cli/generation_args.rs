@@ -160,9 +160,9 @@ pub struct GenerationArgs {
     #[arg(long, value_name = "FILE")]
     pub database: Option<PathBuf>,
     /// RG-DNO settings as JSON (fields of `RgDnoConfig`: retrieval, inversion, first_steps,
-    /// first_lr, segments, mask_kinds, mask_batch, mask_patience, early_stride, early_unguided, reward,
-    /// final_steps, final_lr, ablation, retrieved_motions, skip_retrieved; missing fields keep
-    /// the paper's defaults), e.g.
+    /// first_lr, segments, mask_kinds, mask_batch, mask_patience, early_stride, early_unguided,
+    /// reward, final_steps, final_lr, ablation, retrieved_motions, skip_retrieved; missing fields
+    /// keep the paper's defaults), e.g.
     /// '{"retrieval": {"related_weight": 0.01}}', '{"retrieved_motions": 2}' (start from the best
     /// crops of two takes in turn, each sample keeping its better attempt),
     /// the supplementary's reward for a task '{"reward": "steps_raising_hands"}' (also

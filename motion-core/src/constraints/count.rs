@@ -9,9 +9,10 @@
 use candle_core::{Result, Tensor, D};
 
 use super::geometry::sigmoid;
+use super::signal::signal;
 use crate::metrics::{SWING_ENTER_M_PER_S, SWING_LEAVE_M_PER_S};
-use crate::program::{EventRegion, Extremum};
-use crate::skeleton::{Joint, FPS};
+use crate::program::{Axes, Derivative, EventRegion, Extremum, Point, Quantity};
+use crate::skeleton::Joint;
 
 /// Soft number of extrema of `s` `[B, n]` at the interior frames listed in `frames` (indices of
 /// `s`; frames 0 and n − 1 have no two neighbours and are skipped), `[B]`:
@@ -43,12 +44,9 @@ pub fn soft_count(s: &Tensor, frames: &[usize], extremum: Extremum, threshold: f
 /// dip for a frame before the toe lands, which the judge's state machine rides through.
 const FOOTFALL_SMOOTHING: usize = 3;
 
-/// Smallest squared horizontal toe displacement per frame under the square root of
-/// [`soft_footfalls`], m²: keeps the speed of a still toe differentiable.
-const STILL_TOE_M2: f64 = 1e-10;
-
 /// Soft number of footfalls of joints `[B, T, 22, 3]`, `[B]`: for each toe, its horizontal speed
-/// `v[t] = √(|Δxz|² + ε)·fps` (m/s) over [`FOOTFALL_SMOOTHING`] frames, counted as events of
+/// (m/s; the `speed` quantity of the toe over x and z, [`signal`]) over [`FOOTFALL_SMOOTHING`]
+/// frames, counted as events of
 /// the region above [`SWING_ENTER_M_PER_S`] + b with the hysteresis band b =
 /// [`SWING_ENTER_M_PER_S`] − [`SWING_LEAVE_M_PER_S`] below it ([`soft_event_count`]: above
 /// 1.5 m/s in a swing, under 1 m/s out of it), the two toes added; each swing of either foot
@@ -66,10 +64,8 @@ pub fn soft_footfalls(joints: &Tensor) -> Result<Tensor> {
     let band = SWING_ENTER_M_PER_S - SWING_LEAVE_M_PER_S;
     let mut total = Tensor::zeros(batch, joints.dtype(), joints.device())?;
     for toe in [Joint::LeftFoot, Joint::RightFoot] {
-        let path = joints.narrow(2, toe.index(), 1)?.squeeze(2)?; // [B, T, 3]
-        let step = (path.narrow(1, 1, frames - 1)? - path.narrow(1, 0, frames - 1)?)?;
-        let (dx, dz) = (step.narrow(D::Minus1, 0, 1)?, step.narrow(D::Minus1, 2, 1)?);
-        let speed = (((dx.sqr()? + dz.sqr()?)? + STILL_TOE_M2)?.sqrt()? * FPS)?.squeeze(D::Minus1)?; // [B, T − 1]
+        let horizontal = Quantity::Speed(Derivative { of: Point::Joint(toe), axes: Axes::Xz });
+        let speed = signal(joints, &horizontal)?.squeeze(D::Minus1)?; // [B, T − 1]
         let speed = if frames > FOOTFALL_SMOOTHING { box_filter(&speed, FOOTFALL_SMOOTHING)? } else { speed };
         total = (total + soft_event_count(&speed, EventRegion::Above(SWING_ENTER_M_PER_S + band), band)?)?;
     }

@@ -136,7 +136,7 @@ pub fn generate_rg_dno(
     let both = UnrolledDdim::new(&prior.mdm, text.repeat((2, 1))?, early_guidance, ddim_steps)?.every(stride);
     let inversion = InversionConfig {
         guidance: early_guidance.scale,
-        ddim_steps: config.dno.ddim_steps,
+        ddim_steps,
         sampler_stride: stride,
         schedule: config.schedule,
         stop_within_tolerance: !counts,
