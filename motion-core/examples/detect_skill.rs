@@ -18,13 +18,11 @@ fn main() -> Result<(), Box<dyn Error>> {
         return Err("usage: detect_skill FAMILY JOINTS.npy...".into());
     };
     let family = Family::from_name(family)?;
-    let Some(detector) = family.detector() else {
-        return Err(format!("the {} family has no detector", family.name()).into());
-    };
+    let detector = family.detector();
     let (mut passed, mut motions) = (0, 0);
     for file in files {
         for (k, poses) in read_joints_npy(Path::new(file))?.iter().enumerate() {
-            let pass = family.detect(poses) == Some(true);
+            let pass = family.detect(poses);
             println!("{file} [{k}]: {}", if pass { "passes" } else { "fails" });
             passed += usize::from(pass);
             motions += 1;

@@ -47,17 +47,24 @@ pub struct SkillReport {
     pub detector: String,
     /// Whether each sample passes the detector.
     pub pass: Vec<bool>,
+    /// Whether the prompt asks for the skill, beyond walking ([`Family::is_walking`]): a sample
+    /// that fails its detector then falls short like one that misses a constraint, and is tried
+    /// again ([`crate::pipeline::TaskSettings::retry_unmet`]). A walk's detector is only
+    /// reported, since prompts name walking loosely. False in reports written before it was
+    /// judged.
+    #[serde(default)]
+    pub asked: bool,
 }
 
 impl SkillReport {
-    /// The skill `prompt` names, judged on `motions`; `None` when it names none with a
-    /// detector (a carry has none).
+    /// The skill `prompt` names, judged on `motions`; `None` when it names none.
     pub fn judge(prompt: &str, motions: &[Vec<Pose>]) -> Option<SkillReport> {
         let family = Family::named_in(prompt)?;
         Some(SkillReport {
             family: family.name().to_owned(),
-            detector: family.detector()?.to_owned(),
-            pass: motions.iter().map(|m| family.detect(m) == Some(true)).collect(),
+            detector: family.detector().to_owned(),
+            pass: motions.iter().map(|m| family.detect(m)).collect(),
+            asked: !family.is_walking(),
         })
     }
 
@@ -164,8 +171,8 @@ pub struct TaskReport {
     pub success_rate: f64,
     /// Step counting, for programs with a counting constraint over foot speeds.
     pub steps: Option<StepReport>,
-    /// The skill the prompt names, judged on each sample; absent when it names none with a
-    /// detector, and in reports written before it was judged.
+    /// The skill the prompt names, judged on each sample; absent when it names none, and in
+    /// reports written before it was judged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub skill: Option<SkillReport>,
     /// The motion figures of the samples (foot skate, accelerations, pace, toe flicker, stance
@@ -245,20 +252,42 @@ fn worst(values: &Option<Vec<f64>>) -> Option<f64> {
 impl TaskReport {
     /// The samples that miss at least one constraint at its tolerance.
     pub fn unmet_samples(&self) -> Vec<usize> {
-        (0..self.constraint_error_per_sample.len())
-            .filter(|&b| self.constraints.iter().any(|c| !c.pass.get(b).copied().unwrap_or(false)))
+        (0..self.samples()).filter(|&b| self.met_constraints(b) < self.constraints.len()).collect()
+    }
+
+    /// The samples that meet every constraint but fail the detector of the skill the prompt
+    /// asks for ([`SkillReport::asked`]): a hop that glides, a carry with swinging arms.
+    pub fn skill_missed_samples(&self) -> Vec<usize> {
+        (0..self.samples())
+            .filter(|&b| self.met_constraints(b) == self.constraints.len() && !self.does_asked_skill(b))
             .collect()
     }
 
+    fn samples(&self) -> usize {
+        self.constraint_error_per_sample.len()
+    }
+
+    fn met_constraints(&self, b: usize) -> usize {
+        self.constraints.iter().filter(|c| c.pass.get(b).copied().unwrap_or(false)).count()
+    }
+
+    /// Whether sample `b` passes the detector of the skill the prompt asks for (true when it
+    /// asks for none).
+    fn does_asked_skill(&self, b: usize) -> bool {
+        self.skill.as_ref().is_none_or(|s| !s.asked || s.pass.get(b).copied().unwrap_or(false))
+    }
+
     /// Whether sample `i` of `other` (another attempt at the same program) is better than this
-    /// report's sample `b`: more constraints met at their tolerances, or as many with a lower
-    /// constraint error (a number beats NaN).
+    /// report's sample `b`: more constraints met at their tolerances; or as many, and the skill
+    /// the prompt asks for done where `b` does not do it; or as many, the skill alike, and a
+    /// lower constraint error (a number beats NaN).
     pub fn beaten_by(&self, b: usize, other: &TaskReport, i: usize) -> bool {
-        let met =
-            |r: &TaskReport, s: usize| r.constraints.iter().filter(|c| c.pass.get(s).copied().unwrap_or(false)).count();
-        let (own, theirs) = (met(self, b), met(other, i));
+        let (own, theirs) = (self.met_constraints(b), other.met_constraints(i));
+        let (own_skill, their_skill) = (self.does_asked_skill(b), other.does_asked_skill(i));
         let error = |r: &TaskReport, s: usize| r.constraint_error_per_sample.get(s).copied().unwrap_or(f64::NAN);
-        theirs > own || (theirs == own && crate::dno::beats(error(other, i), error(self, b)))
+        theirs > own
+            || (theirs == own && their_skill && !own_skill)
+            || (theirs == own && their_skill == own_skill && crate::dno::beats(error(other, i), error(self, b)))
     }
 
     /// The name of the first figure that is NaN or infinite (`None` when all are finite): a
@@ -364,8 +393,8 @@ mod tests {
     use crate::generation::method::Method;
 
     /// The skill the prompt names is judged per sample by its family's detector: a straight
-    /// walk passes "walks forward", fails "crawls" and "turns left", and a prompt that names no
-    /// skill with a detector (a carry, a reach) gets none.
+    /// walk passes "walks forward", fails "crawls", "turns left" and "carries a box" (its arms
+    /// swing), and a prompt that names no skill (a reach) gets none.
     #[test]
     fn the_skill_the_prompt_names_is_detected_per_sample() {
         let walk = crate::motion::test_support::walking_poses(120, 0.0);
@@ -380,7 +409,8 @@ mod tests {
         assert_eq!(crawled.pass, [false, false]);
         let turned = SkillReport::judge("a person walks and turns left", &motions).unwrap();
         assert_eq!(turned.pass, [false, true]);
-        assert!(SkillReport::judge("a person carries a box", &motions).is_none());
+        let carried = SkillReport::judge("a person carries a box", &motions).unwrap();
+        assert_eq!((carried.family.as_str(), carried.pass.as_slice()), ("carry", [false, false].as_slice()));
         assert!(SkillReport::judge("a person reaches up high", &motions).is_none());
     }
 
@@ -431,6 +461,25 @@ mod tests {
         assert!(r.beaten_by(1, &r, 0));
         assert!(!r.beaten_by(0, &r, 1));
         assert!(!r.beaten_by(1, &r, 1));
+        // A sample that meets every constraint but not the skill the prompt asks for falls
+        // short too; constraints still come first, then the skill, then the error.
+        let mut hop = r.clone();
+        let skill = SkillReport {
+            family: "hop on one foot".into(),
+            detector: "airborne".into(),
+            pass: vec![false, true],
+            asked: true,
+        };
+        hop.skill = Some(skill.clone());
+        assert_eq!((hop.unmet_samples(), hop.skill_missed_samples()), (vec![1], vec![0]));
+        assert!(hop.beaten_by(1, &hop, 0) && !hop.beaten_by(0, &hop, 1), "the met sample wins though it glides");
+        hop.constraints[0].pass = vec![true, true];
+        hop.constraint_error_per_sample = vec![0.0, 1.0];
+        assert!(hop.beaten_by(0, &hop, 1), "the sample that hops wins over a lower error");
+        assert!(!hop.beaten_by(1, &hop, 0));
+        // A walk's detector is only reported: prompts name walking loosely.
+        hop.skill = Some(SkillReport { asked: false, ..skill });
+        assert!(hop.skill_missed_samples().is_empty() && hop.beaten_by(1, &hop, 0));
     }
 }
 

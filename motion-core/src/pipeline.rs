@@ -10,8 +10,10 @@
 //! the run falls back to DNO; the
 //! reason goes to the report's `fallback` and to the caller as an [`Event::Note`].
 //!
-//! With [`TaskSettings::retry_unmet`], the samples that miss a constraint at its tolerance are
-//! generated again from fresh noise, each keeping its best attempt (the report's `attempt`).
+//! With [`TaskSettings::retry_unmet`], the samples that miss a constraint at its tolerance, or
+//! that do not do the skill the prompt asks for ([`crate::evaluation::SkillReport::asked`]),
+//! are generated again from fresh noise, each keeping its best attempt (the report's
+//! `attempt`).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -44,10 +46,12 @@ pub struct TaskSettings {
     pub rg_dno: RgDnoConfig,
     /// RG-DNO's retrieval database.
     pub database: RetrievalSource,
-    /// Further attempts for the samples that miss a constraint at its tolerance: each such
-    /// sample is generated again from fresh start noise (attempt k + 1 from seed + k·N_S; with
-    /// RG-DNO, from the next retrieved takes) and keeps its best attempt (most constraints met, then the lowest constraint error), up to
-    /// this many times (DNO's noise search, spent only where it is needed). 0: off.
+    /// Further attempts for the samples that miss a constraint at its tolerance or do not do
+    /// the skill the prompt asks for: each such sample is generated again from fresh start
+    /// noise (attempt k + 1 from seed + k·N_S; with RG-DNO, from the next retrieved takes) and
+    /// keeps its best attempt ([`TaskReport::beaten_by`]: most constraints met, then the skill
+    /// done, then the lowest constraint error), up to this many times (DNO's noise search,
+    /// spent only where it is needed). 0: off.
     pub retry_unmet: usize,
     /// Choices about the exported files.
     pub exports: ExportOptions,
@@ -153,9 +157,9 @@ pub fn run_task(
 }
 
 /// Generates and evaluates `program` with `settings` (RG-DNO with its fallback to DNO); then,
-/// with [`TaskSettings::retry_unmet`], generates the samples that miss a constraint again (from
-/// fresh noise and, with RG-DNO, from the next retrieved takes) and keeps each one's best
-/// attempt.
+/// with [`TaskSettings::retry_unmet`], generates the samples that miss a constraint or the skill
+/// the prompt asks for again (from fresh noise and, with RG-DNO, from the next retrieved takes)
+/// and keeps each one's best attempt.
 fn generate_task(
     prior: &Prior,
     checked: &CheckedProgram,
@@ -188,17 +192,19 @@ fn generate_task(
     let mut report = evaluation::report(program, compiled, &generated, &config)?;
     let mut kept = vec![0; config.samples];
     for k in 1..=settings.retry_unmet {
-        let unmet = report.unmet_samples();
-        if unmet.is_empty() {
+        let (missed, unskilled) = (report.unmet_samples(), report.skill_missed_samples());
+        if missed.is_empty() && unskilled.is_empty() {
             break;
         }
         let seed = retry_seed(&config, k);
-        let list = unmet.iter().map(usize::to_string).collect::<Vec<_>>().join(", ");
         on(Event::Note(format!(
-            "attempt {} of {}: sample(s) {list} miss a constraint; generating them again from seed {seed}",
+            "attempt {} of {}: {}; generating them again from seed {seed}",
             k + 1,
-            settings.retry_unmet + 1
+            settings.retry_unmet + 1,
+            short_samples(&missed, &unskilled, &report)
         )));
+        let mut unmet = [missed, unskilled].concat();
+        unmet.sort_unstable();
         let retry_config = GenerationConfig { samples: unmet.len(), seed, ..config.clone() };
         let rg_dno = retry_rg_dno(&settings.rg_dno, k);
         let retrieval = retrieval.map(|r| Retrieval { rg_dno: &rg_dno, ..r });
@@ -226,6 +232,25 @@ fn generate_task(
         return Err(PipelineError::NonFinite(figure));
     }
     Ok(TaskRun { generated, report })
+}
+
+/// Why samples are generated again: "sample(s) 0, 2 miss a constraint", "sample(s) 1 do not do
+/// the skill the prompt asks for (hop on one foot: airborne ≥ 2 frames)", or both joined.
+fn short_samples(missed: &[usize], unskilled: &[usize], report: &TaskReport) -> String {
+    let list = |s: &[usize]| s.iter().map(usize::to_string).collect::<Vec<_>>().join(", ");
+    let mut why = Vec::new();
+    if !missed.is_empty() {
+        why.push(format!("sample(s) {} miss a constraint", list(missed)));
+    }
+    if let (false, Some(skill)) = (unskilled.is_empty(), &report.skill) {
+        why.push(format!(
+            "sample(s) {} do not do the skill the prompt asks for ({}: {})",
+            list(unskilled),
+            skill.family,
+            skill.detector
+        ));
+    }
+    why.join("; ")
 }
 
 /// The start seed of retry `k` (≥ 1): `seed + k·N_S`, so that no retry repeats a start noise of

@@ -60,7 +60,8 @@ pub enum ScheduleArg {
     /// are scored in the order a cheap sampler ranks them until the masks meet the program
     /// (the soft blend is then skipped) or no sample's best has changed over 64 candidates, and
     /// the refinement is skipped when nothing is left to close. Unless set, DNO samples with 5
-    /// DDIM steps (RG-DNO with 10) and a sample that misses a constraint is tried once more.
+    /// DDIM steps (RG-DNO with 10) and a sample that misses a constraint or the skill the
+    /// prompt asks for is tried once more.
     /// The default.
     UntilMet,
 }
@@ -94,16 +95,17 @@ pub struct GenerationArgs {
     /// is done and the motion looks no worse than capture or the prior's own sample, samples
     /// DNO with 5 DDIM steps (RG-DNO keeps 10, its stages before the final round on every other
     /// one and unguided for a program without counts) and tries a sample that missed a
-    /// constraint once more;
+    /// constraint or the skill the prompt asks for once more;
     /// `paper` runs every step of the papers' budgets with 10 DDIM steps and no retry (their
     /// tables' schedule; fixtures/results/issue59-early-stride/).
     #[arg(long, value_enum, default_value_t = ScheduleArg::UntilMet)]
     pub schedule: ScheduleArg,
-    /// Extra attempts for each sample that misses a constraint at its tolerance: it is generated
-    /// again from fresh noise (attempt k + 1 from seed + k·restarts; with RG-DNO, from the next
-    /// retrieved takes) and keeps its best attempt (most constraints met, then the lowest
-    /// error); report.json's `attempt` says which. 0: off (default: 1, or 0 with `--schedule
-    /// paper`).
+    /// Extra attempts for each sample that misses a constraint at its tolerance, or that does
+    /// not do the skill the prompt asks for beyond walking (a crawl, a hop, a carry, ...: its
+    /// detector, report.json's `skill`): it is generated again from fresh noise (attempt k + 1
+    /// from seed + k·restarts; with RG-DNO, from the next retrieved takes) and keeps its best
+    /// attempt (most constraints met, then the skill done, then the lowest error);
+    /// report.json's `attempt` says which. 0: off (default: 1, or 0 with `--schedule paper`).
     #[arg(long)]
     pub retry_unmet: Option<usize>,
     /// DNO's peak Adam learning rate on the start noise (default 0.05, DNO's).

@@ -411,7 +411,7 @@ fn family_row(r: &FamilyQuality) -> String {
         "| {} | {} | {} | {} / {} / {} | {} | {:.3} / {} | {:.3} | {} |",
         r.family.name(),
         r.held_out.count,
-        r.family.detector().unwrap_or("none"),
+        r.family.detector(),
         share(samples),
         share(cleaned_share),
         share(held_out),

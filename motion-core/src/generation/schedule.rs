@@ -62,7 +62,8 @@ pub enum Schedule {
 }
 
 impl Schedule {
-    /// Extra attempts from fresh noise for a sample that misses a constraint, where a run does
+    /// Extra attempts from fresh noise for a sample that misses a constraint or the skill the
+    /// prompt asks for, where a run does
     /// not set them ([`crate::pipeline::TaskSettings::retry_unmet`]): none under the papers'
     /// schedule; one under [`Schedule::UntilMet`], which spends part of the time its early ends
     /// save on a second try of what it did not meet.

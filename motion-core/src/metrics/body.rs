@@ -1,6 +1,8 @@
 //! Body figures of a motion: foot skate, accelerations, travel, bone lengths, ground
-//! penetration and contact, raised hands and the head–neck distance.
+//! penetration and contact, raised hands, how the hands are held and the head–neck distance.
 
+use crate::numeric::mean;
+use crate::representation::facing_direction;
 use crate::skeleton::{bone_lengths, Joint, Pose, FPS, NUM_JOINTS};
 
 /// A foot is in contact when its height is below this, m (ProgMoGen / DNO).
@@ -134,6 +136,58 @@ pub fn hands_raised(poses: &[Pose]) -> bool {
         })
         .count();
     !poses.is_empty() && 2 * raised >= poses.len()
+}
+
+/// How the hands are held over a motion, in the body's own frame (the pelvis, facing the way the
+/// hips and shoulders face): what tells a carried object from swinging arms.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HandHold {
+    /// The nearer wrist's mean distance ahead of the pelvis along the facing direction, m.
+    pub ahead_m: f64,
+    /// The lower wrist's mean height above the pelvis, m (negative: below it).
+    pub above_pelvis_m: f64,
+    /// Mean distance between the wrists, m.
+    pub gap_m: f64,
+    /// Standard deviation of that distance over the frames, m: near 0 when the hands hold one
+    /// rigid thing.
+    pub gap_spread_m: f64,
+    /// The larger of the two wrists' standard deviations of their distance ahead of the pelvis,
+    /// m: a walk's arm swing.
+    pub swing_m: f64,
+}
+
+/// The motion's [`HandHold`], over the frames whose facing direction is defined; `None` when
+/// there are none.
+pub fn hand_hold(poses: &[Pose]) -> Option<HandHold> {
+    let wrists = [Joint::LeftWrist, Joint::RightWrist];
+    let mut ahead = [Vec::new(), Vec::new()];
+    let mut above = [Vec::new(), Vec::new()];
+    let mut gap = Vec::new();
+    for pose in poses {
+        let Some(forward) = facing_direction(pose) else { continue };
+        let pelvis = pose[Joint::Pelvis.index()];
+        for (k, wrist) in wrists.iter().enumerate() {
+            let d = pose[wrist.index()] - pelvis;
+            ahead[k].push(d.dot(forward));
+            above[k].push(d.y);
+        }
+        gap.push((pose[Joint::LeftWrist.index()] - pose[Joint::RightWrist.index()]).length());
+    }
+    if gap.is_empty() {
+        return None;
+    }
+    let spread = |v: &[f64]| {
+        let m = mean(v.iter().copied());
+        mean(v.iter().map(|x| (x - m) * (x - m))).sqrt()
+    };
+    let lesser = |v: &[Vec<f64>; 2]| mean(v[0].iter().copied()).min(mean(v[1].iter().copied()));
+    Some(HandHold {
+        ahead_m: lesser(&ahead),
+        above_pelvis_m: lesser(&above),
+        gap_m: mean(gap.iter().copied()),
+        gap_spread_m: spread(&gap),
+        swing_m: spread(&ahead[0]).max(spread(&ahead[1])),
+    })
 }
 
 /// Head–neck bone lengths at frames 0, L//2 and L−1 that fall outside [`HEAD_NECK_VALID_M`]

@@ -10,9 +10,10 @@ mod gait;
 mod means;
 
 pub use body::{
-    bone_length_range, foot_contact_ratio, foot_skate_ratio, ground_penetration, hands_raised, head_neck_incorrect,
-    max_acceleration, mean_foot_acceleration, root_travel, CAPTURE_FOOT_SKATE, CAPTURE_MAX_ACCELERATION,
-    HEAD_NECK_REST_M, HEAD_NECK_VALID_M, LOOK_SLACK, SKATE_CONTACT_HEIGHT_M, SKATE_SPEED_M_PER_S,
+    bone_length_range, foot_contact_ratio, foot_skate_ratio, ground_penetration, hand_hold, hands_raised,
+    head_neck_incorrect, max_acceleration, mean_foot_acceleration, root_travel, HandHold, CAPTURE_FOOT_SKATE,
+    CAPTURE_MAX_ACCELERATION, HEAD_NECK_REST_M, HEAD_NECK_VALID_M, LOOK_SLACK, SKATE_CONTACT_HEIGHT_M,
+    SKATE_SPEED_M_PER_S,
 };
 pub use events::event_count;
 pub use gait::{

@@ -18,14 +18,14 @@ use crate::prior::{Prior, PriorError};
 use crate::representation::{extract_features, FEATURE_DIM, RIC};
 use crate::skeleton::Pose;
 
-/// Share of motions passing a detector (`None` without a detector or without motions).
+/// Share of motions passing a detector (`None` without motions).
 pub(super) fn detected_share(family: Family, motions: &[Vec<Pose>]) -> Option<f64> {
     share_passing(motions.iter().map(|m| family.detect(m)))
 }
 
-/// Share of `true` among the detector outcomes (`None`: no detector, or no motion).
-fn share_passing(outcomes: impl Iterator<Item = Option<bool>>) -> Option<f64> {
-    let hits: Vec<bool> = outcomes.flatten().collect();
+/// Share of `true` among the detector outcomes (`None`: no motion).
+fn share_passing(outcomes: impl Iterator<Item = bool>) -> Option<f64> {
+    let hits: Vec<bool> = outcomes.collect();
     (!hits.is_empty()).then(|| hits.iter().filter(|h| **h).count() as f64 / hits.len() as f64)
 }
 
@@ -180,7 +180,7 @@ pub fn family_report(
             }
             nearest_distances(d, &training, |_, _| true).map_err(tensor)
         };
-        let sample_hits: Vec<Option<bool>> = samples.iter().map(|m| family.detect(m)).collect();
+        let sample_hits: Vec<bool> = samples.iter().map(|m| family.detect(m)).collect();
         let row = FamilyQuality {
             family,
             prompts: prompts.iter().map(|p| (*p).to_owned()).collect(),
@@ -218,18 +218,18 @@ mod tests {
     use glam::DVec3;
 
     #[test]
-    fn detectors_measure_direction_height_and_nothing_for_carrying() {
+    fn detectors_measure_direction_height_and_held_hands() {
         let sideways = moving(120, DVec3::new(0.8, 0.0, 0.0), 0.0);
-        assert_eq!(Family::Sideways.detect(&sideways), Some(true));
+        assert!(Family::Sideways.detect(&sideways));
         let forwards = moving(120, DVec3::new(0.0, 0.0, 1.2), 0.0);
-        assert_eq!(Family::Sideways.detect(&forwards), Some(false));
+        assert!(!Family::Sideways.detect(&forwards));
         let low = moving(120, DVec3::new(0.0, 0.0, 0.8), 0.25);
-        assert_eq!(Family::Sneak.detect(&low), Some(true));
-        assert_eq!(Family::Sneak.detect(&forwards), Some(false));
-        assert_eq!(Family::Jump.detect(&forwards), Some(false), "never off the ground");
-        assert_eq!(Family::Carry.detect(&forwards), None);
+        assert!(Family::Sneak.detect(&low));
+        assert!(!Family::Sneak.detect(&forwards));
+        assert!(!Family::Jump.detect(&forwards), "never off the ground");
+        assert!(!Family::Carry.detect(&forwards), "hands at the sides, not ahead of the body");
         assert_eq!(detected_share(Family::Sideways, &[sideways, forwards.clone()]), Some(0.5));
-        assert_eq!(detected_share(Family::Carry, &[forwards]), None);
+        assert_eq!(detected_share(Family::Carry, &[forwards]), Some(0.0));
         assert_eq!(detected_share(Family::Walk, &[]), None);
     }
 

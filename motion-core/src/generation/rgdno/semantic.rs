@@ -156,12 +156,13 @@ impl Heard {
     pub fn new(prompt: &str, counting: bool) -> Self {
         let words = words(prompt);
         let mut skills = Family::all_named_in(prompt);
-        skills.retain(|f| !matches!(f, Family::Walk | Family::TurnLeft | Family::TurnRight));
+        skills.retain(|f| !f.is_walking());
         Heard { actions: actions_in(&words), words, skills, counting }
     }
 
     /// The skills the prompt asks for, which retrieval looks for first, the most specific
-    /// first: the families it names ([`Family::all_named_in`]) other than walks and turns.
+    /// first: the families it names ([`Family::all_named_in`]) other than walking
+    /// ([`Family::is_walking`]).
     pub fn skills(&self) -> &[Family] {
         &self.skills
     }
