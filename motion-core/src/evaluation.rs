@@ -282,12 +282,10 @@ impl TaskReport {
     /// the prompt asks for done where `b` does not do it; or as many, the skill alike, and a
     /// lower constraint error (a number beats NaN).
     pub fn beaten_by(&self, b: usize, other: &TaskReport, i: usize) -> bool {
-        let (own, theirs) = (self.met_constraints(b), other.met_constraints(i));
-        let (own_skill, their_skill) = (self.does_asked_skill(b), other.does_asked_skill(i));
+        let own = (self.met_constraints(b), self.does_asked_skill(b));
+        let theirs = (other.met_constraints(i), other.does_asked_skill(i));
         let error = |r: &TaskReport, s: usize| r.constraint_error_per_sample.get(s).copied().unwrap_or(f64::NAN);
-        theirs > own
-            || (theirs == own && their_skill && !own_skill)
-            || (theirs == own && their_skill == own_skill && crate::dno::beats(error(other, i), error(self, b)))
+        theirs > own || (theirs == own && crate::dno::beats(error(other, i), error(self, b)))
     }
 
     /// The name of the first figure that is NaN or infinite (`None` when all are finite): a

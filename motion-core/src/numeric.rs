@@ -13,6 +13,12 @@ pub fn mean<T: Borrow<f64>>(values: impl IntoIterator<Item = T>) -> f64 {
     }
 }
 
+/// The population standard deviation of `values` about their [`mean`]; 0 for none.
+pub fn standard_deviation(values: &[f64]) -> f64 {
+    let m = mean(values);
+    mean(values.iter().map(|x| (x - m) * (x - m))).sqrt()
+}
+
 /// A smooth envelope over non-negative `values` per frame that never falls short of any frame's
 /// own value: each value dilated (the largest within ±`radius` frames, at least 0), then averaged
 /// over the same window. Every window holding frame t holds only values ≥ t's, so a change (a
@@ -43,5 +49,12 @@ mod tests {
         let values = [0.1, 0.2, 0.7, 1e-9];
         assert_eq!(mean(values).to_bits(), (values.iter().sum::<f64>() / 4.0).to_bits());
         assert_eq!(mean(std::iter::empty::<f64>()), 0.0);
+    }
+
+    #[test]
+    fn the_standard_deviation_is_about_the_mean_and_zero_for_none() {
+        assert_eq!(standard_deviation(&[2.0, 4.0, 4.0, 4.0, 5.0, 5.0, 7.0, 9.0]), 2.0);
+        assert_eq!(standard_deviation(&[3.0]), 0.0);
+        assert_eq!(standard_deviation(&[]), 0.0);
     }
 }

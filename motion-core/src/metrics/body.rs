@@ -1,7 +1,7 @@
 //! Body figures of a motion: foot skate, accelerations, travel, bone lengths, ground
 //! penetration and contact, raised hands, how the hands are held and the head–neck distance.
 
-use crate::numeric::mean;
+use crate::numeric::{mean, standard_deviation};
 use crate::representation::facing_direction;
 use crate::skeleton::{bone_lengths, Joint, Pose, FPS, NUM_JOINTS};
 
@@ -176,17 +176,13 @@ pub fn hand_hold(poses: &[Pose]) -> Option<HandHold> {
     if gap.is_empty() {
         return None;
     }
-    let spread = |v: &[f64]| {
-        let m = mean(v.iter().copied());
-        mean(v.iter().map(|x| (x - m) * (x - m))).sqrt()
-    };
-    let lesser = |v: &[Vec<f64>; 2]| mean(v[0].iter().copied()).min(mean(v[1].iter().copied()));
+    let lesser = |v: &[Vec<f64>; 2]| mean(&v[0]).min(mean(&v[1]));
     Some(HandHold {
         ahead_m: lesser(&ahead),
         above_pelvis_m: lesser(&above),
-        gap_m: mean(gap.iter().copied()),
-        gap_spread_m: spread(&gap),
-        swing_m: spread(&ahead[0]).max(spread(&ahead[1])),
+        gap_m: mean(&gap),
+        gap_spread_m: standard_deviation(&gap),
+        swing_m: standard_deviation(&ahead[0]).max(standard_deviation(&ahead[1])),
     })
 }
 

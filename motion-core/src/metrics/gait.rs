@@ -120,9 +120,8 @@ pub fn pace(poses: &[Pose]) -> (f64, Option<f64>) {
         return (rate, None);
     }
     let intervals: Vec<f64> = steps.windows(2).map(|w| (w[1] - w[0]) as f64).collect();
-    let mean = crate::numeric::mean(intervals.iter().copied());
-    let var = intervals.iter().map(|i| (i - mean).powi(2)).sum::<f64>() / intervals.len() as f64;
-    (rate, (mean > 0.0).then(|| var.sqrt() / mean))
+    let mean = crate::numeric::mean(&intervals);
+    (rate, (mean > 0.0).then(|| crate::numeric::standard_deviation(&intervals) / mean))
 }
 
 /// A frame whose pelvis moves faster than this horizontally is moving, m/s ([`moving_pace`]).
