@@ -54,11 +54,12 @@ pub enum ScheduleArg {
     /// stopped improving (it fell by under 1 % of the stage's first loss over 10 steps) and the
     /// cleaned motion's foot skate and peak acceleration are within 10 % of capture's walks or
     /// of the prior's own sample (or have come no nearer to that over three checks: a crawl's
-    /// own skate); RG-DNO's branches once each meets its group; the inversion
+    /// own skate); RG-DNO's branches once each meets its group or has stopped coming nearer
+    /// to it; a sample done before the others is held and costs no more passes; the inversion
     /// once its loss stalls or, for a program without counts, its motion is within 0.05 m of
     /// the retrieved one; the soft blend once its loss stalls. RG-DNO's mask candidates
-    /// are scored in the order a cheap sampler ranks them until the masks meet the program
-    /// (the soft blend is then skipped) or no sample's best has changed over 64 candidates, and
+    /// are scored in the order a cheap sampler ranks them until every sample's mask meets the
+    /// program (the soft blend is then skipped) or has not changed over 64 candidates, and
     /// the refinement is skipped when nothing is left to close. Unless set, DNO samples with 5
     /// DDIM steps (RG-DNO with 10) and a sample that misses a constraint or the skill the
     /// prompt asks for is tried once more.

@@ -95,7 +95,19 @@ impl CompiledProgram {
     /// Whether every sample of joints `[B, T, 22, 3]` meets every constraint at its tolerance
     /// (the verdicts of [`CompiledProgram::satisfaction`]).
     pub fn met_by_every_sample(&self, joints: &Tensor, initial: Option<&Tensor>) -> Result<bool, ConstraintError> {
-        Ok(self.satisfaction(joints, initial)?.iter().all(|c| c.pass.iter().all(|&p| p)))
+        Ok(self.met_per_sample(joints, initial)?.iter().all(|&met| met))
+    }
+
+    /// Whether each sample of joints `[B, T, 22, 3]` meets every constraint at its tolerance,
+    /// `[B]`.
+    pub fn met_per_sample(&self, joints: &Tensor, initial: Option<&Tensor>) -> Result<Vec<bool>, ConstraintError> {
+        let mut met = vec![true; joints.dim(0)?];
+        for constraint in self.satisfaction(joints, initial)? {
+            for (m, pass) in met.iter_mut().zip(constraint.pass) {
+                *m &= pass;
+            }
+        }
+        Ok(met)
     }
 
     /// Every constraint's figures in natural units on joints `[B, T, 22, 3]` (no gradient);

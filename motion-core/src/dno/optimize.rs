@@ -100,19 +100,24 @@ pub fn optimize<S: Solver + ?Sized>(
     config: &DnoConfig,
     on_step: impl FnMut(&DnoStep),
 ) -> Result<DnoResult> {
-    optimize_until(solver, criterion, z0, config, on_step, |_, _| Ok(false))
+    optimize_until(solver, criterion, z0, config, on_step, |s, _| Ok(vec![false; s.loss.len()]))
 }
 
-/// [`optimize`], asking `done` after every step whether the run is done before its budget:
+/// [`optimize`], asking `done` after every step which samples are done before the budget:
 /// `done` gets the step's figures and the motion `x` `[batch, frames, 263]` the result returns
-/// when the run ends there (the forward of that step, or with `keep_best` the best iterate's).
+/// when the run ends there (the forward of that step, or with `keep_best` the best iterate's),
+/// and answers per row (`[batch]`, true: done).
+///
+/// A row once done is held: its noise and motion stay those of the step it was done on, the
+/// solver no longer runs it ([`Solver::solve_rows`]: a done sample costs no more denoiser
+/// passes), and the criterion sees its held motion. The run ends when every row is done.
 pub fn optimize_until<S: Solver + ?Sized>(
     solver: &S,
     criterion: impl Fn(&Tensor) -> Result<Tensor>,
     z0: &Tensor,
     config: &DnoConfig,
     mut on_step: impl FnMut(&DnoStep),
-    mut done: impl FnMut(&DnoStep, &Tensor) -> Result<bool>,
+    mut done: impl FnMut(&DnoStep, &Tensor) -> Result<Vec<bool>>,
 ) -> Result<DnoResult> {
     config.validate()?;
     let (batch, _, _) = z0.dims3()?;
@@ -124,11 +129,17 @@ pub fn optimize_until<S: Solver + ?Sized>(
     let mut last: Option<(Tensor, Vec<f64>)> = None;
     // With `keep_best`: per sample, the iterate with the lowest loss so far (z, x, loss).
     let mut best: Option<(Tensor, Tensor, Vec<f64>)> = None;
+    // Rows done, and the noise and motion `[batch, ...]` they are held at (other rows unused).
+    let mut held_rows = vec![false; batch];
+    let mut held: Option<(Tensor, Tensor)> = None;
     for step in 0..config.steps {
         let lr_factor = config.lr_factor(step);
         let lr = config.lr * lr_factor;
 
-        let x = solver.solve(z.as_tensor())?;
+        let x = match &held {
+            None => solver.solve(z.as_tensor())?,
+            Some((_, x_held)) => solve_unheld(solver, z.as_tensor(), x_held, &held_rows)?,
+        };
         // A copy: a solver may return z's own storage, which the update below overwrites.
         let x_out = x.detach().copy()?;
         let loss = criterion(&x)?;
@@ -150,8 +161,10 @@ pub fn optimize_until<S: Solver + ?Sized>(
         };
 
         let loss_now = to_f64(&loss)?;
+        // The noise of this step's motion (the update below moves z past it).
+        let z_now = z.as_tensor().detach().copy()?;
         if config.keep_best {
-            let z_now = z.as_tensor().detach().copy()?;
+            let z_now = z_now.clone();
             best = Some(match best {
                 None => (z_now, x_out.clone(), loss_now.clone()),
                 Some((z_best, x_best, loss_best)) => {
@@ -179,6 +192,10 @@ pub fn optimize_until<S: Solver + ?Sized>(
             let noise = gaussian_from_rng(z.shape(), &mut rng, z.device())?.to_dtype(z.dtype())?;
             z.set(&(z.as_tensor() + (noise * (config.perturb_scale * lr_factor))?)?)?;
         }
+        if let Some((z_held, _)) = &held {
+            // Held rows stay where they were done (the regulariser still reaches them).
+            z.set(&take_rows(&held_rows, z_held, z.as_tensor())?)?;
+        }
 
         let report = DnoStep {
             step,
@@ -197,9 +214,25 @@ pub fn optimize_until<S: Solver + ?Sized>(
         on_step(&report);
         // The motion the run hands on were it to end here: the best iterate with `keep_best`.
         let handed_on = best.as_ref().map_or(&x_out, |(_, x, _)| x);
-        let stop = done(&report, handed_on)?;
+        let rows_done = done(&report, handed_on)?;
+        if rows_done.len() != batch {
+            candle_core::bail!("DNO: done answered {} rows, expected {batch}", rows_done.len());
+        }
+        let newly: Vec<bool> = rows_done.iter().zip(&held_rows).map(|(&d, &h)| d && !h).collect();
+        let all_done = rows_done.iter().zip(&held_rows).all(|(&d, &h)| d || h);
+        if newly.iter().any(|&n| n) && !all_done {
+            // Newly done rows are held at this step's noise and motion.
+            held = Some(match held {
+                None => (z_now.clone(), x_out.clone()),
+                Some((z_held, x_held)) => (take_rows(&newly, &z_now, &z_held)?, take_rows(&newly, &x_out, &x_held)?),
+            });
+            for (h, &n) in held_rows.iter_mut().zip(&newly) {
+                *h |= n;
+            }
+            z.set(&take_rows(&newly, &z_now, z.as_tensor())?)?;
+        }
         last = Some((x_out, report.loss));
-        if stop {
+        if all_done {
             break;
         }
     }
@@ -223,7 +256,7 @@ pub fn optimize_with_restarts<S: Solver + ?Sized>(
     device: &Device,
     config: &DnoConfig,
     mut on_step: impl FnMut(usize, &DnoStep),
-    mut done: impl FnMut(usize, &DnoStep, &Tensor) -> Result<bool>,
+    mut done: impl FnMut(usize, &DnoStep, &Tensor) -> Result<Vec<bool>>,
 ) -> Result<RestartsResult> {
     config.validate()?;
     let mut best: Option<DnoResult> = None;
@@ -250,6 +283,29 @@ pub fn optimize_with_restarts<S: Solver + ?Sized>(
     }
     let best = best.ok_or_else(|| candle_core::Error::Msg("DNO ran no restarts".into()))?;
     Ok(RestartsResult { best, chosen, final_loss })
+}
+
+/// The motion `[batch, frames, 263]` of noise `z`: the solver's on the rows not `held`, and
+/// the rows of `x_held` on the others (no gradient reaches their noise through it).
+fn solve_unheld<S: Solver + ?Sized>(solver: &S, z: &Tensor, x_held: &Tensor, held: &[bool]) -> Result<Tensor> {
+    let running: Vec<u32> = (0..held.len()).filter(|&b| !held[b]).map(|b| b as u32).collect();
+    let rows = Tensor::new(running.as_slice(), z.device())?;
+    let x_running = solver.solve_rows(&z.index_select(&rows, 0)?, &rows)?;
+    // Row b of the result: its place among the running rows, or its row of `x_held` after them.
+    let mut place = 0u32;
+    let order: Vec<u32> = held
+        .iter()
+        .enumerate()
+        .map(|(b, &h)| {
+            if h {
+                (running.len() + b) as u32
+            } else {
+                place += 1;
+                place - 1
+            }
+        })
+        .collect();
+    Tensor::cat(&[&x_running, &x_held.detach()], 0)?.index_select(&Tensor::new(order.as_slice(), z.device())?, 0)
 }
 
 /// Whether loss `new` should replace `old`: lower, or a number against NaN.

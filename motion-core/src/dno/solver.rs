@@ -11,6 +11,14 @@ use crate::diffusion::{DdimSampler, Denoiser, Guidance, NoiseSchedule};
 pub trait Solver {
     /// x = G(z), keeping the autograd graph back to `z`.
     fn solve(&self, z: &Tensor) -> Result<Tensor>;
+
+    /// x of some rows of the batch: `z_rows` `[R, frames, 263]` are the rows `rows` (`[R]`,
+    /// u32) of the batch's noise. A solver that maps each row on its own (a closure) solves
+    /// them as they are; one with inputs per row picks those rows of them.
+    fn solve_rows(&self, z_rows: &Tensor, rows: &Tensor) -> Result<Tensor> {
+        let _ = rows;
+        self.solve(z_rows)
+    }
 }
 
 impl<F: Fn(&Tensor) -> Result<Tensor>> Solver for F {
@@ -95,5 +103,22 @@ impl<D: Denoiser + ?Sized> Solver for UnrolledDdim<'_, D> {
             Some(start) => (&start.signal + z.affine(start.noise_scale, 0.0)?)?,
         };
         self.sampler.sample_unrolled(self.denoiser, &x_start, &self.text, self.guidance)
+    }
+
+    fn solve_rows(&self, z_rows: &Tensor, rows: &Tensor) -> Result<Tensor> {
+        // The text and the late start's signal of those rows (one row serves every sample).
+        let pick = |t: &Tensor| if t.dim(0)? == 1 { Ok(t.clone()) } else { t.index_select(rows, 0) };
+        let late_start = match &self.late_start {
+            None => None,
+            Some(start) => Some(LateStart { signal: pick(&start.signal)?, noise_scale: start.noise_scale }),
+        };
+        let part = Self {
+            sampler: self.sampler.clone(),
+            denoiser: self.denoiser,
+            text: pick(&self.text)?,
+            guidance: self.guidance,
+            late_start,
+        };
+        part.solve(z_rows)
     }
 }

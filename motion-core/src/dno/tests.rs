@@ -120,7 +120,7 @@ fn restarts_keep_the_best_run_per_sample() {
         &dev,
         &config,
         |r, _| calls[r] += 1,
-        |_, _, _| Ok(false),
+        |_, s, _| Ok(vec![false; s.loss.len()]),
     )
     .unwrap();
     assert_eq!(calls, [5, 5, 5]);
@@ -253,7 +253,7 @@ fn a_run_ends_where_done_says_with_that_steps_motion() {
         |_| {},
         |s, x| {
             motions.push(x.clone());
-            Ok(s.step == 3)
+            Ok(vec![s.step == 3])
         },
     )
     .unwrap();
@@ -262,6 +262,49 @@ fn a_run_ends_where_done_says_with_that_steps_motion() {
     assert_eq!(run.loss[0], run.history[0].loss[3]);
     let same = (&run.x - &motions[3]).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
     assert_eq!(same, 0.0, "the result is the motion of the step it ended on");
-    let full = optimize_until(&identity, reach(&[2.0], &[1.0]), &z0, &config, |_| {}, |_, _| Ok(false)).unwrap();
+    let full = optimize_until(&identity, reach(&[2.0], &[1.0]), &z0, &config, |_| {}, |_, _| Ok(vec![false])).unwrap();
     assert_eq!(full.history[0].loss.len(), 20, "never done: the whole budget");
+}
+
+#[test]
+fn a_done_row_is_held_at_its_step_and_solved_no_more() {
+    let dev = Device::Cpu;
+    let z0 = gaussian((3, FRAMES, FEATURE_DIM), 5, &dev).unwrap();
+    let config = DnoConfig { steps: 20, lr_warmup_steps: 0, ..DnoConfig::default() };
+    // The identity, recording how many rows it was asked to solve at each step.
+    let solved = std::cell::RefCell::new(Vec::new());
+    let counting = |z: &Tensor| {
+        solved.borrow_mut().push(z.dim(0)?);
+        identity(z)
+    };
+    let mut motions = Vec::new();
+    let run = optimize_until(
+        &counting,
+        reach(&[2.0, -1.0, 0.5], &[1.0, 1.0, 1.0]),
+        &z0,
+        &config,
+        |_| {},
+        |s, x| {
+            motions.push(x.clone());
+            // Row 1 is done after step 2, row 0 after step 5, row 2 after step 7.
+            Ok(vec![s.step >= 5, s.step >= 2, s.step == 7])
+        },
+    )
+    .unwrap();
+    assert_eq!(*solved.borrow(), [3, 3, 3, 2, 2, 2, 1, 1], "a done row is no longer solved");
+    assert_eq!(run.history[0].loss.len(), 8, "the run ends once every row is done");
+    let row = |t: &Tensor, b: usize| t.get(b).unwrap();
+    // Each row's result is its motion of the step it was done on, and a held row's noise is
+    // that motion's (the solver is the identity; the last step's rows keep its update).
+    for (b, step) in [(0, 5), (1, 2), (2, 7)] {
+        assert_eq!(max_abs_diff(&row(&run.x, b), &row(&motions[step], b)).unwrap(), 0.0, "row {b}");
+        if step < 7 {
+            assert_eq!(max_abs_diff(&row(&run.z, b), &row(&motions[step], b)).unwrap(), 0.0, "row {b}'s noise");
+        }
+        assert_eq!(run.loss[b], run.history[b].loss[step]);
+        // A held row's loss stays where it was done.
+        assert!(run.history[b].loss[step..].iter().all(|&l| l == run.history[b].loss[step]), "row {b}");
+    }
+    // The rows still running move on: row 2 between steps 2 and 7.
+    assert!(max_abs_diff(&row(&motions[7], 2), &row(&motions[2], 2)).unwrap() > 0.0);
 }

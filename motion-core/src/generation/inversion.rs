@@ -147,7 +147,7 @@ pub fn invert_motion(
                 let error_m = mean_joint_distance(&prior.to_joints(x)?, &joints)?.to_dtype(DType::F64)?.to_vec1()?;
                 reproduced = mean(&error_m) <= INVERSION_TOLERANCE_M;
             }
-            Ok(fast && (stalled || reproduced))
+            Ok(vec![fast && (stalled || reproduced); s.loss.len()])
         };
         z = dno::optimize_until(&solver, criterion, &z, &settings, &mut on_polish_step, done)?.z;
     }
@@ -157,9 +157,10 @@ pub fn invert_motion(
         let mut stall = Stall::default();
         let done = |s: &DnoStep, _: &Tensor| {
             let error_m = mean(&s.loss);
-            Ok(fast
+            let ended = fast
                 && (stall.stalled_after(error_m, 0)
-                    || ((within || stall.at_check(0)) && error_m <= INVERSION_TOLERANCE_M)))
+                    || ((within || stall.at_check(0)) && error_m <= INVERSION_TOLERANCE_M));
+            Ok(vec![ended; s.loss.len()])
         };
         z = dno::optimize_until(&solver, criterion, &z, &settings, &mut on_polish_step, done)?.z;
     }

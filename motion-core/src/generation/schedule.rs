@@ -41,15 +41,20 @@ pub enum Schedule {
     /// - DNO and RG-DNO's final round when every constraint is met, the criterion has stalled
     ///   ([`Stall`]) and the motion looks no worse than its bar ([`LookBar`]) or no longer
     ///   comes nearer to it ([`LookFloor`]);
-    /// - RG-DNO's branches when each branch meets its own group (the final round finishes
-    ///   the motion);
+    /// - RG-DNO's branches when each branch meets its own group or no longer comes nearer to
+    ///   it (the final round finishes the motion);
+    /// - in every DNO stage, a sample that is done (a shown stage's sample that meets the
+    ///   program and looks no worse than its bars, an intermediate stage's that no longer
+    ///   comes nearer its program) is held where it is while the others go on, and costs no
+    ///   more denoiser passes ([`crate::dno::optimize_until`]);
     /// - the inversion's polishes and RG-DNO's soft blend when their objective has stalled;
     ///   the inversion's polishes also once the motion is within [`INVERSION_TOLERANCE_M`] of
     ///   the retrieved one (the joint polish is then skipped);
     /// - RG-DNO's mask search scores its candidates by eq. 13 in the order a cheap sampler
-    ///   ranks them and ends once every sample's best meets the program (then the soft blend
-    ///   is skipped too) or no sample's best has changed over the last
-    ///   [`crate::generation::rgdno::config::RgDnoConfig::mask_patience`] candidates;
+    ///   ranks them, stops sampling a sample whose best has not changed over the last
+    ///   [`crate::generation::rgdno::config::RgDnoConfig::mask_patience`] candidates, and ends
+    ///   once every sample's best meets the program (then the soft blend is skipped too) or
+    ///   has stopped changing;
     /// - for a program without counts, RG-DNO's stages before its final round sample through
     ///   every other DDIM timestep without guidance
     ///   ([`crate::generation::rgdno::config::RgDnoConfig::early_stride`],
@@ -87,6 +92,11 @@ pub const INVERSION_TOLERANCE_M: f64 = 0.05;
 /// Judgements of a met, stalled motion above its look bar, with no sample's look coming nearer
 /// its bar by [`STALL_FRACTION`] of the bar, after which the look counts as at its floor.
 pub const LOOK_PATIENCE: usize = 3;
+
+/// Judgements in a row without a new best after which a row of an intermediate stage that has
+/// not met its program is done: more steps do not bring it nearer, and the final round fits
+/// the whole program from wherever the row got to.
+pub const UNMET_PATIENCE: usize = 2;
 
 /// What a fall of the criterion is measured against when asking whether it has stalled.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -224,14 +234,46 @@ impl LookFloor {
     }
 }
 
+/// Each row's best criterion over an intermediate stage's judgements, and how many judgements
+/// in a row it has gone without falling under that best by [`STALL_FRACTION`] of it.
+#[derive(Debug, Clone, Default)]
+pub struct RowStall {
+    best: Vec<f64>,
+    without_gain: Vec<usize>,
+}
+
+impl RowStall {
+    /// Records one judgement's criterion per row; true for each row that has now gone
+    /// [`UNMET_PATIENCE`] judgements without a new best (a NaN is never a gain).
+    pub fn stuck_after(&mut self, loss: &[f64]) -> Vec<bool> {
+        if self.best.len() != loss.len() {
+            self.best = loss.to_vec();
+            self.without_gain = vec![0; loss.len()];
+            return vec![false; loss.len()];
+        }
+        let rows = self.best.iter_mut().zip(&mut self.without_gain).zip(loss);
+        rows.map(|((best, without_gain), &now)| {
+            if now < *best - STALL_FRACTION * best.abs() || (best.is_nan() && !now.is_nan()) {
+                *without_gain = 0;
+            } else {
+                *without_gain += 1;
+            }
+            *best = best.min(now);
+            *without_gain >= UNMET_PATIENCE
+        })
+        .collect()
+    }
+}
+
 /// What ends a stage under [`Schedule::UntilMet`].
 enum Goal<'a> {
     /// A shown motion: every constraint met, the criterion stalled, and the look under its bars
     /// (made at the first judgement from the unoptimised motion and the generation's clean-up)
     /// or at its floor.
     Shown { foot_lock: &'a FootLockConfig, bar: Option<LookBar>, floor: LookFloor },
-    /// An intermediate one: every program met on its rows.
-    Met,
+    /// An intermediate one: every row meets the program of its rows or no longer comes nearer
+    /// to it ([`RowStall`]).
+    Met { stuck: RowStall },
 }
 
 /// When one DNO stage ends under a [`Schedule`]: asked after every step with the motion the
@@ -277,7 +319,7 @@ impl<'a> StageEnd<'a> {
         initial: &'a Tensor,
         warmup: usize,
     ) -> Self {
-        Self::with_goal(schedule, prior, parts, initial, warmup, Goal::Met)
+        Self::with_goal(schedule, prior, parts, initial, warmup, Goal::Met { stuck: RowStall::default() })
     }
 
     fn with_goal(
@@ -300,54 +342,79 @@ impl<'a> StageEnd<'a> {
         }
     }
 
-    /// Whether restart `round`'s stage is done after `step`, handing on motion `x`.
-    pub fn done(&mut self, round: usize, step: &DnoStep, x: &Tensor) -> candle_core::Result<bool> {
+    /// Which samples of restart `round`'s stage are done after `step`, handing on motion `x`
+    /// (per row, true: done; the run ends when every row is):
+    /// - an intermediate stage, at every judgement: every row once each meets its part's
+    ///   program or, short of it, has gone [`UNMET_PATIENCE`] judgements without a new best;
+    ///   before that, each row short of its program without a new best (a met row goes on with
+    ///   the others: the margin it gains survives the stages after it);
+    /// - a shown stage, at a judgement where the criterion has stalled: every row once every
+    ///   row meets the program and the look is under its bars or at its floor; before that,
+    ///   each row that meets the program and looks no worse than its bars (it has nothing left
+    ///   to gain, and costs no more passes while the others go on).
+    pub fn done(&mut self, round: usize, step: &DnoStep, x: &Tensor) -> candle_core::Result<Vec<bool>> {
+        let going = vec![false; step.loss.len()];
         if self.schedule == Schedule::Paper {
-            return Ok(false);
+            return Ok(going);
         }
         if round != self.round {
             self.round = round;
             self.stall.clear();
-            if let Goal::Shown { floor, .. } = &mut self.goal {
-                *floor = LookFloor::default();
+            match &mut self.goal {
+                Goal::Shown { floor, .. } => *floor = LookFloor::default(),
+                Goal::Met { stuck } => *stuck = RowStall::default(),
             }
         }
         let stalled = self.stall.stalled_after(mean(&step.loss), self.warmup);
         let judged = match self.goal {
             Goal::Shown { .. } => stalled,
-            Goal::Met => self.stall.at_check(self.warmup),
+            Goal::Met { .. } => self.stall.at_check(self.warmup),
         };
         if !judged {
-            return Ok(false);
+            return Ok(going);
         }
         let joints = self.prior.to_joints(x)?;
-        if !self.meets_every_part(&joints)? {
-            return Ok(false);
-        }
+        let met = self.met_rows(&joints)?;
         match &mut self.goal {
             Goal::Shown { foot_lock, bar, floor } => {
+                if !met.iter().any(|&m| m) {
+                    return Ok(going);
+                }
                 let bar = match bar {
                     Some(bar) => bar,
                     None => bar.insert(LookBar::of_initial(self.initial, foot_lock)?),
                 };
-                Ok(floor.done_after(&bar.excess(&joints, foot_lock)?))
+                let excess = bar.excess(&joints, foot_lock)?;
+                if met.iter().all(|&m| m) && floor.done_after(&excess) {
+                    return Ok(vec![true; met.len()]);
+                }
+                Ok(met.iter().zip(&excess).map(|(&m, &e)| m && e <= 1.0).collect())
             }
-            Goal::Met => Ok(true),
+            Goal::Met { stuck } => {
+                // Only a row short of its program is held for want of progress.
+                let stuck: Vec<bool> =
+                    stuck.stuck_after(&step.loss).into_iter().zip(&met).map(|(stuck, &met)| stuck && !met).collect();
+                if met.iter().zip(&stuck).all(|(&met, &stuck)| met || stuck) {
+                    return Ok(vec![true; met.len()]);
+                }
+                Ok(stuck)
+            }
         }
     }
 
-    /// Whether every sample meets every constraint of every part on its rows of `joints`.
-    fn meets_every_part(&self, joints: &Tensor) -> candle_core::Result<bool> {
+    /// Whether each row of `joints` meets every constraint of the part that judges it (a row
+    /// no part judges is met).
+    fn met_rows(&self, joints: &Tensor) -> candle_core::Result<Vec<bool>> {
+        let mut met = vec![true; joints.dim(0)?];
         for (compiled, rows) in &self.parts {
-            let part = match rows {
-                Some(rows) => joints.narrow(0, rows.start, rows.len())?,
-                None => joints.clone(),
-            };
-            if !compiled.met_by_every_sample(&part, Some(self.initial)).map_err(candle_core::Error::wrap)? {
-                return Ok(false);
+            let rows = rows.clone().unwrap_or(0..met.len());
+            let part = joints.narrow(0, rows.start, rows.len())?;
+            let judged = compiled.met_per_sample(&part, Some(self.initial)).map_err(candle_core::Error::wrap)?;
+            for (m, part_met) in met[rows].iter_mut().zip(judged) {
+                *m &= part_met;
             }
         }
-        Ok(true)
+        Ok(met)
     }
 }
 
@@ -385,6 +452,19 @@ mod tests {
             !(1..=20).any(|step| halving.stalled_after(0.5f64.powi(step / 4), 0)),
             "falling by more than 1 % of the start every ten steps"
         );
+    }
+
+    #[test]
+    fn a_row_is_stuck_after_two_judgements_without_a_new_best() {
+        let mut stall = RowStall::default();
+        // Row 0 keeps falling; row 1 rises, then gains 0.5 % (under 1 % of its best), then
+        // falls again; row 2 is flat.
+        let judgements = [[1.0, 0.5, 2.0], [0.8, 0.6, 2.0], [0.6, 0.4975, 2.0], [0.4, 0.3, 2.0]];
+        let stuck: Vec<Vec<bool>> = judgements.iter().map(|loss| stall.stuck_after(loss)).collect();
+        assert_eq!(stuck[0], [false, false, false], "the first judgement sets the bests");
+        assert_eq!(stuck[1], [false, false, false]);
+        assert_eq!(stuck[2], [false, true, true], "two judgements without a gain of 1 %");
+        assert_eq!(stuck[3], [false, false, true], "a new best counts again");
     }
 
     /// 40 frames standing still, or with both feet on the floor sliding sideways at `speed`

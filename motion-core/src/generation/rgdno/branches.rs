@@ -1,6 +1,7 @@
 //! Stage 4 (eqs. 8–9): the two branches in one batch: `z1` from random noise fitted to `C1`
 //! and `z2` from the inverted noise `z_R` fitted to `C2`, each `N1` DNO steps (or, under
-//! [`crate::generation::schedule::Schedule::UntilMet`], until each branch meets its group).
+//! [`crate::generation::schedule::Schedule::UntilMet`], until each branch meets its group or
+//! no longer comes nearer to it; a branch that no longer does is held while the other goes on).
 
 use candle_core::Tensor;
 

@@ -85,10 +85,11 @@ pub struct RgDnoConfig {
     pub mask_kinds: Vec<MaskKind>,
     /// Mask candidates sampled per batch, per sample (default 16).
     pub mask_batch: usize,
-    /// Under [`crate::generation::schedule::Schedule::UntilMet`], the mask search also ends once no
-    /// sample's best candidate has changed over this many candidates scored in its order
-    /// (default 64; 0: it ends only when the program is met, or after every candidate). The
-    /// paper's search scores every candidate.
+    /// Under [`crate::generation::schedule::Schedule::UntilMet`], a sample's best candidate
+    /// that has not changed over this many candidates scored in its order ends that sample's
+    /// search (its rows are no longer sampled; default 64; 0: a sample's search ends only
+    /// when the program is met, or after every candidate). The paper's search scores every
+    /// candidate.
     pub mask_patience: usize,
     /// Under [`crate::generation::schedule::Schedule::UntilMet`], for a program without
     /// counts, the inversion, the branches, the mask search and the soft blend sample through

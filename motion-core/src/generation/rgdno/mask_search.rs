@@ -6,10 +6,11 @@
 //! first sampled by a cheap sampler ([`SCREEN_DDIM_STEPS`] unguided DDIM steps: a tenth of the
 //! denoiser passes of ten guided ones) and the candidates are put in the order of their best
 //! rank by `F_C` over the samples; they are then scored as above in that order, and the search
-//! ends once at least [`SCREENED`] are scored and every sample's best meets the whole program
-//! at its tolerance (then the soft blend is skipped too), or once no sample's best has changed
-//! over the last [`RgDnoConfig::mask_patience`] candidates: the order puts the likely winners
-//! first, so a long run without a change means the rest are unlikely to win. The cheap sampler
+//! stops sampling a sample whose best has not changed over the last
+//! [`RgDnoConfig::mask_patience`] candidates, and ends once at least [`SCREENED`] are scored and
+//! every sample's best meets the whole program at its tolerance or has stopped changing; where
+//! every sample's best meets the program the soft blend is skipped too. The order puts the likely winners first, so a long run without a change means
+//! the rest are unlikely to win. The cheap sampler
 //! only orders; a candidate is passed over only by that patience.
 //! It used to drop all but each sample's best 16, which lost the masks that make the three
 //! touches touch (`fixtures/results/issue59-mask-order/`).
@@ -84,7 +85,12 @@ impl Objective<'_> {
 
     /// Whether every sample of joints `[B, T, 22, 3]` meets every constraint at its tolerance.
     pub(super) fn meets(&self, joints: &Tensor) -> candle_core::Result<bool> {
-        self.compiled.met_by_every_sample(joints, Some(self.initial)).map_err(candle_core::Error::wrap)
+        Ok(self.met_per_sample(joints)?.iter().all(|&m| m))
+    }
+
+    /// Whether each sample of joints `[B, T, 22, 3]` meets every constraint at its tolerance.
+    pub(super) fn met_per_sample(&self, joints: &Tensor) -> candle_core::Result<Vec<bool>> {
+        self.compiled.met_per_sample(joints, Some(self.initial)).map_err(candle_core::Error::wrap)
     }
 }
 
@@ -165,10 +171,11 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
     }
 
     /// Every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient, in batches of
-    /// `mask_batch` candidates) and scored by `F_C + R`, in order; with `stop_when_met`, until
-    /// at least [`SCREENED`] are scored and every sample's best meets the program, or no
-    /// sample's best has changed over [`RgDnoConfig::mask_patience`] candidates. `done` gets
-    /// the candidates done.
+    /// `mask_batch` candidates) and scored by `F_C + R`, in order; with `stop_when_met`, a
+    /// sample whose best has not changed over [`RgDnoConfig::mask_patience`] candidates is no
+    /// longer sampled, and the search ends once at least [`SCREENED`] are scored and every
+    /// sample's best meets the program or has stopped changing. `done` gets the candidates
+    /// done.
     fn choose(
         &self,
         candidates: &[MaskCandidate],
@@ -186,27 +193,38 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let mut best: Vec<Option<(ChosenMask, f64)>> = vec![None; batch];
         // Each sample's best motion so far `[T, 22, 3]`, kept while the search may end early.
         let mut best_joints: Vec<Option<Tensor>> = vec![None; batch];
-        let mut met = false;
+        // Per sample: whether its best meets the program, and whether it has stopped changing.
+        let (mut met, mut ended) = (vec![false; batch], vec![false; batch]);
         // Whether a best changed since `met` was last judged (the judgement stands otherwise).
         let mut unjudged = false;
         for (chunk_index, chunk) in candidates.chunks(per_batch).enumerate() {
-            // Rows ordered candidate-major: row k·B + b is candidate k on sample b.
-            let z = self.blended(chunk, (z1, z2), frames)?;
-            let text = self.solver.text.repeat((chunk.len(), 1))?;
+            let searching: Vec<usize> = (0..batch).filter(|&b| !ended[b]).collect();
+            let rows = Tensor::new(searching.iter().map(|&b| b as u32).collect::<Vec<_>>().as_slice(), device)?;
+            // The searching samples' rows of a per-sample tensor (one row serves every sample).
+            let part = |t: &Tensor| match t.dim(0)? {
+                n if n == 1 || searching.len() == batch => Ok(t.clone()),
+                _ => t.index_select(&rows, 0),
+            };
+            let n = searching.len();
+            // Rows ordered candidate-major: row k·n + i is candidate k on searching sample i.
+            let z = self.blended(chunk, (&part(z1)?, &part(z2)?), frames)?;
+            let text = part(&self.solver.text)?.repeat((chunk.len(), 1))?;
             let x = self.solver.sampler.sample(self.solver.denoiser, &z, &text, self.solver.guidance)?;
             let joints = self.prior.to_joints(&x)?;
-            let constraint = to_vec(&self.objective.on_copies(&joints, chunk.len())?)?;
+            let initial = part(self.objective.initial)?;
+            let objective = Objective { initial: &initial, ..self.objective };
+            let constraint = to_vec(&objective.on_copies(&joints, chunk.len())?)?;
             let terms = to_vec(&reward(&joints, &z, self.weights, rng)?.total)?;
             for (k, candidate) in chunk.iter().enumerate() {
-                for b in 0..batch {
-                    let (c, r) = (constraint[k * batch + b], terms[k * batch + b]);
+                for (i, &b) in searching.iter().enumerate() {
+                    let (c, r) = (constraint[k * n + i], terms[k * n + i]);
                     let total = c + r;
                     if total.is_finite() && best[b].as_ref().is_none_or(|(_, t)| total < *t) {
                         let place = chunk_index * per_batch + k;
                         best[b] =
                             Some((ChosenMask { candidate: *candidate, constraint_error: c, reward: r, place }, total));
                         if stop_when_met {
-                            best_joints[b] = Some(joints.get(k * batch + b)?);
+                            best_joints[b] = Some(joints.get(k * n + i)?);
                             unjudged = true;
                         }
                     }
@@ -217,16 +235,20 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
             if stop_when_met && (scored >= SCREENED || scored == candidates.len()) {
                 let Some(motions) = best_joints.iter().cloned().collect::<Option<Vec<Tensor>>>() else { continue };
                 if unjudged {
-                    met = self.objective.meets(&Tensor::stack(&motions, 0)?)?;
+                    met = self.objective.met_per_sample(&Tensor::stack(&motions, 0)?)?;
                     unjudged = false;
                 }
-                let last_change = best.iter().flatten().map(|(m, _)| m.place + 1).max().unwrap_or(0);
                 let patience = self.rg.mask_patience;
-                if met || (patience > 0 && scored - last_change >= patience) {
+                for (ended, best) in ended.iter_mut().zip(&best) {
+                    let last_change = best.as_ref().map_or(0, |(m, _)| m.place + 1);
+                    *ended |= patience > 0 && scored - last_change >= patience;
+                }
+                if met.iter().zip(&ended).all(|(&met, &ended)| met || ended) {
                     break;
                 }
             }
         }
+        let met = stop_when_met && met.iter().all(|&m| m);
         let chosen: Vec<ChosenMask> = best
             .into_iter()
             .map(|b| b.map(|(m, _)| m))
@@ -308,9 +330,10 @@ mod tests {
         assert_eq!((candidates(&ordered), scored, met), (candidates(&full), 32, false));
     }
 
-    /// With a patience, the ordered search on a program nothing meets ends once no sample's best
-    /// has changed over that many candidates, before the last, on the masks the search with no
-    /// patience keeps wherever those were scored by then.
+    /// With a patience, the ordered search on a program nothing meets ends once each sample's
+    /// best has gone unchanged over that many candidates (a sample is no longer sampled from
+    /// then on), before the last, on the masks the search with no patience keeps wherever those
+    /// were scored by then.
     #[test]
     fn the_patient_search_ends_once_no_sample_s_best_has_changed() {
         let patient = RgDnoConfig { mask_batch: 2, mask_patience: 6, ..RgDnoConfig::default() };
