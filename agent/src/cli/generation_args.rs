@@ -55,7 +55,8 @@ pub enum ScheduleArg {
     /// cleaned motion's foot skate and peak acceleration are within 10 % of capture's walks or
     /// of the prior's own sample (or have come no nearer to that over three checks: a crawl's
     /// own skate); RG-DNO's branches once each meets its group or has stopped coming nearer
-    /// to it; a sample done before the others is held and costs no more passes; the inversion
+    /// to it; without counts, a sample done before the others is held and costs no more
+    /// passes; the inversion
     /// once its loss stalls or, for a program without counts, its motion is within 0.05 m of
     /// the retrieved one; the soft blend once its loss stalls. RG-DNO's mask candidates
     /// are scored in the order a cheap sampler ranks them until every sample's mask meets the

@@ -41,12 +41,13 @@ pub enum Schedule {
     /// - DNO and RG-DNO's final round when every constraint is met, the criterion has stalled
     ///   ([`Stall`]) and the motion looks no worse than its bar ([`LookBar`]) or no longer
     ///   comes nearer to it ([`LookFloor`]);
-    /// - RG-DNO's branches when each branch meets its own group or no longer comes nearer to
-    ///   it (the final round finishes the motion);
-    /// - in every DNO stage, a sample that is done (a shown stage's sample that meets the
-    ///   program and looks no worse than its bars, an intermediate stage's that no longer
-    ///   comes nearer its program) is held where it is while the others go on, and costs no
-    ///   more denoiser passes ([`crate::dno::optimize_until`]);
+    /// - RG-DNO's branches when each branch meets its own group or, without counts, no longer
+    ///   comes nearer to it (the final round finishes the motion);
+    /// - for a program without counts, in every DNO stage, a sample that is done (a shown
+    ///   stage's sample that meets the program and looks no worse than its bars, an
+    ///   intermediate stage's that no longer comes nearer its program) is held where it is
+    ///   while the others go on, and costs no more denoiser passes
+    ///   ([`crate::dno::optimize_until`]);
     /// - the inversion's polishes and RG-DNO's soft blend when their objective has stalled;
     ///   the inversion's polishes also once the motion is within [`INVERSION_TOLERANCE_M`] of
     ///   the retrieved one (the joint polish is then skipped);
@@ -290,6 +291,10 @@ pub struct StageEnd<'a> {
     /// Steps of the learning rate's warm-up: no stop before them.
     warmup: usize,
     goal: Goal<'a>,
+    /// Whether a sample may end before the others: for programs without counts. A counting
+    /// program's criterion plateaus and then drops as an event forms, and its stages end
+    /// together, on every sample's judgement.
+    per_sample: bool,
     /// The mean criterion of the current restart.
     stall: Stall,
     round: usize,
@@ -330,9 +335,11 @@ impl<'a> StageEnd<'a> {
         warmup: usize,
         goal: Goal<'a>,
     ) -> Self {
+        let per_sample = parts.iter().all(|(compiled, _)| compiled.count_targets().is_empty());
         StageEnd {
             schedule,
             prior,
+            per_sample,
             parts,
             initial,
             warmup,
@@ -343,7 +350,8 @@ impl<'a> StageEnd<'a> {
     }
 
     /// Which samples of restart `round`'s stage are done after `step`, handing on motion `x`
-    /// (per row, true: done; the run ends when every row is):
+    /// (per row, true: done; the run ends when every row is). For a program with counts every
+    /// row is done at once, on the rules' "every row" halves alone; otherwise:
     /// - an intermediate stage, at every judgement: every row once each meets its part's
     ///   program or, short of it, has gone [`UNMET_PATIENCE`] judgements without a new best;
     ///   before that, each row short of its program without a new best (a met row goes on with
@@ -377,7 +385,8 @@ impl<'a> StageEnd<'a> {
         let met = self.met_rows(&joints)?;
         match &mut self.goal {
             Goal::Shown { foot_lock, bar, floor } => {
-                if !met.iter().any(|&m| m) {
+                let all_met = met.iter().all(|&m| m);
+                if !met.iter().any(|&m| m) || !(all_met || self.per_sample) {
                     return Ok(going);
                 }
                 let bar = match bar {
@@ -385,11 +394,15 @@ impl<'a> StageEnd<'a> {
                     None => bar.insert(LookBar::of_initial(self.initial, foot_lock)?),
                 };
                 let excess = bar.excess(&joints, foot_lock)?;
-                if met.iter().all(|&m| m) && floor.done_after(&excess) {
+                if all_met && floor.done_after(&excess) {
                     return Ok(vec![true; met.len()]);
+                }
+                if !self.per_sample {
+                    return Ok(going);
                 }
                 Ok(met.iter().zip(&excess).map(|(&m, &e)| m && e <= 1.0).collect())
             }
+            Goal::Met { .. } if !self.per_sample => Ok(vec![met.iter().all(|&m| m); met.len()]),
             Goal::Met { stuck } => {
                 // Only a row short of its program is held for want of progress.
                 let stuck: Vec<bool> =

@@ -171,11 +171,12 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
     }
 
     /// Every candidate's `z' = M z1 + (1 − M) z2` is sampled (no gradient, in batches of
-    /// `mask_batch` candidates) and scored by `F_C + R`, in order; with `stop_when_met`, a
-    /// sample whose best has not changed over [`RgDnoConfig::mask_patience`] candidates is no
-    /// longer sampled, and the search ends once at least [`SCREENED`] are scored and every
-    /// sample's best meets the program or has stopped changing. `done` gets the candidates
-    /// done.
+    /// `mask_batch` candidates) and scored by `F_C + R`, in order; with `stop_when_met`, for a
+    /// program without counts a sample whose best has not changed over
+    /// [`RgDnoConfig::mask_patience`] candidates is no longer sampled, and the search ends once
+    /// at least [`SCREENED`] are scored and every sample's best meets the program or has
+    /// stopped changing (for a counting program: or once no sample's best has changed over the
+    /// patience). `done` gets the candidates done.
     fn choose(
         &self,
         candidates: &[MaskCandidate],
@@ -193,7 +194,10 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let mut best: Vec<Option<(ChosenMask, f64)>> = vec![None; batch];
         // Each sample's best motion so far `[T, 22, 3]`, kept while the search may end early.
         let mut best_joints: Vec<Option<Tensor>> = vec![None; batch];
-        // Per sample: whether its best meets the program, and whether it has stopped changing.
+        // Per sample: whether its best meets the program, and whether it has stopped changing
+        // (judged per sample for a program without counts; a counting program's late winners
+        // are kept by the samples still searching).
+        let per_sample = self.objective.compiled.count_targets().is_empty();
         let (mut met, mut ended) = (vec![false; batch], vec![false; batch]);
         // Whether a best changed since `met` was last judged (the judgement stands otherwise).
         let mut unjudged = false;
@@ -239,9 +243,13 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
                     unjudged = false;
                 }
                 let patience = self.rg.mask_patience;
-                for (ended, best) in ended.iter_mut().zip(&best) {
-                    let last_change = best.as_ref().map_or(0, |(m, _)| m.place + 1);
-                    *ended |= patience > 0 && scored - last_change >= patience;
+                let last_change = |best: &Option<(ChosenMask, f64)>| best.as_ref().map_or(0, |(m, _)| m.place + 1);
+                if per_sample {
+                    for (ended, best) in ended.iter_mut().zip(&best) {
+                        *ended |= patience > 0 && scored - last_change(best) >= patience;
+                    }
+                } else if patience > 0 && scored - best.iter().map(last_change).max().unwrap_or(0) >= patience {
+                    break;
                 }
                 if met.iter().zip(&ended).all(|(&met, &ended)| met || ended) {
                     break;
