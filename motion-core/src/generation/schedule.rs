@@ -53,9 +53,9 @@ pub enum Schedule {
     ///   the retrieved one (the joint polish is then skipped);
     /// - RG-DNO's mask search scores its candidates by eq. 13 in the order a cheap sampler
     ///   ranks them, stops sampling a sample whose best has not changed over the last
-    ///   [`crate::generation::rgdno::config::RgDnoConfig::mask_patience`] candidates, and ends
-    ///   once every sample's best meets the program (then the soft blend is skipped too) or
-    ///   has stopped changing;
+    ///   [`crate::generation::rgdno::config::RgDnoConfig::mask_patience`] candidates (for a
+    ///   counting program: ends once no sample's best has), and ends once every sample's best
+    ///   meets the program (then the soft blend is skipped too) or has stopped changing;
     /// - for a program without counts, RG-DNO's stages before its final round sample through
     ///   every other DDIM timestep without guidance
     ///   ([`crate::generation::rgdno::config::RgDnoConfig::early_stride`],
