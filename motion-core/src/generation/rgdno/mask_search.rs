@@ -7,11 +7,12 @@
 //! denoiser passes of ten guided ones) and the candidates are put in the order of their best
 //! rank by `F_C` over the samples; they are then scored as above in that order, and the search
 //! stops sampling a sample whose best has not changed over the last
-//! [`RgDnoConfig::mask_patience`] candidates, and ends once at least [`SCREENED`] are scored and
-//! every sample's best meets the whole program at its tolerance or has stopped changing; where
-//! every sample's best meets the program the soft blend is skipped too. The order puts the likely winners first, so a long run without a change means
-//! the rest are unlikely to win. The cheap sampler
-//! only orders; a candidate is passed over only by that patience.
+//! [`RgDnoConfig::mask_patience`] candidates (a counting program's search goes on for every
+//! sample until none has changed), and ends once at least [`SCREENED`] are scored and every
+//! sample's best meets the whole program at its tolerance or has stopped changing; where every
+//! sample's best meets the program the soft blend is skipped too. The order puts the likely
+//! winners first, so a long run without a change means the rest are unlikely to win. The cheap
+//! sampler only orders; a candidate is passed over only by that patience.
 //! It used to drop all but each sample's best 16, which lost the masks that make the three
 //! touches touch (`fixtures/results/issue59-mask-order/`).
 
