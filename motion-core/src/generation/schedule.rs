@@ -48,6 +48,10 @@ pub enum Schedule {
     ///   intermediate stage's that no longer comes nearer its program) is held where it is
     ///   while the others go on, and costs no more denoiser passes
     ///   ([`crate::dno::optimize_until`]);
+    /// - for a program without counts, RG-DNO's final round hands on per sample the
+    ///   best-looking met motion of its judgements, judges its criterion's lowest value for the
+    ///   stall, and has its look at the floor after one judgement without gain
+    ///   ([`StageEnd::handing_on_best_look`]);
     /// - the inversion's polishes and RG-DNO's soft blend when their objective has stalled;
     ///   the inversion's polishes also once the motion is within [`INVERSION_TOLERANCE_M`] of
     ///   the retrieved one (the joint polish is then skipped);
@@ -94,6 +98,11 @@ pub const INVERSION_TOLERANCE_M: f64 = 0.05;
 /// its bar by [`STALL_FRACTION`] of the bar, after which the look counts as at its floor.
 pub const LOOK_PATIENCE: usize = 3;
 
+/// [`LOOK_PATIENCE`] of a stage that hands on the best-looking met motion its judgements saw
+/// ([`StageEnd::handing_on_best_look`]): waiting no longer risks ending on a worse look than one
+/// already seen, only missing a better one to come.
+pub const BEST_LOOK_PATIENCE: usize = 1;
+
 /// Judgements in a row without a new best after which a row of an intermediate stage that has
 /// not met its program is done: more steps do not bring it nearer, and the final round fits
 /// the whole program from wherever the row got to.
@@ -119,12 +128,22 @@ pub enum StallScale {
 pub struct Stall {
     losses: Vec<f64>,
     scale: StallScale,
+    /// Whether the fall is that of the lowest criterion so far (a stage that hands on its best
+    /// iterate) rather than of the last one.
+    of_best: bool,
 }
 
 impl Stall {
     /// A record judged against `scale`.
     pub fn with_scale(scale: StallScale) -> Self {
-        Stall { losses: Vec::new(), scale }
+        Stall { losses: Vec::new(), scale, of_best: false }
+    }
+
+    /// A record judged against `scale` on the lowest criterion so far: for a stage that hands
+    /// on its best iterate, which has stopped improving once no new best comes, however the
+    /// last iterate swings around it.
+    pub fn of_best(scale: StallScale) -> Self {
+        Stall { losses: Vec::new(), scale, of_best: true }
     }
 
     /// Records the criterion after a step. True when this step is a check (a multiple of
@@ -137,7 +156,11 @@ impl Stall {
             return false;
         }
         let taken = self.losses.len();
-        let (before, now) = (self.losses[taken - 1 - CHECK_EVERY], self.losses[taken - 1]);
+        let lowest = |losses: &[f64]| losses.iter().copied().fold(f64::INFINITY, f64::min);
+        let (before, now) = match self.of_best {
+            false => (self.losses[taken - 1 - CHECK_EVERY], self.losses[taken - 1]),
+            true => (lowest(&self.losses[..taken - CHECK_EVERY]), lowest(&self.losses)),
+        };
         let scale = match self.scale {
             StallScale::Recent => before.abs(),
             StallScale::StageStart => before.abs().max(self.losses[0].abs()),
@@ -210,13 +233,26 @@ impl LookBar {
 /// A shown motion's look over the judgements of one restart: done once every sample is under
 /// its bars, or when for [`LOOK_PATIENCE`] judgements in a row no sample above its bar came
 /// nearer to it than its best by [`STALL_FRACTION`] of the bar.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct LookFloor {
     best: Vec<f64>,
     without_gain: usize,
+    /// Judgements without gain that make the floor.
+    patience: usize,
+}
+
+impl Default for LookFloor {
+    fn default() -> Self {
+        Self::with_patience(LOOK_PATIENCE)
+    }
 }
 
 impl LookFloor {
+    /// A floor reached after `patience` judgements without gain.
+    pub fn with_patience(patience: usize) -> Self {
+        LookFloor { best: Vec::new(), without_gain: 0, patience }
+    }
+
     /// Records one judgement's [`LookBar::excess`] per sample; true when the look is done.
     pub fn done_after(&mut self, excess: &[f64]) -> bool {
         if excess.iter().all(|&e| e <= 1.0) {
@@ -231,7 +267,7 @@ impl LookFloor {
             *best = best.min(now);
         }
         self.without_gain = if gained { 0 } else { self.without_gain + 1 };
-        self.without_gain >= LOOK_PATIENCE
+        self.without_gain >= self.patience
     }
 }
 
@@ -266,12 +302,16 @@ impl RowStall {
     }
 }
 
+/// Per row, the lowest [`LookBar::excess`] a judgement saw on a motion that met the program, and
+/// that motion `[T, 263]` (none before one met).
+type BestLook = Vec<Option<(f64, Tensor)>>;
+
 /// What ends a stage under [`Schedule::UntilMet`].
 enum Goal<'a> {
     /// A shown motion: every constraint met, the criterion stalled, and the look under its bars
     /// (made at the first judgement from the unoptimised motion and the generation's clean-up)
     /// or at its floor.
-    Shown { foot_lock: &'a FootLockConfig, bar: Option<LookBar>, floor: LookFloor },
+    Shown { foot_lock: &'a FootLockConfig, bar: Option<LookBar>, floor: LookFloor, best_look: Option<BestLook> },
     /// An intermediate one: every row meets the program of its rows or no longer comes nearer
     /// to it ([`RowStall`]).
     Met { stuck: RowStall },
@@ -312,7 +352,7 @@ impl<'a> StageEnd<'a> {
         warmup: usize,
         foot_lock: &'a FootLockConfig,
     ) -> Self {
-        let goal = Goal::Shown { foot_lock, bar: None, floor: LookFloor::default() };
+        let goal = Goal::Shown { foot_lock, bar: None, floor: LookFloor::default(), best_look: None };
         Self::with_goal(schedule, prior, vec![(compiled, None)], initial, warmup, goal)
     }
 
@@ -325,6 +365,54 @@ impl<'a> StageEnd<'a> {
         warmup: usize,
     ) -> Self {
         Self::with_goal(schedule, prior, parts, initial, warmup, Goal::Met { stuck: RowStall::default() })
+    }
+
+    /// This shown stage handing on, per sample, the best-looking motion that met the program at
+    /// its judgements ([`Self::best_looking`]) where that looks better than the stage's own
+    /// result. Its look floor then comes after [`BEST_LOOK_PATIENCE`] judgements without gain,
+    /// and its criterion has stalled once its lowest value stops falling ([`Stall::of_best`]):
+    /// once met, the last iterate swings around that best at every step, and the motion
+    /// handed on is the best-looking of those judged. Only for a program without counts (a
+    /// counting program's stage ends as [`Self::shown`]'s); an intermediate stage is left as it
+    /// is.
+    pub fn handing_on_best_look(mut self) -> Self {
+        if !self.per_sample {
+            return self;
+        }
+        if let Goal::Shown { floor, best_look, .. } = &mut self.goal {
+            *floor = LookFloor::with_patience(BEST_LOOK_PATIENCE);
+            *best_look = Some(Vec::new());
+            self.stall = Stall::of_best(StallScale::StageStart);
+        }
+        self
+    }
+
+    /// The motion to hand on from a stage built [`Self::handing_on_best_look`] whose result is
+    /// `x` `[B, T, 263]`: each row replaced by the best-looking met motion its judgements saw
+    /// where that one lies nearer its look bars (lower [`LookBar::excess`]). `None` where no
+    /// row changes (no judgement met the program, or the result looks at least as good).
+    pub fn best_looking(&self, x: &Tensor) -> candle_core::Result<Option<Tensor>> {
+        let Goal::Shown { foot_lock, bar: Some(bar), best_look: Some(looks), .. } = &self.goal else {
+            return Ok(None);
+        };
+        if looks.iter().all(Option::is_none) {
+            return Ok(None);
+        }
+        let excess = bar.excess(&self.prior.to_joints(x)?, foot_lock)?;
+        let mut changed = false;
+        let rows = (0..x.dim(0)?)
+            .map(|b| match looks.get(b) {
+                Some(Some((best, motion))) if *best < excess[b] => {
+                    changed = true;
+                    Ok(motion.clone())
+                }
+                _ => x.get(b),
+            })
+            .collect::<candle_core::Result<Vec<_>>>()?;
+        if !changed {
+            return Ok(None);
+        }
+        Tensor::stack(&rows, 0).map(Some)
     }
 
     fn with_goal(
@@ -369,7 +457,12 @@ impl<'a> StageEnd<'a> {
             self.round = round;
             self.stall.clear();
             match &mut self.goal {
-                Goal::Shown { floor, .. } => *floor = LookFloor::default(),
+                Goal::Shown { floor, best_look, .. } => {
+                    *floor = LookFloor::with_patience(floor.patience);
+                    if let Some(looks) = best_look {
+                        looks.clear();
+                    }
+                }
                 Goal::Met { stuck } => *stuck = RowStall::default(),
             }
         }
@@ -384,7 +477,7 @@ impl<'a> StageEnd<'a> {
         let joints = self.prior.to_joints(x)?;
         let met = self.met_rows(&joints)?;
         match &mut self.goal {
-            Goal::Shown { foot_lock, bar, floor } => {
+            Goal::Shown { foot_lock, bar, floor, best_look } => {
                 let all_met = met.iter().all(|&m| m);
                 if !met.iter().any(|&m| m) || !(all_met || self.per_sample) {
                     return Ok(going);
@@ -394,6 +487,14 @@ impl<'a> StageEnd<'a> {
                     None => bar.insert(LookBar::of_initial(self.initial, foot_lock)?),
                 };
                 let excess = bar.excess(&joints, foot_lock)?;
+                if let Some(looks) = best_look {
+                    looks.resize(met.len(), None);
+                    for (b, (look, (&met, &excess))) in looks.iter_mut().zip(met.iter().zip(&excess)).enumerate() {
+                        if met && look.as_ref().is_none_or(|(best, _)| excess < *best) {
+                            *look = Some((excess, x.get(b)?));
+                        }
+                    }
+                }
                 if all_met && floor.done_after(&excess) {
                     return Ok(vec![true; met.len()]);
                 }
@@ -468,6 +569,23 @@ mod tests {
     }
 
     #[test]
+    fn a_criterion_of_best_stalls_once_no_new_best_comes_however_the_last_swings() {
+        // Down from 1 to 0.1 over the first nine steps, then swinging above that best: 0.35,
+        // and at every tenth step 0.5, 0.4, 0.3 (each 0.1 under the one ten steps before).
+        let loss = |step: usize| match step {
+            1..=9 => 1.0 - 0.1125 * (step - 1) as f64,
+            _ if step % 10 == 0 => 0.5 - 0.01 * (step - 10) as f64,
+            _ => 0.35,
+        };
+        let mut of_best = Stall::of_best(StallScale::StageStart);
+        let mut of_last = Stall::with_scale(StallScale::StageStart);
+        let best: Vec<usize> = (1..=30).filter(|&step| of_best.stalled_after(loss(step), 0)).collect();
+        let last: Vec<usize> = (1..=30).filter(|&step| of_last.stalled_after(loss(step), 0)).collect();
+        assert_eq!(best, [20, 30], "no new best after step 9");
+        assert!(last.is_empty(), "the last value falls by 0.1 every ten steps: {last:?}");
+    }
+
+    #[test]
     fn a_row_is_stuck_after_two_judgements_without_a_new_best() {
         let mut stall = RowStall::default();
         // Row 0 keeps falling; row 1 rises, then gains 0.5 % (under 1 % of its best), then
@@ -522,5 +640,91 @@ mod tests {
         assert_eq!(judged(&[[2.0, 1.0], [2.0, 0.5], [2.0, 0.2], [2.0, 0.1]]), Some(4));
         let steady = [[3.0, 1.0], [2.5, 1.0], [2.0, 1.0], [1.5, 1.0], [1.2, 1.0], [1.0, 1.0]];
         assert_eq!(judged(&steady), Some(6), "coming down to its bar");
+    }
+
+    /// Three motions of the prior, `[1, 40, 263]` each, and the prior.
+    fn prior_motions() -> (Prior, Vec<Tensor>) {
+        let device = Device::Cpu;
+        let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures");
+        let prior = Prior::load(&fixtures.join("model/prior.safetensors"), &fixtures.join("text"), &device).unwrap();
+        let text = prior.encode_text(&["a person walks forward"], &device).unwrap();
+        let guidance = crate::diffusion::Guidance::default().for_text(&text).unwrap();
+        let solver = crate::dno::UnrolledDdim::new(&prior.mdm, text, guidance, 10).unwrap();
+        let motions = (1..=3)
+            .map(|seed| {
+                let z = crate::diffusion::noise::gaussian((1, 40, crate::representation::FEATURE_DIM), seed, &device);
+                solver.sampler.sample(solver.denoiser, &z.unwrap(), &solver.text, solver.guidance).unwrap()
+            })
+            .collect();
+        (prior, motions)
+    }
+
+    fn compiled(min_pelvis_height_m: f64) -> CompiledProgram {
+        let program = crate::program::TaskProgram::from_json_validated(&format!(
+            r#"{{"text": "a person walks forward", "frames": 40, "constraints": [{{"id": "c1", "expr":
+            {{"op": "greater_than", "quantity": {{"kind": "position", "of": {{"joint": "pelvis"}}, "axes": "y"}},
+            "min": {min_pelvis_height_m}, "frames": {{"keyframes": ["first"]}}}}}}]}}"#
+        ))
+        .unwrap();
+        CompiledProgram::compile(&program, &Device::Cpu).unwrap()
+    }
+
+    /// Judges motions 1 and 2 of `motions` at the first two checks of a shown stage built
+    /// handing on its best look, on a flat criterion, and asks what it hands on for motion 0.
+    fn hand_on(
+        prior: &Prior,
+        motions: &[Tensor],
+        compiled: &CompiledProgram,
+        schedule: Schedule,
+        lock: &FootLockConfig,
+    ) -> Option<Tensor> {
+        let initial = prior.to_joints(&motions[0]).unwrap();
+        let mut end = StageEnd::shown(schedule, prior, compiled, &initial, 0, lock).handing_on_best_look();
+        for step in 0..30 {
+            let figures = DnoStep {
+                step,
+                steps: 100,
+                lr: 0.0,
+                loss: vec![1.0],
+                decorrelation: vec![0.0],
+                diff_norm: vec![0.0],
+                grad_norm: vec![0.0],
+            };
+            end.done(0, &figures, &motions[1 + step / 20]).unwrap();
+        }
+        end.best_looking(&motions[0]).unwrap()
+    }
+
+    #[test]
+    fn a_stage_handing_on_its_best_look_hands_on_the_best_looking_met_motion_it_judged() {
+        let (prior, motions) = prior_motions();
+        let lock = FootLockConfig::default();
+        let bar = LookBar::of_initial(&prior.to_joints(&motions[0]).unwrap(), &lock).unwrap();
+        let excess: Vec<f64> =
+            motions.iter().map(|x| bar.excess(&prior.to_joints(x).unwrap(), &lock).unwrap()[0]).collect();
+        let handed = hand_on(&prior, &motions, &compiled(0.1), Schedule::UntilMet, &lock);
+        // Judged at steps 20 (motion 1) and 30 (motion 2); the stage's own result is motion 0.
+        let judged = if excess[2] < excess[1] { 2 } else { 1 };
+        match handed {
+            Some(x) => {
+                assert!(excess[judged] < excess[0], "{excess:?}");
+                assert_eq!(
+                    x.flatten_all().unwrap().to_vec1::<f32>().unwrap(),
+                    motions[judged].flatten_all().unwrap().to_vec1::<f32>().unwrap()
+                );
+            }
+            None => assert!(excess[0] <= excess[judged], "{excess:?}"),
+        }
+        // Motion 0 handed on from what it judged, on the motion that looks worst: always a change.
+        let worst = (0..3).max_by(|&a, &b| excess[a].total_cmp(&excess[b])).unwrap();
+        let reordered: Vec<Tensor> =
+            [worst].into_iter().chain((0..3).filter(|&k| k != worst)).map(|k| motions[k].clone()).collect();
+        assert!(
+            hand_on(&prior, &reordered, &compiled(0.1), Schedule::UntilMet, &lock).is_some()
+                || excess.iter().all(|&e| e == excess[worst])
+        );
+        // Nothing met (the pelvis 5 m up), or the papers' schedule: the result is handed on as it is.
+        assert!(hand_on(&prior, &reordered, &compiled(5.0), Schedule::UntilMet, &lock).is_none());
+        assert!(hand_on(&prior, &reordered, &compiled(0.1), Schedule::Paper, &lock).is_none());
     }
 }

@@ -5,22 +5,36 @@
 //! under the until-met schedule), the round
 //! starts on that coarse sampler until the motion meets every constraint (or all but a quarter
 //! of `N2`, at least one step, are spent), then finishes on the whole sampler, which makes the
-//! motion it hands on, under the shown stage's stopping rule ([`StageEnd::shown`]).
+//! motion it hands on, under the shown stage's stopping rule ([`StageEnd::shown`]). For a
+//! program without counts the round hands on, per sample, the best-looking met motion its
+//! judgements saw ([`StageEnd::handing_on_best_look`]), and so waits one judgement without a
+//! gain of look, not three.
 
 use candle_core::Tensor;
 
 use super::error::RgDnoError;
+use super::figures::to_vec;
 use super::report::{Stage, StageProgress};
 use super::stages::Stages;
 use crate::diffusion::Denoiser;
-use crate::dno::{self, DnoConfig, DnoResult, DnoStep};
+use crate::dno::{self, DnoConfig, DnoStep, SampleHistory};
 use crate::generation::objective::program_objective;
 use crate::generation::schedule::StageEnd;
 
+/// The final round's motion per sample.
+pub(super) struct FinalMotion {
+    /// The motion handed on, normalised features `[B, T, 263]`: the best iterate of the whole
+    /// sampler's steps, or where the stopping rule saw a met motion that looks better, that one
+    /// ([`StageEnd::best_looking`]).
+    pub(super) x: Tensor,
+    /// `F_C` with the guards of `x`, per sample.
+    pub(super) loss: Vec<f64>,
+    /// The criterion at every step of both samplers.
+    pub(super) history: Vec<SampleHistory>,
+}
+
 impl<M: Denoiser + ?Sized> Stages<'_, M> {
-    /// The final round from `z_blend` `[B, T, 263]` on `F_C` with the jitter guard, keeping the
-    /// best iterate (of the whole sampler's steps): its `x` is the motion of its `z` through the
-    /// whole sampler, its `loss` that motion's `F_C`, its history every step of both samplers.
+    /// The final round from `z_blend` `[B, T, 263]` on `F_C` with the jitter guard.
     pub(super) fn final_round(
         &self,
         z_blend: &Tensor,
@@ -28,7 +42,7 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
         seed: u64,
         round: usize,
         progress: &mut dyn FnMut(&StageProgress),
-    ) -> Result<DnoResult, RgDnoError> {
+    ) -> Result<FinalMotion, RgDnoError> {
         let Stages { prior, compiled, config, rg, solver, early, foot_lock, .. } = *self;
         let full = program_objective(prior, compiled, initial_joints, config.guards);
         let last = DnoConfig {
@@ -57,9 +71,17 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             last = DnoConfig { steps: rg.final_steps - offset, lr_warmup_steps: 0, lr_decay_steps: None, ..last };
         }
         let mut end =
-            StageEnd::shown(config.schedule, prior, compiled, initial_joints, last.lr_warmup_steps, foot_lock);
+            StageEnd::shown(config.schedule, prior, compiled, initial_joints, last.lr_warmup_steps, foot_lock)
+                .handing_on_best_look();
         let done = |s: &DnoStep, x: &Tensor| end.done(round, s, x);
         let mut run = dno::optimize_until(solver, &full, &z, &last, |s| report(Stage::FinalRound, offset, s), done)?;
+        let (x, loss) = match end.best_looking(&run.x)? {
+            Some(x) => {
+                let loss = to_vec(&full(&x)?)?;
+                (x, loss)
+            }
+            None => (run.x, run.loss),
+        };
         if let Some(coarse) = coarse_history {
             // The round's curves over both samplers, step by step.
             for (whole, mut first) in run.history.iter_mut().zip(coarse) {
@@ -69,6 +91,6 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
                 *whole = first;
             }
         }
-        Ok(run)
+        Ok(FinalMotion { x, loss, history: run.history })
     }
 }
