@@ -224,6 +224,12 @@ impl CompiledProgram {
         Ok(worst)
     }
 
+    /// Whether any constraint counts events (steps, counted extrema): such a program's stages
+    /// end together on every sample's judgement.
+    pub fn has_counts(&self) -> bool {
+        !self.count_targets().is_empty()
+    }
+
     /// `(constraint id, target count)` of every counting expression (counts, steps, events), for
     /// the step-count metric and retrieval's check of counting tasks.
     pub fn count_targets(&self) -> Vec<(String, u32)> {

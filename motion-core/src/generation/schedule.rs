@@ -423,7 +423,7 @@ impl<'a> StageEnd<'a> {
         warmup: usize,
         goal: Goal<'a>,
     ) -> Self {
-        let per_sample = parts.iter().all(|(compiled, _)| compiled.count_targets().is_empty());
+        let per_sample = parts.iter().all(|(compiled, _)| !compiled.has_counts());
         StageEnd {
             schedule,
             prior,

@@ -198,7 +198,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         // Per sample: whether its best meets the program, and whether it has stopped changing
         // (judged per sample for a program without counts; a counting program's late winners
         // are kept by the samples still searching).
-        let per_sample = self.objective.compiled.count_targets().is_empty();
+        let per_sample = !self.objective.compiled.has_counts();
         let (mut met, mut ended) = (vec![false; batch], vec![false; batch]);
         // Whether a best changed since `met` was last judged (the judgement stands otherwise).
         let mut unjudged = false;

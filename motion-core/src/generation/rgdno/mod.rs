@@ -113,7 +113,7 @@ pub fn generate_rg_dno(
         program: &c_r,
         most_difficult: &parse.most_difficult,
         prompt: &program.text,
-        counting: !c_r.count_targets().is_empty(),
+        counting: c_r.has_counts(),
         encoder: Some(&prior.encoder),
     };
     let found = retrieve(database, &query, &rg.retrieval_keeping_used(), device)?;
@@ -127,7 +127,7 @@ pub fn generate_rg_dno(
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
     // The stages before the final round may sample through fewer of the sampler's timesteps,
     // and without guidance.
-    let counts = !compiled.count_targets().is_empty();
+    let counts = compiled.has_counts();
     let stride = rg.early_stride_under(config.schedule, counts);
     let early_guidance = rg.early_guidance_under(config.schedule, counts, guidance);
     let ddim_steps = config.dno.ddim_steps;
