@@ -10,7 +10,8 @@ use motion_core::constraints::CompiledProgram;
 use motion_core::evaluation::report;
 use motion_core::generation::generate;
 use motion_core::generation::method::{GenerationConfig, Method, Task};
-use motion_core::generation::schedule::{Schedule, CHECK_EVERY};
+use motion_core::generation::schedule::Schedule;
+use motion_core::generation::stall::CHECK_EVERY;
 use motion_core::prior::Prior;
 use motion_core::program::TaskProgram;
 

@@ -23,7 +23,8 @@ use candle_core::{DType, Result, Tensor};
 
 use crate::diffusion::Guidance;
 use crate::dno::{self, DnoConfig, DnoStep, UnrolledDdim};
-use crate::generation::schedule::{Schedule, Stall, INVERSION_TOLERANCE_M};
+use crate::generation::schedule::{Schedule, INVERSION_TOLERANCE_M};
+use crate::generation::stall::Stall;
 use crate::numeric::mean;
 use crate::prior::Prior;
 

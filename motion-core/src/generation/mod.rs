@@ -30,6 +30,7 @@ pub mod postprocess;
 pub mod refine;
 pub mod rgdno;
 pub mod schedule;
+pub mod stall;
 
 use std::time::Instant;
 

@@ -14,7 +14,8 @@ use super::report::{Stage, StageProgress};
 use super::reward::reward;
 use crate::diffusion::Denoiser;
 use crate::dno::{self, DnoConfig};
-use crate::generation::schedule::{Schedule, Stall};
+use crate::generation::schedule::Schedule;
+use crate::generation::stall::Stall;
 use crate::numeric::mean;
 use crate::optim::AdamW;
 
