@@ -8,7 +8,8 @@
 //! motion it hands on, under the shown stage's stopping rule ([`StageEnd::shown`]). For a
 //! program without counts the round hands on, per sample, the best-looking met motion its
 //! judgements saw ([`StageEnd::handing_on_best_look`]), and so waits one judgement without a
-//! gain of look, not three.
+//! gain of look, not three. The whole sampler's Adam starts afresh, so its learning rate warms
+//! up over [`WHOLE_SAMPLER_WARMUP_STEPS`].
 
 use candle_core::Tensor;
 
@@ -20,6 +21,12 @@ use crate::diffusion::Denoiser;
 use crate::dno::{self, DnoConfig, DnoStep, SampleHistory};
 use crate::generation::objective::program_objective;
 use crate::generation::schedule::StageEnd;
+
+/// Steps over which the whole sampler's learning rate rises to the round's, after the coarse
+/// sampler: a fresh Adam's first updates move every element of `z` by about the learning rate
+/// whatever its gradient, which throws a motion the coarse steps brought near the program far
+/// off it again.
+pub const WHOLE_SAMPLER_WARMUP_STEPS: usize = 10;
 
 /// The final round's motion per sample.
 pub(super) struct FinalMotion {
@@ -66,9 +73,12 @@ impl<M: Denoiser + ?Sized> Stages<'_, M> {
             let done = |s: &DnoStep, x: &Tensor| end.done(round, s, x);
             let run = dno::optimize_until(early, &full, &z, &coarse, |s| report(Stage::FinalRoundCoarse, 0, s), done)?;
             offset = run.history.first().map_or(0, |h| h.loss.len());
-            // The rest of the budget on the whole sampler, its learning rate decayed over it.
+            // The rest of the budget on the whole sampler, its learning rate warmed up and decayed
+            // over it.
             (z, coarse_history) = (run.z, Some(run.history));
-            last = DnoConfig { steps: rg.final_steps - offset, lr_warmup_steps: 0, lr_decay_steps: None, ..last };
+            let steps = rg.final_steps - offset;
+            let warmup = WHOLE_SAMPLER_WARMUP_STEPS.min(steps - 1);
+            last = DnoConfig { steps, lr_warmup_steps: warmup, lr_decay_steps: None, ..last };
         }
         let mut end =
             StageEnd::shown(config.schedule, prior, compiled, initial_joints, last.lr_warmup_steps, foot_lock)

@@ -5,7 +5,10 @@
 //! With [`Schedule::UntilMet`] the search is ordered and may end early: every candidate is
 //! first sampled by a cheap sampler ([`SCREEN_DDIM_STEPS`] unguided DDIM steps: a tenth of the
 //! denoiser passes of ten guided ones) and the candidates are put in the order of their best
-//! rank by `F_C` over the samples; they are then scored as above in that order, and the search
+//! rank over the samples by `F_C` on the retrieval's proxy of the program (joint centres only,
+//! every [`super::config::RetrievalConfig::proxy_frame_step`]-th frame: ranking hundreds of
+//! motions, it costs a fraction of the exact program's body-surface points on every frame);
+//! they are then scored exactly as above in that order, and the search
 //! stops sampling a sample whose best has not changed over the last
 //! [`RgDnoConfig::mask_patience`] candidates (a counting program's search goes on for every
 //! sample until none has changed), and ends once at least [`SCREENED`] are scored and every
@@ -117,8 +120,8 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         })
     }
 
-    /// Every candidate, in the order of its best rank over the samples by `F_C` of the cheap
-    /// sampler (equal ranks in their order in `candidates`).
+    /// Every candidate, in the order of its best rank over the samples by the proxy's `F_C` of
+    /// the cheap sampler (equal ranks in their order in `candidates`).
     fn ordered(
         &self,
         candidates: &[MaskCandidate],
@@ -130,12 +133,14 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let text = self.solver.text.clone();
         let cheap = UnrolledDdim::new(self.solver.denoiser, text, Guidance::none(), SCREEN_DDIM_STEPS)?;
         let (batch, frames, _) = z1.dims3()?;
+        let proxy = self.objective.compiled.joints_only().thinned(self.rg.retrieval.proxy_frame_step, z1.device())?;
+        let objective = Objective { compiled: &proxy, ..self.objective };
         let (z1, z2) = (&z1.detach(), &z2.detach());
         let mut scores: Vec<Vec<f64>> = vec![Vec::with_capacity(candidates.len()); batch];
         for chunk in candidates.chunks(self.rg.mask_batch.max(1)) {
             let z = self.blended(chunk, (z1, z2), frames)?;
             let x = cheap.sampler.sample(cheap.denoiser, &z, &cheap.text.repeat((chunk.len(), 1))?, cheap.guidance)?;
-            let constraint = to_vec(&self.objective.on_copies(&self.prior.to_joints(&x)?, chunk.len())?)?;
+            let constraint = to_vec(&objective.on_copies(&self.prior.to_joints(&x)?, chunk.len())?)?;
             for k in 0..chunk.len() {
                 for (b, sample) in scores.iter_mut().enumerate() {
                     let c = constraint[k * batch + b];
