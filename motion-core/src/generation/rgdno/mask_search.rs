@@ -8,16 +8,16 @@
 //! rank over the samples by `F_C` on the retrieval's proxy of the program (joint centres only,
 //! every [`super::config::RetrievalConfig::proxy_frame_step`]-th frame: ranking hundreds of
 //! motions, it costs a fraction of the exact program's body-surface points on every frame);
-//! they are then scored exactly as above in that order, and the search
-//! stops sampling a sample whose best has not changed over the last
-//! [`RgDnoConfig::mask_patience`] candidates (a counting program's search goes on for every
-//! sample until none has changed), and ends once at least [`SCREENED`] are scored and every
-//! sample's best meets the whole program at its tolerance or has stopped changing; where every
-//! sample's best meets the program the soft blend is skipped too. The order puts the likely
-//! winners first, so a long run without a change means the rest are unlikely to win. The cheap
-//! sampler only orders; a candidate is passed over only by that patience.
-//! It used to drop all but each sample's best 16, which lost the masks that make the three
-//! touches touch (`fixtures/results/issue59-mask-order/`).
+//! they are then scored exactly as above in that order, and the search stops sampling a sample
+//! whose best has not changed over the last [`RgDnoConfig::mask_patience`] candidates (a
+//! counting program's search goes on for every sample until none has changed), and ends once
+//! at least [`SCREENED`] are scored and every sample's best meets the whole program at its
+//! tolerance or has stopped changing; where every sample's best meets the program the soft
+//! blend is skipped too. The order puts the likely winners first, so a long run without a
+//! change means the rest are unlikely to win. The cheap sampler only orders; a candidate is
+//! passed over only by that patience, never by its screened rank alone: keeping only each
+//! sample's best 16 of the screen loses the masks that make the three touches touch
+//! (`fixtures/results/issue59-mask-order/`).
 
 use candle_core::Tensor;
 use rand::rngs::StdRng;
