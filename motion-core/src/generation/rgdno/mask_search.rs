@@ -5,9 +5,10 @@
 //! With [`Schedule::UntilMet`] the search is ordered and may end early: every candidate is
 //! first sampled by a cheap sampler ([`SCREEN_DDIM_STEPS`] unguided DDIM steps: a tenth of the
 //! denoiser passes of ten guided ones) and the candidates are put in the order of their best
-//! rank over the samples by `F_C` on the retrieval's proxy of the program (joint centres only,
-//! every [`super::config::RetrievalConfig::proxy_frame_step`]-th frame: ranking hundreds of
-//! motions, it costs a fraction of the exact program's body-surface points on every frame);
+//! rank over the samples by `F_C`, for a program without counts on the retrieval's proxy of
+//! the program (joint centres only, every [`super::config::RetrievalConfig::proxy_frame_step`]-th
+//! frame: ranking hundreds of motions, it costs a fraction of the exact program's body-surface
+//! points on every frame; a counting program, whose winners are rarer, ranks on itself);
 //! they are then scored exactly as above in that order, and the search stops sampling a sample
 //! whose best has not changed over the last [`RgDnoConfig::mask_patience`] candidates (a
 //! counting program's search goes on for every sample until none has changed), and ends once
@@ -120,8 +121,9 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         })
     }
 
-    /// Every candidate, in the order of its best rank over the samples by the proxy's `F_C` of
-    /// the cheap sampler (equal ranks in their order in `candidates`).
+    /// Every candidate, in the order of its best rank over the samples by `F_C` (the proxy's,
+    /// for a program without counts) of the cheap sampler (equal ranks in their order in
+    /// `candidates`).
     fn ordered(
         &self,
         candidates: &[MaskCandidate],
@@ -133,7 +135,11 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let text = self.solver.text.clone();
         let cheap = UnrolledDdim::new(self.solver.denoiser, text, Guidance::none(), SCREEN_DDIM_STEPS)?;
         let (batch, frames, _) = z1.dims3()?;
-        let proxy = self.objective.compiled.joints_only().thinned(self.rg.retrieval.proxy_frame_step, z1.device())?;
+        let compiled = self.objective.compiled;
+        let proxy = match compiled.has_counts() {
+            true => compiled.clone(),
+            false => compiled.joints_only().thinned(self.rg.retrieval.proxy_frame_step, z1.device())?,
+        };
         let objective = Objective { compiled: &proxy, ..self.objective };
         let (z1, z2) = (&z1.detach(), &z2.detach());
         let mut scores: Vec<Vec<f64>> = vec![Vec::with_capacity(candidates.len()); batch];
