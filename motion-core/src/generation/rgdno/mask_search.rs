@@ -135,12 +135,15 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
         let text = self.solver.text.clone();
         let cheap = UnrolledDdim::new(self.solver.denoiser, text, Guidance::none(), SCREEN_DDIM_STEPS)?;
         let (batch, frames, _) = z1.dims3()?;
-        let compiled = self.objective.compiled;
-        let proxy = match compiled.has_counts() {
-            true => compiled.clone(),
-            false => compiled.joints_only().thinned(self.rg.retrieval.proxy_frame_step, z1.device())?,
+        let proxy;
+        let objective = match self.objective.compiled.has_counts() {
+            true => self.objective,
+            false => {
+                let step = self.rg.retrieval.proxy_frame_step;
+                proxy = self.objective.compiled.joints_only().thinned(step, z1.device())?;
+                Objective { compiled: &proxy, ..self.objective }
+            }
         };
-        let objective = Objective { compiled: &proxy, ..self.objective };
         let (z1, z2) = (&z1.detach(), &z2.detach());
         let mut scores: Vec<Vec<f64>> = vec![Vec::with_capacity(candidates.len()); batch];
         for chunk in candidates.chunks(self.rg.mask_batch.max(1)) {
