@@ -122,7 +122,7 @@ pub struct BeforeCleanup {
 }
 
 /// What the finishing stages did to the run: the kinematic refinement ([`crate::generation::refine`]) and
-/// the contact-aware clean-up ([`crate::cleanup::foot_lock`]).
+/// the contact-aware clean-up ([`fn@crate::cleanup::foot_lock`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CleanupReport {
     /// Whether the foot clean-up ran (when neither stage ran, `before` equals the report's own

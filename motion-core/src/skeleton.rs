@@ -261,7 +261,7 @@ pub fn rest_bone_lengths() -> [f64; NUM_JOINTS] {
     bone_lengths(&rest_pose())
 }
 
-/// The canonical rest pose ([`REST_POSE`]): what retargeting, the rigid skeleton and the
+/// The canonical rest pose (`REST_POSE`): what retargeting, the rigid skeleton and the
 /// exports' rotations measure bones against.
 pub fn rest_pose() -> Pose {
     REST_POSE.map(DVec3::from_array)

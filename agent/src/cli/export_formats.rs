@@ -33,8 +33,8 @@ pub struct ExportFormats {
     /// Also write every motion onto your own rig: a skinned character (.glb or .gltf: its skin's
     /// joints at their bind pose) or a BVH skeleton (hierarchy and rest offsets), whose bones
     /// follow the Mixamo, Unreal mannequin, Unity humanoid, CMU or SMPL names (any case, any
-    /// `name:` prefix); any motion in it is ignored. Written as sample_<i>/<rig>.bvh in the rig's
-    /// unit and up axis and sample_<i>/<rig>.glb: a character's own file (meshes, materials)
+    /// `name:` prefix); any motion in it is ignored. Written as `sample_<i>/<rig>.bvh` in the rig's
+    /// unit and up axis and `sample_<i>/<rig>.glb`: a character's own file (meshes, materials)
     /// with the motion as its animation, or for a BVH rig its bones with a skinned capsule body
     /// and the scene. The feet are kept where the motion plants them; export.json reports what
     /// carried over. Rigs to try: fixtures/rigs/.

@@ -302,7 +302,7 @@ fn sample_strip(args: &ReportArgs, prior: &Prior, device: &Device) -> anyhow::Re
     Ok(())
 }
 
-/// Issue 40's ratio bars ([`held_out_ratio`]) as a table in `lines`: each family's figures over
+/// Issue 40's ratio bars ([`motion_core::quality::held_out_ratio`]) as a table in `lines`: each family's figures over
 /// its held-out capture's, on the network's output and after the clean-up; returned for the
 /// JSON.
 fn ratio_section(rows: &[FamilyQuality], lines: &mut Vec<String>) -> Vec<serde_json::Value> {

@@ -22,8 +22,8 @@ pub struct RunArgs {
     /// network's motion, before the foot clean-up), joints.npy [n, frames, 22, 3] (m, y up, 20
     /// fps, bones at the rest lengths, after the clean-up: the output), report.json (every
     /// constraint in natural units with pass/fail, before and after the clean-up), strip.png
-    /// (world coordinates, the scene drawn), program.json, sample_<i>/motion.bvh and
-    /// sample_<i>/motion.glb (rotations on a rigid skeleton; the GLB has a skinned figure and the
+    /// (world coordinates, the scene drawn), program.json, `sample_<i>/motion.bvh` and
+    /// `sample_<i>/motion.glb` (rotations on a rigid skeleton; the GLB has a skinned figure and the
     /// scene), viewer.html (3-D, offline) and export.json (the files and the rotation fit).
     #[arg(long, short, default_value = "out/run")]
     out: PathBuf,

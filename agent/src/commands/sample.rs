@@ -52,7 +52,7 @@ pub struct SampleArgs {
     formats: ExportFormats,
     /// Output folder: joints.npy [n, frames, 22, 3] (m, y up, after the foot clean-up),
     /// features.npy [n, frames, 263] (de-normalised, the root velocity as decoded, before the
-    /// clean-up), strip.png, sample_<i>/motion.{bvh,glb}, viewer.html, export.json.
+    /// clean-up), strip.png, `sample_<i>/motion.{bvh,glb}`, viewer.html, export.json.
     #[arg(long, short, default_value = "out/sample")]
     out: PathBuf,
 }

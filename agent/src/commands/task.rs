@@ -40,7 +40,7 @@ pub struct TaskArgs {
     #[command(flatten)]
     generation: GenerationArgs,
     /// Output folder: program.json, features.npy, joints.npy, report.json, strip.png,
-    /// sample_<i>/motion.bvh and .glb, viewer.html (3-D, offline), export.json.
+    /// `sample_<i>/motion.bvh` and .glb, viewer.html (3-D, offline), export.json.
     #[arg(long, short, default_value = "out/task")]
     out: PathBuf,
     /// Repair rounds per LLM stage when an answer is invalid.
@@ -58,8 +58,8 @@ pub struct TaskArgs {
 #[derive(Args)]
 #[command(next_help_heading = "LLM")]
 struct LlmArgs {
-    /// Base URL of an OpenAI-compatible API (vLLM http://localhost:8000/v1, Ollama
-    /// http://localhost:11434/v1, llama.cpp http://localhost:8080/v1, https://api.deepseek.com/v1).
+    /// Base URL of an OpenAI-compatible API (vLLM `http://localhost:8000/v1`, Ollama
+    /// `http://localhost:11434/v1`, llama.cpp `http://localhost:8080/v1`, `https://api.deepseek.com/v1`).
     #[arg(long, env = "OPENAI_BASE_URL", hide_env_values = true)]
     base_url: Option<String>,
     /// Model name.

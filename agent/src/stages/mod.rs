@@ -8,7 +8,7 @@
 //!
 //! Every reply goes through extraction, JSON Schema validation with paths, deserialisation and
 //! the meaning checks ([`motion_core::constraints::checked::CheckedProgram::check`]); the problems go back to the model for a bounded number of repair
-//! rounds ([`repair`]).
+//! rounds (`repair`).
 
 mod program;
 mod relational;

@@ -1,6 +1,6 @@
 //! Contact-aware clean-up of a finished motion: feet that stay planted.
 //!
-//! [`foot_lock`] is the foot locking animation tools apply to captured or generated motion
+//! [`fn@foot_lock`] is the foot locking animation tools apply to captured or generated motion
 //! (Kovar, Schreiner & Gleicher 2002, "Footskate cleanup for motion capture editing"), on joint
 //! positions (m, y up, 20 fps, floor y = 0):
 //! 1. **Floor** ([`contact::floor_height`]): a body hovering above the floor by more than
@@ -34,7 +34,7 @@
 //!    eased fraction is checked again). (Without these checks a lock lowering a stance ankle to
 //!    its standing height pushes its toe, or a crawl's knee, up to 7 cm through the floor; both
 //!    figures are in `fixtures/results/README.md`.)
-//! 5. **Judged** ([`locks_help`]): the locks and IK are kept only where they do not raise the
+//! 5. **Judged** (`locks_help`): the locks and IK are kept only where they do not raise the
 //!    foot skate of the motion on the floor nor jerk it beyond capture's peak acceleration;
 //!    otherwise the motion is only set on the floor (a crawl's feet drag along it by design).
 //!
@@ -79,7 +79,7 @@ pub const FLOOR_FRACTION_STEP: f64 = 0.25;
 /// How far below the floor, or below where it was, the IK may leave a joint, m (round-off).
 const FLOOR_SLACK_M: f64 = 1e-3;
 
-/// Settings of [`foot_lock`]. Heights and speeds were measured on the shipped walking clips
+/// Settings of [`fn@foot_lock`]. Heights and speeds were measured on the shipped walking clips
 /// (`fixtures/mocap`, the DeepMimic walks): standing ankles at 5.9–7.2 cm (median per clip),
 /// standing toes at 1.5–2.4 cm; stance joints move at about 0.1 m/s, swinging feet at 1–4 m/s.
 /// Fields missing from a deserialised config take their defaults.
@@ -143,7 +143,7 @@ pub struct FootLockConfig {
     /// A body floating less than this above the floor is not lowered, m (default 0.02): its
     /// stance feet come within `height_tolerance_m` of the floor through the leg IK.
     pub float_tolerance_m: f64,
-    /// Keep the locks only where they help ([`locks_help`]; default true): otherwise the motion
+    /// Keep the locks only where they help (`locks_help`; default true): otherwise the motion
     /// is only set on the floor. Off, the locks stay whatever they do (the papers' schedule,
     /// whose motions stay those of the builds before this judgement).
     pub judge_locks: bool,
@@ -204,7 +204,7 @@ pub struct JointContacts {
     pub locked_frames: usize,
 }
 
-/// What [`foot_lock`] did, with the figures before and after it.
+/// What [`fn@foot_lock`] did, with the figures before and after it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FootLockReport {
     /// Whether the clean-up ran.
@@ -243,7 +243,7 @@ pub struct FootLockReport {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub undone_for: Vec<String>,
     /// Whether the locks were given up because they would raise the foot skate or jerk the
-    /// motion ([`locks_help`]): the motion is then only set on the floor (the contacts and
+    /// motion (`locks_help`): the motion is then only set on the floor (the contacts and
     /// counts above are of the locks given up).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub locks_given_up: bool,
@@ -258,7 +258,7 @@ pub struct FootLocked {
     pub report: FootLockReport,
 }
 
-/// Why [`foot_lock`] refused a motion.
+/// Why [`fn@foot_lock`] refused a motion.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FootLockError {
     /// The contact labels do not cover the motion frame for frame.

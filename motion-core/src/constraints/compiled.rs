@@ -105,7 +105,7 @@ impl CompiledProgram {
     }
 
     /// This program with every step and event count valued by its soft count
-    /// ([`CountValue::Soft`]) instead of the judge's: a proxy for ranking many motions at once,
+    /// (`CountValue::Soft`) instead of the judge's: a proxy for ranking many motions at once,
     /// where counting each one's steps as the judge does would cost more than the ranking.
     pub fn soft_counts(&self) -> CompiledProgram {
         let mut proxy = self.clone();
@@ -135,7 +135,7 @@ impl CompiledProgram {
     }
 
     /// This program with every span of frames that a constraint reduces over (all frames, a
-    /// range) thinned to every `step`-th frame, its first and last kept ([`Frames::thinned`]);
+    /// range) thinned to every `step`-th frame, its first and last kept (`Frames::thinned`);
     /// keyframes, counts, steps, events and flights as they are. A proxy about `step`× cheaper
     /// for a scene constraint over all frames (5 Hz at `step` 4), for ranking many motions before
     /// scoring the best on every frame.

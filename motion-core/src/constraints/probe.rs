@@ -78,7 +78,7 @@ pub const PROBE_SHARPNESS: f64 = 10.0;
 impl CompiledProgram {
     /// Evaluates the program on the probe motion (its own initial motion: `stay_near_initial`
     /// terms are 0) and measures the gradient of the total and of every constraint. Counting
-    /// sigmoids are softened to [`PROBE_SHARPNESS`], so what fails is a loss that does not
+    /// sigmoids are softened to `PROBE_SHARPNESS`, so what fails is a loss that does not
     /// depend on the motion where it is violated, e.g. a distance between two fixed points.
     pub fn gradient_check(&self) -> Result<GradientCheck> {
         let device = Device::Cpu;

@@ -19,7 +19,7 @@
 //!   runs step at a running cadence while they move ([`RUN_MIN_STEPS_PER_S`]);
 //! - turns: at least [`TURN_MIN_DEG`](crate::corpus::tags::TURN_MIN_DEG) the asked way;
 //! - carry: both hands held in front of the body at the pelvis or higher, a steady distance
-//!   apart and without a walk's arm swing ([`carries_in_front`]): a box or a crate in both
+//!   apart and without a walk's arm swing (`carries_in_front`): a box or a crate in both
 //!   arms. Nothing in the joints says that a hanging hand holds a suitcase, so a one-handed
 //!   carry does not pass.
 

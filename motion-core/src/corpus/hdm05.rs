@@ -3,7 +3,7 @@
 //! `HDM_<actor>_<motion>_<nr>_120.amc` clips, read with the ASF/AMC importer. The folders' own
 //! train/test division is not used: splits are by actor like every other source. The clips are
 //! cut to one repetition (a hop lasts 0.8 s), so each is held still for up to
-//! [`HOLD_FRAMES`] at both ends to reach a window's length.
+//! `HOLD_FRAMES` at both ends to reach a window's length.
 
 use std::path::Path;
 

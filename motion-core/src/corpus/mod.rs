@@ -9,7 +9,7 @@
 //! steps: [`screen`] (drop what is not motion, by measurement), [`prepare`] (re-target to the
 //! rest skeleton, floor under the stance feet, canonical start), then windows of
 //! [`WINDOW_FRAMES`] every [`WINDOW_STRIDE_FRAMES`], each with its measured [`tags`] and
-//! [`caption`]s. [`file`] stores it compactly; [`stats`] counts hours per source, skill and
+//! [`caption`]s. [`mod@file`] stores it compactly; [`stats`] counts hours per source, skill and
 //! split.
 
 pub mod accad;

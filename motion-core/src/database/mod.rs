@@ -225,7 +225,7 @@ pub struct MotionDatabase {
 
 impl MotionDatabase {
     /// Builds the database from loaded source clips. The config is checked first, and each
-    /// augmented sequence's length against [`CLIP_FRAMES`] before it is sampled.
+    /// augmented sequence's length against [`crate::limits::CLIP_FRAMES`] before it is sampled.
     pub fn build(sources: &[SourceClip], config: &DatabaseConfig) -> Result<Self, DatabaseError> {
         config.check()?;
         let mut features: Vec<FeatureFrame> = Vec::new();

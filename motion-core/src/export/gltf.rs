@@ -17,7 +17,7 @@
 //!   track the pelvis and the six [`ANIMATED_OFFSETS`] joints, hips, spine1, neck and collars) and
 //!   the local rotation of every node. So the file poses the armature's forward kinematics
 //!   ([`ArmatureTrack::world`]).
-//! - **Body** ([`geometry`]): round the nodes of our 22 joints (on a rig, [`TargetRig::map`]) a
+//! - **Body** (`geometry`): round the nodes of our 22 joints (on a rig, [`TargetRig::map`]) a
 //!   capsule per bone and spheres for the head and hands, thin capsules along the other bones
 //!   below the pelvis (fingers, twist bones), each vertex bound with weight 1 to one node (a
 //!   bone's capsule to the bone's parent); one material.

@@ -1,7 +1,7 @@
 //! A self-contained 3-D viewer page: one HTML file holding three.js, the motions, the scene and
 //! the report, that opens offline from the file system (no network, no sibling files).
 //!
-//! The page ([`VIEWER_JS`] on [`TEMPLATE`]) draws each sample as capsules (joints as spheres,
+//! The page (`VIEWER_JS` on `TEMPLATE`) draws each sample as capsules (joints as spheres,
 //! bones as cylinders; left limbs blue, right red, as in the strips), the scene boxes, a ground
 //! grid with metre labels, the pelvis and foot paths, playback controls and the per-constraint
 //! report, and each sample on the user's rig from its GLB (`--rig`: the skinned body played by

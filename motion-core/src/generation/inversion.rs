@@ -2,7 +2,7 @@
 //! start optimising from a retrieved motion, and what editing a motion with DNO starts from.
 //!
 //! Three stages:
-//! 1. [`DdimSampler::invert`] with fixed-point iterations, which inverts the discrete sampler
+//! 1. [`crate::diffusion::DdimSampler::invert`] with fixed-point iterations, which inverts the discrete sampler
 //!    rather than the ODE;
 //! 2. when polishing, each sample's noise is first rescaled to unit RMS, the shell where
 //!    Gaussian start noise lies. A denoiser whose x̂0 at t ≈ 0 does not reproduce a clean

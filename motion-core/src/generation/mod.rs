@@ -1,6 +1,6 @@
 //! Constrained generation: every [`Method`] dispatched from one function, [`generate`]: the
 //! prior's unconstrained samples, the IK and IK+Reg baselines that optimise the motion directly
-//! (ProgMoGen's `task_configs_eval_others`, [`direct`]), ProgMoGen+DNO, which optimises the
+//! (ProgMoGen's `task_configs_eval_others`, `direct`), ProgMoGen+DNO, which optimises the
 //! start noise through the unrolled DDIM sampler, and RG-DNO ([`crate::generation::rgdno`]), which starts
 //! DNO from a retrieved motion's noise blended with random noise.
 //!
@@ -14,7 +14,7 @@
 //! Every method's motion then goes through the finishing stages ([`crate::generation::postprocess`]): the
 //! kinematic refinement against the program's geometric constraints ([`crate::generation::refine`],
 //! switchable off with [`GenerationConfig::refine`]) and the contact-aware clean-up
-//! ([`crate::cleanup::foot_lock`], switchable off with [`GenerationConfig::foot_lock`]): the
+//! ([`fn@crate::cleanup::foot_lock`], switchable off with [`GenerationConfig::foot_lock`]): the
 //! returned joints are the finished ones, the network's joints are kept beside them so that a
 //! report can give every figure before and after both.
 //!

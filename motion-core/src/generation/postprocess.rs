@@ -124,7 +124,7 @@ fn refine_in_parallel(
     Ok((Tensor::cat(&tensors, 0)?, reports.concat()))
 }
 
-/// [`foot_lock`] on every sample of `joints` `[B, T, 22, 3]` (samples in parallel): the
+/// [`fn@foot_lock`] on every sample of `joints` `[B, T, 22, 3]` (samples in parallel): the
 /// cleaned joints (same shape, dtype and device) and each sample's report.
 pub fn clean_up(joints: &Tensor, config: &FootLockConfig) -> Result<(Tensor, Vec<FootLockReport>), GenerationError> {
     use rayon::prelude::*;

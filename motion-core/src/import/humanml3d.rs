@@ -13,7 +13,7 @@
 //! otherwise it describes frames `[⌊start_s·20⌋, ⌊end_s·20⌋)` (HumanML3D's
 //! `motion[int(f_tag*20):int(to_tag*20)]`, `data_loaders/humanml/data/dataset.py`).
 //!
-//! The `.npy` reader is our own ([`npy`]): it checks the header against the file's size before
+//! The `.npy` reader is our own ([`crate::npy`]): it checks the header against the file's size before
 //! reading, so a truncated or corrupt file is an error naming the file, never a panic or a huge
 //! allocation. [`HumanMl3dClip`] poses a clip's features for the motion database.
 

@@ -3,7 +3,7 @@
 //!
 //! The character is the DeepMimic humanoid (same bodies, offsets and rest frames; the recorded
 //! body positions agree with its forward kinematics to 3e-7 m), so the mapping is
-//! [`deepmimic::smpl22_from_world`]. A file is a NumPy archive with, among others,
+//! `deepmimic::smpl22_from_world`. A file is a NumPy archive with, among others,
 //! `fps` (int64), `body_positions` `[frames, 15, 3]` (m) and `body_rotations` `[frames, 15, 4]`
 //! (world rotations, w x y z). Its world has **z up**, the character facing +x and +y on its
 //! left; DeepMimic's has y up and +z on the right, so a vector maps as (x, y, z) → (x, z, −y)
@@ -17,7 +17,7 @@
 //! The files put the lowest *ankle* of the clip at z = 0, which sinks the soles (5 cm below the
 //! ankle) into the floor, and the retargeted root height wanders: with one lift for the whole
 //! clip the lowest sole point of each frame still ranged over −5.8…+3.8 cm in the walk. The
-//! import therefore puts the ground under every frame ([`ground_level`]): in the frames where
+//! import therefore puts the ground under every frame (`ground_level`): in the frames where
 //! the lowest sole point stands still (slower than [`STANCE_SPEED_M_PER_S`] horizontally: a
 //! foot in stance) it is brought to y = 0; between such frames (a run's flight) the correction
 //! is interpolated, so the flight stays in the air.

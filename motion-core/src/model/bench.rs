@@ -175,7 +175,7 @@ pub fn bench_train_step(cfg: &MdmConfig, batch: usize, frames: usize, reps: usiz
     Ok(median(&mut times))
 }
 
-/// The rate of [`gemm_into`] on `isa` on a square f32 product `[side, side]·[side, side]`
+/// The rate of `gemm_into` on `isa` on a square f32 product `[side, side]·[side, side]`
 /// (GFLOP/s, 2·side³ flops per product), its rows split into one block per thread of the
 /// current rayon pool as the fused layer splits its own: the median of `reps` products after
 /// one warm-up. Entries are small integers, so the rate does not depend on the values.

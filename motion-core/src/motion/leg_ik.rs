@@ -66,7 +66,7 @@ pub fn solve_leg(leg: &Leg, ankle_target: DVec3, toe_target: DVec3, pole: DVec3,
 }
 
 /// Which way the knee of `leg` bends, m: the knee's offset from the hip–ankle line, plus a
-/// little of `forward` (up to [`STRAIGHT_KNEE_M`] as the offset shrinks to 0), so a leg that is
+/// little of `forward` (up to `STRAIGHT_KNEE_M` as the offset shrinks to 0), so a leg that is
 /// straight or nearly so bends forward like a knee rather than wherever round-off points.
 ///
 /// Taken against the leg's own hip–ankle line, not the line to the new target: a straight

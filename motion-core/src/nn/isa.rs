@@ -1,4 +1,4 @@
-//! The vector instruction set the CPU kernels ([`super::kernels`]) run on: the best this CPU
+//! The vector instruction set the CPU kernels (`super::kernels`) run on: the best this CPU
 //! has, or AVX2/FMA on request ([`Isa::ENV`]), so that an AVX-512 machine can measure the
 //! path a CPU without AVX-512 runs.
 

@@ -37,7 +37,7 @@ pub struct LabelQuality {
     pub label: String,
     /// Generated samples, as the network made them.
     pub samples: MetricMeans,
-    /// The same samples after the foot clean-up with its defaults ([`foot_lock`]): the motions
+    /// The same samples after the foot clean-up with its defaults ([`fn@foot_lock`]): the motions
     /// `mogen sample` writes.
     pub cleaned: MetricMeans,
     /// Training windows of the label (cropped to the same length).

@@ -16,7 +16,7 @@
 //!    as a noun, an adjective or an adverb ("distance", "long strides", "at full speed") unless
 //!    it is a third-person verb right after a word read as a noun, its subject ("a woman
 //!    strides", "someone springs");
-//! 3. otherwise each of its lemmas' first sense of bodily motion ([`wordnet::BODILY_MOTION`])
+//! 3. otherwise each of its lemmas' first sense of bodily motion ([`crate::text::wordnet::BODILY_MOTION`])
 //!    is searched breadth first: the sense's own words, its hypernyms, theirs (at most
 //!    [`HYPERNYM_LEVELS`] up). The first word found that is a caption verb (a caption
 //!    word WordNet knows as a verb lemma, not a light one: "turn" must itself be a caption word,

@@ -27,7 +27,7 @@
 //!    proportions this moves nothing; on other proportions it keeps the feet planted where a
 //!    bone-direction copy would slide or sink them. Where a stride asks more than the rig's legs
 //!    reach (shorter legs under the same trunk), the pelvis first comes down by what is missing,
-//!    eased over [`DROP_EASE_S`] either side ([`eased_envelope`]).
+//!    eased over `DROP_EASE_S` either side ([`eased_envelope`]).
 //!
 //! What cannot carry over exactly is reported, not hidden ([`RetargetReport`]): a rig of other
 //! proportions puts a hand elsewhere than ours scaled (a world-position constraint on the hand
@@ -104,7 +104,7 @@ pub struct RetargetReport {
     /// The joint of that distance.
     pub from_ours_on_rig_bones_joint: &'static str,
     /// Largest distance the pelvis came down so that the rig's legs reach the ankle targets, m
-    /// (eased over [`DROP_EASE_S`] either side; 0 on a rig of our proportions).
+    /// (eased over `DROP_EASE_S` either side; 0 on a rig of our proportions).
     pub pelvis_lowered_max_m: f64,
     /// Largest distance the leg IK moved a knee, ankle or toe from where the transfer put it, m.
     pub leg_fix_max_m: f64,

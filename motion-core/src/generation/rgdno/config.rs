@@ -33,7 +33,7 @@ pub struct RetrievalConfig {
     /// the proxy (default 64; at least `top_k`).
     pub exact_shortlist: usize,
     /// The proxy that ranks every candidate reads every `proxy_frame_step`-th frame of the
-    /// spans its constraints reduce over, keyframes kept ([`CompiledProgram::thinned`]), and the
+    /// spans its constraints reduce over, keyframes kept ([`crate::constraints::CompiledProgram::thinned`]), and the
     /// joint centres only (default 4: 5 Hz; 1: every frame).
     pub proxy_frame_step: usize,
     /// `λ` of the caption similarity in the shortlist's ranking,

@@ -64,7 +64,7 @@ const ACTION_STEMS: [(&str, Action); 27] = [
     ("stand", Action::Stand),
 ];
 
-/// The actions `text` names, in the order of [`ACTION_STEMS`], each once.
+/// The actions `text` names, in the order of `ACTION_STEMS`, each once.
 pub fn named_actions(text: &str) -> Vec<Action> {
     actions_in(&words(text))
 }

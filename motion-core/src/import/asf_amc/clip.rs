@@ -77,7 +77,7 @@ const SOURCES: [Along; NUM_JOINTS] = [
 ];
 
 /// An ASF/AMC clip posed on the 22 joints: the source is posed by [`AmcMotion`] (slerped bone
-/// rotations, lerped root translation), [`SOURCES`] picks the 22 points, and bone lengths are
+/// rotations, lerped root translation), `SOURCES` picks the 22 points, and bone lengths are
 /// retargeted to those of [`crate::skeleton::rest_pose`] with [`retarget_bone_lengths`] (bone
 /// directions kept, the root trajectory scaled by the leg-length ratio). Not cyclic.
 ///

@@ -33,7 +33,7 @@ pub struct Batch {
     pub text: Tensor,
 }
 
-/// What the trainer learns from; see the [module doc](super).
+/// What the trainer learns from; see the module doc (`batches`).
 #[derive(Debug, Clone)]
 pub struct TrainingSet {
     sequences: Vec<Sequence>,

@@ -550,7 +550,7 @@ impl RetrievalDatabase {
     /// generator places a motion (module doc), to `out` (`[frames, 22, 3]`, flat, m, y up): one
     /// pass that resizes, turns and shifts in x and z and finds the floor, then one that lowers
     /// y onto it; a mirrored crop is the reflection of the recorded one so placed
-    /// ([`Self::reflect`]). `false` (and zeros) when the first pose has no facing direction (a
+    /// (`Self::reflect`). `false` (and zeros) when the first pose has no facing direction (a
     /// body so twisted that it cannot be placed; the feature extraction refuses it too).
     pub fn place(&self, crop: &Crop, frames: usize, out: &mut Vec<f32>) -> bool {
         let begin = out.len();
