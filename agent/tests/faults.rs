@@ -224,6 +224,25 @@ fn motion_files(folder: &Path) -> Vec<(String, Vec<u8>)> {
     files(folder).into_iter().filter(|(name, _)| name.ends_with(".npy") || name == "program.json").collect()
 }
 
+/// Replaces `out`'s files with those of the finished run in `from`, and removes the staging
+/// folders of killed runs beside `out`: the state a finished run of `from`'s settings leaves.
+fn restore(from: &Path, out: &Path) {
+    if out.exists() {
+        std::fs::remove_dir_all(out).unwrap();
+    }
+    for (name, bytes) in files(from) {
+        let path = out.join(name);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, bytes).unwrap();
+    }
+    let parent = out.parent().unwrap();
+    for entry in std::fs::read_dir(parent).unwrap().flatten() {
+        if entry.file_name().to_string_lossy().starts_with(".out.staging-") {
+            std::fs::remove_dir_all(entry.path()).unwrap();
+        }
+    }
+}
+
 /// Whether a run spawned at `spawned` has begun writing outputs: a file in a staging folder
 /// beside `out`, or a file of `out` itself changed since.
 fn writing_started(parent: &Path, out: &Path, spawned: std::time::SystemTime) -> bool {
@@ -310,11 +329,27 @@ fn killed_and_racing_runs_never_leave_a_partial_or_mixed_folder() {
             .filter(|e| std::fs::read_dir(e.path()).is_ok_and(|mut d| d.next().is_some()))
             .count();
         killed_while_writing += usize::from(staged > 0);
-        // Back to the old run for the next round.
-        assert!(mogen(&run_args(&program, "1", &out_arg)).status.success());
+        // Back to the old run for the next round: its files copied back, the killed run's
+        // staging folder removed (a whole run each round would double the test's time).
+        restore(&dir.path().join("reference-1"), &out);
     }
     eprintln!("{killed_while_writing} of 20 kills fell into the write phase");
     assert!(killed_while_writing > 0, "no kill fell into the write phase");
+    // A last kill inside the write phase, then a whole run, which removes its staging folder.
+    let spawned = std::time::SystemTime::now();
+    let mut child = Command::new(bin())
+        .args(run_args(&program, "2", &out_arg))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    while !writing_started(dir.path(), &out, spawned) && child.try_wait().unwrap().is_none() {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let _ = child.kill();
+    child.wait().unwrap();
+    assert!(mogen(&run_args(&program, "1", &out_arg)).status.success());
+    assert_eq!(motion_files(&out), old);
     let left: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .flatten()
