@@ -227,3 +227,11 @@ fn from_sample(
     };
     finish(prior, task, config, Unfinished { features, initial_joints, loss_history }, start)
 }
+
+/// The shipped prior (`fixtures/model/prior.safetensors`, with the text encoder of
+/// `fixtures/text/`), for the tests of the stages.
+#[cfg(test)]
+pub(crate) fn shipped_prior(device: &candle_core::Device) -> Prior {
+    let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures");
+    Prior::load(&fixtures.join("model/prior.safetensors"), &fixtures.join("text"), device).unwrap()
+}

@@ -477,8 +477,7 @@ mod tests {
     /// Three motions of the prior, `[1, 40, 263]` each, and the prior.
     fn prior_motions() -> (Prior, Vec<Tensor>) {
         let device = Device::Cpu;
-        let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures");
-        let prior = Prior::load(&fixtures.join("model/prior.safetensors"), &fixtures.join("text"), &device).unwrap();
+        let prior = crate::generation::shipped_prior(&device);
         let text = prior.encode_text(&["a person walks forward"], &device).unwrap();
         let guidance = crate::diffusion::Guidance::default().for_text(&text).unwrap();
         let solver = crate::dno::UnrolledDdim::new(&prior.mdm, text, guidance, 10).unwrap();

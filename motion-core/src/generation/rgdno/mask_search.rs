@@ -301,8 +301,7 @@ mod tests {
     /// whether the search judged the program met.
     fn search(constraint: &str, schedule: Schedule, rg: RgDnoConfig) -> (Vec<ChosenMask>, usize, bool) {
         let device = Device::Cpu;
-        let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures");
-        let prior = Prior::load(&fixtures.join("model/prior.safetensors"), &fixtures.join("text"), &device).unwrap();
+        let prior = crate::generation::shipped_prior(&device);
         let program = TaskProgram::from_json_validated(&format!(
             r#"{{"text": "a person walks forward", "frames": 40, "constraints": [{{"id": "c1", "expr": {constraint}}}]}}"#
         ))
