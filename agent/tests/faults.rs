@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 const PROGRAM: &str = r#"{"text": "a person walks forward", "frames": 40, "constraints": [
@@ -243,6 +243,19 @@ fn restore(from: &Path, out: &Path) {
     }
 }
 
+/// `mogen` with `args`, started without waiting for it, its output discarded.
+fn spawn_quiet(args: &[&str]) -> Child {
+    Command::new(bin()).args(args).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap()
+}
+
+/// Waits until `child`, spawned at `spawned`, has begun writing outputs ([`writing_started`])
+/// or has ended.
+fn wait_until_writing(parent: &Path, out: &Path, spawned: std::time::SystemTime, child: &mut Child) {
+    while !writing_started(parent, out, spawned) && child.try_wait().unwrap().is_none() {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
 /// Whether a run spawned at `spawned` has begun writing outputs: a file in a staging folder
 /// beside `out`, or a file of `out` itself changed since.
 fn writing_started(parent: &Path, out: &Path, spawned: std::time::SystemTime) -> bool {
@@ -295,21 +308,14 @@ fn killed_and_racing_runs_never_leave_a_partial_or_mixed_folder() {
     for round in 0..20 {
         let before = files(&out);
         let spawned = std::time::SystemTime::now();
-        let mut child = Command::new(bin())
-            .args(run_args(&program, "2", &out_arg))
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut child = spawn_quiet(&run_args(&program, "2", &out_arg));
         let moment = if round < 10 {
             let moment = duration.mul_f64(0.1 + 0.9 * random());
             std::thread::sleep(moment);
             moment
         } else {
             let begin = Instant::now();
-            while !writing_started(dir.path(), &out, spawned) && child.try_wait().unwrap().is_none() {
-                std::thread::sleep(Duration::from_millis(1));
-            }
+            wait_until_writing(dir.path(), &out, spawned, &mut child);
             std::thread::sleep(Duration::from_secs_f64(0.2 * random()));
             begin.elapsed()
         };
@@ -337,15 +343,8 @@ fn killed_and_racing_runs_never_leave_a_partial_or_mixed_folder() {
     assert!(killed_while_writing > 0, "no kill fell into the write phase");
     // A last kill inside the write phase, then a whole run, which removes its staging folder.
     let spawned = std::time::SystemTime::now();
-    let mut child = Command::new(bin())
-        .args(run_args(&program, "2", &out_arg))
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    while !writing_started(dir.path(), &out, spawned) && child.try_wait().unwrap().is_none() {
-        std::thread::sleep(Duration::from_millis(1));
-    }
+    let mut child = spawn_quiet(&run_args(&program, "2", &out_arg));
+    wait_until_writing(dir.path(), &out, spawned, &mut child);
     let _ = child.kill();
     child.wait().unwrap();
     assert!(mogen(&run_args(&program, "1", &out_arg)).status.success());
@@ -359,17 +358,7 @@ fn killed_and_racing_runs_never_leave_a_partial_or_mixed_folder() {
     assert!(left.is_empty(), "staging folders of killed runs are removed by the next run: {left:?}");
 
     // Two runs racing into one folder: all files from one of them.
-    let racers: Vec<_> = ["1", "2"]
-        .iter()
-        .map(|seed| {
-            Command::new(bin())
-                .args(run_args(&program, seed, &out_arg))
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()
-                .unwrap()
-        })
-        .collect();
+    let racers: Vec<_> = ["1", "2"].iter().map(|seed| spawn_quiet(&run_args(&program, seed, &out_arg))).collect();
     for mut racer in racers {
         assert!(racer.wait().unwrap().success());
     }
