@@ -160,17 +160,28 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     let mut config = GenerationConfig::new(Method::RgDno);
     config.samples = 2;
     config.guidance = 1.0;
-    let mut stages = Vec::new();
+    // The stages in the order each sample ran them (last: those run once for every sample).
+    let mut stages = vec![Vec::new(); 3];
     let task = RgDnoTask { program: &program, compiled: &compiled, database: &database };
     let (generated, report) = generate_rg_dno(&prior, task, &config, &rg, &device, |p| {
-        if stages.last() != Some(&p.stage) {
-            stages.push(p.stage);
+        let own = &mut stages[p.sample.unwrap_or(2)];
+        if own.last() != Some(&p.stage) {
+            own.push(p.stage);
         }
     })
     .unwrap();
     use motion_core::generation::rgdno::report::Stage::*;
-    assert_eq!(stages, vec![Inversion, Branches, Masks, SoftBlend, FinalRound]);
+    assert_eq!(stages[2], vec![Inversion]);
+    for own in &stages[..2] {
+        assert_eq!(own, &vec![Branches, Masks, SoftBlend, FinalRound]);
+    }
     assert_eq!(generated.joints.dims(), &[2, 40, 22, 3]);
+    // Every sample runs on its own: the network's motions of the first two of three samples are
+    // this run's two (the finishing refinement groups samples by worker thread).
+    let three = GenerationConfig { samples: 3, ..config.clone() };
+    let (more, _) = generate_rg_dno(&prior, task, &three, &rg, &device, |_| {}).unwrap();
+    let rows = |t: &candle_core::Tensor| t.narrow(0, 0, 2).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    assert_eq!(rows(&more.features), rows(&generated.features));
     let values = generated.joints.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     assert!(values.iter().all(|v| v.is_finite()));
     // C_R is the barrier with the target; the retrieved motion keeps low under it: a crawl.

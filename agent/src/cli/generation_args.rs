@@ -80,7 +80,7 @@ impl From<ScheduleArg> for Schedule {
 /// Options shared by every command that generates motions.
 #[derive(Debug, Clone, Args)]
 pub struct GenerationArgs {
-    /// Motions generated together.
+    /// Motions generated together (RG-DNO runs them side by side, one per core).
     #[arg(long, short = 'n', default_value_t = 1, value_parser = flags::samples)]
     pub samples: usize,
     /// Seed of the start noise (same seed, same machine: same motion).

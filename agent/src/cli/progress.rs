@@ -40,16 +40,17 @@ impl Progress {
     /// Shows one event.
     pub fn show(&mut self, event: Event<'_>) {
         match event {
-            Event::Step { stage, round, step, steps, loss } => {
+            Event::Step { stage, round, step, steps, loss, sample } => {
+                let of = sample.map_or(String::new(), |i| format!(", sample {i}"));
                 self.bar.set_prefix(stage.to_owned());
                 self.bar.set_length(steps as u64);
                 self.bar.set_position(step as u64);
-                self.bar.set_message(format!("{loss:.5} (round {round})"));
+                self.bar.set_message(format!("{loss:.5} (round {round}{of})"));
                 let due = self.last_line.is_none_or(|t| t.elapsed() >= PLAIN_PROGRESS_EVERY);
                 if self.bar.is_hidden() && (due || step <= 1 || step == steps) {
                     self.last_line = Some(Instant::now());
                     eprintln!(
-                        "{stage} round {round}: step {step}/{steps} loss {loss:.5} ({:.0} s)",
+                        "{stage} round {round}{of}: step {step}/{steps} loss {loss:.5} ({:.0} s)",
                         self.start.elapsed().as_secs_f64()
                     );
                 }

@@ -30,6 +30,7 @@ pub mod postprocess;
 pub mod refine;
 pub mod rgdno;
 pub mod schedule;
+pub mod side_by_side;
 pub mod stall;
 
 use std::time::Instant;
@@ -76,6 +77,9 @@ pub enum Event<'a> {
         steps: usize,
         /// Mean loss over the samples.
         loss: f64,
+        /// The sample, where each runs the stage on its own (RG-DNO's stages after the
+        /// inversion); `None` where the stage runs for every sample.
+        sample: Option<usize>,
     },
     /// Something the user should read: the retrieval database opened, a fallback and its reason.
     Note(String),
@@ -156,7 +160,14 @@ fn rg_dno(
     }
     let Retrieval { database, rg_dno } = retrieval.ok_or(RgDnoError::NoDatabase)?;
     generate_rg_dno(prior, RgDnoTask { program, compiled, database }, config, rg_dno, device, |p| {
-        on(Event::Step { stage: p.stage.name(), round: p.round, step: p.step, steps: p.steps, loss: p.loss })
+        on(Event::Step {
+            stage: p.stage.name(),
+            round: p.round,
+            step: p.step,
+            steps: p.steps,
+            loss: p.loss,
+            sample: p.sample,
+        })
     })
 }
 
@@ -186,7 +197,7 @@ fn from_sample(
     let start = Instant::now();
     let stage = config.method.to_string();
     let mut progress = |round: usize, step: usize, steps: usize, loss: f64| {
-        on(Event::Step { stage: &stage, round, step: step + 1, steps, loss })
+        on(Event::Step { stage: &stage, round, step: step + 1, steps, loss, sample: None })
     };
     let shape = (config.samples, frames, FEATURE_DIM);
     let text = prior.encode_text(&vec![program.text.as_str(); config.samples], device)?;

@@ -32,6 +32,7 @@ pub(super) fn invert_retrieved(
             step: polished,
             steps: polish_steps,
             loss: mean(&s.loss),
+            sample: None,
         });
     })?;
     let error_m = scalar(&mean_joint_distance(&prior.to_joints(&inverted.x)?, &prior.to_joints(&x_r)?)?)?;

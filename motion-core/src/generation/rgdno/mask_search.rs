@@ -117,7 +117,14 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
             Schedule::UntilMet => (self.ordered(&candidates, (z1, z2))?, true),
         };
         self.choose(&candidates, (z1, z2), stop_when_met, rng, &mut |done| {
-            progress(&StageProgress { stage: Stage::Masks, round, step: done, steps: candidates.len(), loss: 0.0 })
+            progress(&StageProgress {
+                stage: Stage::Masks,
+                round,
+                step: done,
+                steps: candidates.len(),
+                loss: 0.0,
+                sample: None,
+            })
         })
     }
 

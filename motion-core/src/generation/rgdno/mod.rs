@@ -49,6 +49,7 @@ use crate::dno::{self, UnrolledDdim};
 use crate::generation::inversion::InversionConfig;
 use crate::generation::method::{Generated, GenerationConfig, GenerationError, Task};
 use crate::generation::postprocess::{finish, finishing_foot_lock, Unfinished};
+use crate::generation::side_by_side::{side_by_side, workers};
 use crate::prior::Prior;
 use crate::program::TaskProgram;
 use crate::representation::FEATURE_DIM;
@@ -80,8 +81,9 @@ pub struct RgDnoTask<'a> {
 /// restarts `N_S` (`config.dno.restarts`); `rg` the RG-DNO stages. Retrieval runs once; each
 /// retrieved motion the stages start from ([`RgDnoConfig::retrieved_motions`], one by default)
 /// is inverted once, and its restart r runs the stages after the inversion from the random
-/// noise of seed `seed + r`. Each sample keeps the attempt whose final motion has the lowest
-/// `F_C`.
+/// noise of seed `seed + r`, every sample on its own worker ([`crate::generation::side_by_side`];
+/// sample `i` from row `i` of that noise). Each sample keeps the attempt whose final motion has
+/// the lowest `F_C`.
 pub fn generate_rg_dno(
     prior: &Prior,
     task: RgDnoTask<'_>,
@@ -90,9 +92,13 @@ pub fn generate_rg_dno(
     device: &Device,
     mut on_progress: impl FnMut(&StageProgress),
 ) -> Result<(Generated, RgDnoReport), RgDnoError> {
-    let (mut steps, mut masks_done) = (StageSteps::default(), 0);
+    let batch = config.samples;
+    // The steps each sample ran on its own and, last, those of the stages run once for every
+    // sample, each with the mask candidates it has scored so far.
+    let mut tallies = vec![(StageSteps::default(), 0); batch + 1];
     let mut progress = |p: &StageProgress| {
-        steps.record(p, &mut masks_done);
+        let (steps, masks_done) = &mut tallies[p.sample.map_or(batch, |i| i.min(batch))];
+        steps.record(p, masks_done);
         on_progress(p)
     };
     let RgDnoTask { program, compiled, database } = task;
@@ -104,7 +110,6 @@ pub fn generate_rg_dno(
     let groups = rg.ablation.groups(program.constraint_groups().ok_or(RgDnoError::NoParse)?, all);
     let parse = program.relational_parse.as_ref().ok_or(RgDnoError::NoParse)?;
     let mut seconds = StageSeconds::default();
-    let batch = config.samples;
 
     // Retrieval (eqs. 5–6).
     let clock = Instant::now();
@@ -122,8 +127,9 @@ pub fn generate_rg_dno(
     }
     seconds.retrieval = clock.elapsed().as_secs_f64();
 
-    // The solver, as DNO's, for the batch and for both branches side by side.
-    let text = prior.encode_text(&vec![program.text.as_str(); batch], device)?;
+    // The solver, as DNO's, for one sample and for its two branches side by side: every sample
+    // runs the stages after the inversion on its own ([`Stages::attempts`]).
+    let text = prior.encode_text(&[program.text.as_str()], device)?;
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
     // The stages before the final round may sample through fewer of the sampler's timesteps,
     // and without guidance.
@@ -147,17 +153,10 @@ pub fn generate_rg_dno(
     let (mut inverted, mut restart, mut motion) = (Vec::new(), vec![0; batch], vec![0; batch]);
     let restarts = config.dno.restarts;
     for (j, index) in rg.used_motions(found.retrieved.len()).into_iter().enumerate() {
-        // Inversion (eq. 7), once for the batch.
+        // Inversion (eq. 7), once for every sample.
         let clock = Instant::now();
-        let (z_r, error_m) = invert::invert_retrieved(
-            prior,
-            &found.retrieved[index].features,
-            &text.narrow(0, 0, 1)?,
-            &inversion,
-            j,
-            &mut progress,
-        )?;
-        let z_r = z_r.broadcast_as((batch, compiled.frames(), FEATURE_DIM))?.contiguous()?;
+        let (z_r, error_m) =
+            invert::invert_retrieved(prior, &found.retrieved[index].features, &text, &inversion, j, &mut progress)?;
         seconds.inversion += clock.elapsed().as_secs_f64();
         inverted.push(InvertedReport { motion: index, error_m });
         let stages = Stages {
@@ -174,7 +173,8 @@ pub fn generate_rg_dno(
         };
         for r in 0..restarts {
             let round = j * restarts + r;
-            let attempt = stages.attempt(config.seed.wrapping_add(r as u64), round, &mut seconds, &mut progress)?;
+            let attempt =
+                stages.attempts(config.seed.wrapping_add(r as u64), batch, round, &mut seconds, &mut progress)?;
             kept = Some(match kept {
                 None => {
                     motion.fill(index);
@@ -223,7 +223,7 @@ pub fn generate_rg_dno(
         restart,
         final_objective: kept.objective,
         seconds,
-        steps,
+        steps: tallies[batch].0.plus(&StageSteps::longest(tallies[..batch].iter().map(|(steps, _)| steps))),
         config: rg.clone(),
     };
     Ok((generated, report))
@@ -262,26 +262,90 @@ impl Attempt {
             history: pick(self.history, other.history, take),
         })
     }
+
+    /// The samples' attempts as one batch: rows and lists in sample order.
+    fn concat(attempts: Vec<Attempt>) -> candle_core::Result<Attempt> {
+        let rows = |f: fn(&Attempt) -> &Tensor| Tensor::cat(&attempts.iter().map(f).collect::<Vec<_>>(), 0);
+        let (features, initial_joints) = (rows(|a| &a.features)?, rows(|a| &a.initial_joints)?);
+        let mut all = Attempt {
+            features,
+            initial_joints,
+            objective: Vec::new(),
+            z1_error: Vec::new(),
+            z2_error: Vec::new(),
+            masks: Vec::new(),
+            soft_blend_objective: Vec::new(),
+            history: Vec::new(),
+        };
+        for a in attempts {
+            all.objective.extend(a.objective);
+            all.z1_error.extend(a.z1_error);
+            all.z2_error.extend(a.z2_error);
+            all.masks.extend(a.masks);
+            all.soft_blend_objective.extend(a.soft_blend_objective);
+            all.history.extend(a.history);
+        }
+        Ok(all)
+    }
 }
 
-impl<M: Denoiser + ?Sized> Stages<'_, M> {
-    /// The stages after the inversion from the random noise of `seed`: both branches, the
-    /// binary masks, the soft blend and the final round.
+/// The seed of sample `i`'s optimisers and random terms in the attempt from `seed`: `seed`
+/// itself for sample 0, so that one sample runs as it would alone.
+fn sample_seed(seed: u64, i: usize) -> u64 {
+    seed.wrapping_add((i as u64) << 32)
+}
+
+impl<M: Denoiser + Sync + ?Sized> Stages<'_, M> {
+    /// The stages after the inversion for `batch` samples from the random noise of `seed`, every
+    /// sample on its own worker ([`side_by_side`]): sample `i` from row `i` of that noise, its
+    /// optimisers seeded with [`sample_seed`]. `seconds` gains each stage's seconds summed over
+    /// the samples and divided by the workers that ran them side by side.
+    fn attempts(
+        &self,
+        seed: u64,
+        batch: usize,
+        round: usize,
+        seconds: &mut StageSeconds,
+        progress: &mut dyn FnMut(&StageProgress),
+    ) -> Result<Attempt, RgDnoError> {
+        let (_, frames, _) = self.z_r.dims3()?;
+        let z0 = gaussian((batch, frames, FEATURE_DIM), seed, self.z_r.device())?;
+        let job = |i: usize, report: &mut dyn FnMut(StageProgress)| {
+            let mut own = StageSeconds::default();
+            let z0 = z0.narrow(0, i, 1)?;
+            let attempt = self.attempt(&z0, sample_seed(seed, i), round, &mut own, &mut |p| report(p.clone()))?;
+            Ok::<_, RgDnoError>((attempt, own))
+        };
+        let on = |i: usize, p: StageProgress| progress(&StageProgress { sample: Some(i), ..p });
+        let runs = side_by_side(batch, job, on)
+            .map_err(|e| GenerationError::Setting(format!("the samples' worker threads did not start: {e}")))?;
+        let mut attempts = Vec::with_capacity(batch);
+        let workers = workers(batch) as f64;
+        for run in runs {
+            let (attempt, own) = run?;
+            *seconds = seconds.plus(&own.scaled(1.0 / workers));
+            attempts.push(attempt);
+        }
+        Ok(Attempt::concat(attempts)?)
+    }
+
+    /// The stages after the inversion for one sample from its random noise `z0` `[1, T, 263]`:
+    /// both branches, the binary masks, the soft blend and the final round; `seed` seeds their
+    /// optimisers and random terms.
     fn attempt(
         &self,
+        z0: &Tensor,
         seed: u64,
         round: usize,
         seconds: &mut StageSeconds,
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<Attempt, RgDnoError> {
-        let Stages { prior, compiled, config, rg, solver, early, z_r, .. } = *self;
-        let (batch, frames, _) = z_r.dims3()?;
-        let z0 = gaussian((batch, frames, FEATURE_DIM), seed, z_r.device())?;
+        let Stages { prior, compiled, config, rg, solver, early, .. } = *self;
         let initial_joints =
-            prior.to_joints(&solver.sampler.sample(solver.denoiser, &z0, &solver.text, solver.guidance)?)?;
+            prior.to_joints(&solver.sampler.sample(solver.denoiser, z0, &solver.text, solver.guidance)?)?;
 
         let clock = Instant::now();
-        let Branches { z1, z2, z1_error, z2_error } = self.branches(&z0, &initial_joints, seed, round, progress)?;
+        let Branches { z1, z2, z1_error, z2_error } = self.branches(z0, &initial_joints, seed, round, progress)?;
         seconds.branches += clock.elapsed().as_secs_f64();
 
         let reward_weights = if rg.ablation == Ablation::NoReward { RewardWeights::NONE } else { rg.reward };

@@ -52,7 +52,9 @@ pub struct ChosenMask {
     pub place: usize,
 }
 
-/// Seconds per stage.
+/// Seconds per stage; of the stages every sample runs on its own, summed over the samples and
+/// divided by the workers that ran them side by side
+/// ([`crate::generation::side_by_side::workers`]).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageSeconds {
     /// Retrieval: the semantic check, scoring every candidate, extracting the retrieved
@@ -71,7 +73,8 @@ pub struct StageSeconds {
 }
 
 /// Steps each stage ran, summed over the restarts (the masks: candidates scored through the
-/// full sampler). The [`crate::generation::schedule::Schedule`] decides where a stage ends.
+/// full sampler); of the stages every sample runs on its own, the most any sample ran. The
+/// [`crate::generation::schedule::Schedule`] decides where a stage ends.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageSteps {
     /// The inversion's feature and joint polishes.
@@ -111,6 +114,18 @@ impl StageSteps {
         }
     }
 
+    /// Stage by stage, the most steps any of `runs` ran.
+    pub(super) fn longest<'a>(runs: impl IntoIterator<Item = &'a StageSteps>) -> StageSteps {
+        runs.into_iter().fold(StageSteps::default(), |a, b| StageSteps {
+            inversion: a.inversion.max(b.inversion),
+            branches: a.branches.max(b.branches),
+            masks: a.masks.max(b.masks),
+            soft_blend: a.soft_blend.max(b.soft_blend),
+            final_round: a.final_round.max(b.final_round),
+            final_round_coarse: a.final_round_coarse.max(b.final_round_coarse),
+        })
+    }
+
     /// The steps of both runs, stage by stage.
     pub(super) fn plus(&self, other: &StageSteps) -> StageSteps {
         StageSteps {
@@ -125,6 +140,18 @@ impl StageSteps {
 }
 
 impl StageSeconds {
+    /// Every stage's seconds times `factor`.
+    pub(super) fn scaled(&self, factor: f64) -> StageSeconds {
+        StageSeconds {
+            retrieval: self.retrieval * factor,
+            inversion: self.inversion * factor,
+            branches: self.branches * factor,
+            masks: self.masks * factor,
+            soft_blend: self.soft_blend * factor,
+            final_round: self.final_round * factor,
+        }
+    }
+
     /// The seconds of both runs, stage by stage.
     pub(super) fn plus(&self, other: &StageSeconds) -> StageSeconds {
         StageSeconds {
@@ -274,11 +301,14 @@ pub struct StageProgress {
     pub steps: usize,
     /// Mean loss over the samples (0 where a stage has none).
     pub loss: f64,
+    /// The sample, for the stages every sample runs on its own (the branches, the masks, the
+    /// soft blend and the final round); `None` for those run once for every sample.
+    pub sample: Option<usize>,
 }
 
 impl StageProgress {
     /// The progress of a DNO step of `stage` in restart `round`.
     pub(super) fn of_dno(stage: Stage, round: usize, step: &dno::DnoStep) -> Self {
-        StageProgress { stage, round, step: step.step + 1, steps: step.steps, loss: mean(&step.loss) }
+        StageProgress { stage, round, step: step.step + 1, steps: step.steps, loss: mean(&step.loss), sample: None }
     }
 }

@@ -55,6 +55,7 @@ impl<M: Denoiser + ?Sized> MaskStages<'_, M> {
                 step: step + 1,
                 steps: rg.first_steps,
                 loss: mean(&soft_blend_objective),
+                sample: None,
             });
             // Under the until-met schedule the blend is handed on, before its update, once its
             // objective has stalled or its motion meets the program.

@@ -11,19 +11,19 @@ use crate::generation::method::GenerationConfig;
 use crate::prior::Prior;
 use crate::program::ConstraintGroups;
 
-/// What every restart shares: the compiled task and its groups, the settings, the solvers
-/// (batch `B` and, for the branches, `2B`), the inverted noise `z_R` `[B, T, 263]` and the clean-up the generation
-/// ends with.
+/// What every restart shares: the compiled task and its groups, the settings, the solvers of
+/// one sample (batch 1 and, for the branches, 2), the inverted noise `z_R` `[1, T, 263]` and the
+/// clean-up the generation ends with.
 pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
     pub(super) prior: &'a Prior,
     pub(super) compiled: &'a CompiledProgram,
     pub(super) groups: &'a ConstraintGroups,
     pub(super) config: &'a GenerationConfig,
     pub(super) rg: &'a RgDnoConfig,
-    /// The final round's solver (batch `B`), which also samples the restart's unoptimised motion.
+    /// The final round's solver, which also samples the restart's unoptimised motion.
     pub(super) solver: &'a UnrolledDdim<'a, M>,
-    /// The solver of the mask search, the soft blend and the final round's start (batch `B`;
-    /// `solver` on fewer timesteps and without guidance under
+    /// The solver of the mask search, the soft blend and the final round's start (`solver` on
+    /// fewer timesteps and without guidance under
     /// [`crate::generation::rgdno::config::RgDnoConfig::early_stride`] and
     /// [`crate::generation::rgdno::config::RgDnoConfig::early_unguided`]).
     pub(super) early: &'a UnrolledDdim<'a, M>,
