@@ -160,28 +160,17 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
     let mut config = GenerationConfig::new(Method::RgDno);
     config.samples = 2;
     config.guidance = 1.0;
-    // The stages in the order each sample ran them (last: those run once for every sample).
-    let mut stages = vec![Vec::new(); 3];
+    let mut stages = Vec::new();
     let task = RgDnoTask { program: &program, compiled: &compiled, database: &database };
     let (generated, report) = generate_rg_dno(&prior, task, &config, &rg, &device, |p| {
-        let own = &mut stages[p.sample.unwrap_or(2)];
-        if own.last() != Some(&p.stage) {
-            own.push(p.stage);
+        if stages.last() != Some(&p.stage) {
+            stages.push(p.stage);
         }
     })
     .unwrap();
     use motion_core::generation::rgdno::report::Stage::*;
-    assert_eq!(stages[2], vec![Inversion]);
-    for own in &stages[..2] {
-        assert_eq!(own, &vec![Branches, Masks, SoftBlend, FinalRound]);
-    }
+    assert_eq!(stages, vec![Inversion, Branches, Masks, SoftBlend, FinalRound]);
     assert_eq!(generated.joints.dims(), &[2, 40, 22, 3]);
-    // Every sample runs on its own: the network's motions of the first two of three samples are
-    // this run's two (the finishing refinement groups samples by worker thread).
-    let three = GenerationConfig { samples: 3, ..config.clone() };
-    let (more, _) = generate_rg_dno(&prior, task, &three, &rg, &device, |_| {}).unwrap();
-    let rows = |t: &candle_core::Tensor| t.narrow(0, 0, 2).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
-    assert_eq!(rows(&more.features), rows(&generated.features));
     let values = generated.joints.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     assert!(values.iter().all(|v| v.is_finite()));
     // C_R is the barrier with the target; the retrieved motion keeps low under it: a crawl.
@@ -256,7 +245,7 @@ fn a_tiny_rg_dno_run_goes_through_every_stage() {
 /// DDIM timestep; on a program no motion meets, the final round runs its whole budget, first on
 /// that sampler and then on the whole one, its steps and curve counted over both.
 #[test]
-fn the_until_met_final_round_spends_an_unmet_budget_over_both_samplers() {
+fn the_until_met_final_round_spends_an_unmet_budget_over_both_samplers_and_each_sample_runs_on_its_own() {
     let device = Device::Cpu;
     let prior = Prior::load(&fixtures().join("model/prior.safetensors"), &fixtures().join("text"), &device).unwrap();
     // Task-2 at 40 frames with its target 50 m ahead: no motion of 2 s meets it.
@@ -289,4 +278,19 @@ fn the_until_met_final_round_spends_an_unmet_budget_over_both_samplers() {
     assert_eq!((report.steps.final_round, report.steps.final_round_coarse), (8, 6));
     assert_eq!(generated.loss_history[0].len(), 8);
     assert!(!report.final_objective[0].is_nan() && report.final_objective[0] > 1.0, "{:?}", report.final_objective);
+
+    // Each sample runs the stages after the inversion on its own: its progress names it, and the
+    // network's motions of the first two of three samples are those of a two-sample run.
+    use motion_core::generation::rgdno::report::Stage::{Branches, Inversion};
+    let mut named = Vec::new();
+    config.samples = 2;
+    let (two, _) = generate_rg_dno(&prior, task, &config, &rg, &device, |p| named.push((p.stage, p.sample))).unwrap();
+    assert!(named.iter().all(|&(stage, sample)| (stage == Inversion) == sample.is_none()), "{named:?}");
+    for i in 0..2 {
+        assert!(named.contains(&(Branches, Some(i))) && named.contains(&(FinalRound, Some(i))), "{named:?}");
+    }
+    config.samples = 3;
+    let (three, _) = generate_rg_dno(&prior, task, &config, &rg, &device, |_| {}).unwrap();
+    let rows = |t: &candle_core::Tensor| t.narrow(0, 0, 2).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    assert_eq!(rows(&three.features), rows(&two.features));
 }

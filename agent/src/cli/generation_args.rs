@@ -80,7 +80,8 @@ impl From<ScheduleArg> for Schedule {
 /// Options shared by every command that generates motions.
 #[derive(Debug, Clone, Args)]
 pub struct GenerationArgs {
-    /// Motions generated together (RG-DNO runs them side by side, one per core).
+    /// Motions generated together (under `--schedule until-met`, RG-DNO runs those of a program
+    /// without counts side by side, one per core).
     #[arg(long, short = 'n', default_value_t = 1, value_parser = flags::samples)]
     pub samples: usize,
     /// Seed of the start noise (same seed, same machine: same motion).

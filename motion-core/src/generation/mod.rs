@@ -78,7 +78,7 @@ pub enum Event<'a> {
         /// Mean loss over the samples.
         loss: f64,
         /// The sample, where each runs the stage on its own (RG-DNO's stages after the
-        /// inversion); `None` where the stage runs for every sample.
+        /// inversion, side by side); `None` where the stage runs for every sample.
         sample: Option<usize>,
     },
     /// Something the user should read: the retrieval database opened, a fallback and its reason.

@@ -275,6 +275,14 @@ impl RgDnoConfig {
         }
     }
 
+    /// Whether each sample runs the stages after the inversion on its own worker
+    /// ([`crate::generation::side_by_side`]) under `schedule`, for a program that `counts` or
+    /// not: where the stages before the final round are eased; elsewhere the samples run as one
+    /// batch, as the papers' tables were made.
+    pub(super) fn side_by_side_under(schedule: Schedule, counts: bool) -> bool {
+        Self::early_stages_eased(schedule, counts)
+    }
+
     /// Whether the stages before the final round may run a cheaper sampler: under the
     /// until-met schedule, for a program without counts.
     fn early_stages_eased(schedule: Schedule, counts: bool) -> bool {

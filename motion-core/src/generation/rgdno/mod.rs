@@ -81,9 +81,9 @@ pub struct RgDnoTask<'a> {
 /// restarts `N_S` (`config.dno.restarts`); `rg` the RG-DNO stages. Retrieval runs once; each
 /// retrieved motion the stages start from ([`RgDnoConfig::retrieved_motions`], one by default)
 /// is inverted once, and its restart r runs the stages after the inversion from the random
-/// noise of seed `seed + r`, every sample on its own worker ([`crate::generation::side_by_side`];
-/// sample `i` from row `i` of that noise). Each sample keeps the attempt whose final motion has
-/// the lowest `F_C`.
+/// noise of seed `seed + r` (under the until-met schedule, for a program without counts, every
+/// sample on its own worker, [`crate::generation::side_by_side`], sample `i` from row `i` of that
+/// noise). Each sample keeps the attempt whose final motion has the lowest `F_C`.
 pub fn generate_rg_dno(
     prior: &Prior,
     task: RgDnoTask<'_>,
@@ -127,13 +127,15 @@ pub fn generate_rg_dno(
     }
     seconds.retrieval = clock.elapsed().as_secs_f64();
 
-    // The solver, as DNO's, for one sample and for its two branches side by side: every sample
-    // runs the stages after the inversion on its own ([`Stages::attempts`]).
-    let text = prior.encode_text(&[program.text.as_str()], device)?;
+    // The solver, as DNO's, for the rows each job of the stages after the inversion runs, and
+    // for their two branches side by side: one sample per job under the until-met schedule for a
+    // program without counts, else every sample in one job ([`Stages::attempts`]).
+    let counts = compiled.has_counts();
+    let rows = if RgDnoConfig::side_by_side_under(config.schedule, counts) { 1 } else { batch };
+    let text = prior.encode_text(&vec![program.text.as_str(); rows], device)?;
     let guidance = Guidance { scale: config.guidance }.for_text(&text)?;
     // The stages before the final round may sample through fewer of the sampler's timesteps,
     // and without guidance.
-    let counts = compiled.has_counts();
     let stride = rg.early_stride_under(config.schedule, counts);
     let early_guidance = rg.early_guidance_under(config.schedule, counts, guidance);
     let ddim_steps = config.dno.ddim_steps;
@@ -155,8 +157,9 @@ pub fn generate_rg_dno(
     for (j, index) in rg.used_motions(found.retrieved.len()).into_iter().enumerate() {
         // Inversion (eq. 7), once for every sample.
         let clock = Instant::now();
-        let (z_r, error_m) =
-            invert::invert_retrieved(prior, &found.retrieved[index].features, &text, &inversion, j, &mut progress)?;
+        let (x_r, one) = (&found.retrieved[index].features, text.narrow(0, 0, 1)?);
+        let (z_r, error_m) = invert::invert_retrieved(prior, x_r, &one, &inversion, j, &mut progress)?;
+        let z_r = z_r.broadcast_as((rows, compiled.frames(), FEATURE_DIM))?.contiguous()?;
         seconds.inversion += clock.elapsed().as_secs_f64();
         inverted.push(InvertedReport { motion: index, error_m });
         let stages = Stages {
@@ -296,10 +299,12 @@ fn sample_seed(seed: u64, i: usize) -> u64 {
 }
 
 impl<M: Denoiser + Sync + ?Sized> Stages<'_, M> {
-    /// The stages after the inversion for `batch` samples from the random noise of `seed`, every
-    /// sample on its own worker ([`side_by_side`]): sample `i` from row `i` of that noise, its
-    /// optimisers seeded with [`sample_seed`]. `seconds` gains each stage's seconds summed over
-    /// the samples and divided by the workers that ran them side by side.
+    /// The stages after the inversion for `batch` samples from the random noise of `seed`. With
+    /// `z_R` of one row ([`RgDnoConfig::side_by_side_under`]), every sample on its own worker
+    /// ([`side_by_side`]): sample `i` from row `i` of that noise, its optimisers seeded with
+    /// [`sample_seed`], and `seconds` gains each stage's seconds summed over the samples and
+    /// divided by the workers that ran them side by side. With `z_R` of `batch` rows, every
+    /// sample in one batch on the current pool.
     fn attempts(
         &self,
         seed: u64,
@@ -308,8 +313,11 @@ impl<M: Denoiser + Sync + ?Sized> Stages<'_, M> {
         seconds: &mut StageSeconds,
         progress: &mut dyn FnMut(&StageProgress),
     ) -> Result<Attempt, RgDnoError> {
-        let (_, frames, _) = self.z_r.dims3()?;
+        let (rows, frames, _) = self.z_r.dims3()?;
         let z0 = gaussian((batch, frames, FEATURE_DIM), seed, self.z_r.device())?;
+        if rows > 1 {
+            return self.attempt(&z0, seed, round, seconds, progress);
+        }
         let job = |i: usize, report: &mut dyn FnMut(StageProgress)| {
             let mut own = StageSeconds::default();
             let z0 = z0.narrow(0, i, 1)?;
@@ -329,8 +337,8 @@ impl<M: Denoiser + Sync + ?Sized> Stages<'_, M> {
         Ok(Attempt::concat(attempts)?)
     }
 
-    /// The stages after the inversion for one sample from its random noise `z0` `[1, T, 263]`:
-    /// both branches, the binary masks, the soft blend and the final round; `seed` seeds their
+    /// The stages after the inversion from the random noise `z0` `[rows of z_R, T, 263]`: both
+    /// branches, the binary masks, the soft blend and the final round; `seed` seeds their
     /// optimisers and random terms.
     fn attempt(
         &self,

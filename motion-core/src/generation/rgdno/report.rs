@@ -301,8 +301,9 @@ pub struct StageProgress {
     pub steps: usize,
     /// Mean loss over the samples (0 where a stage has none).
     pub loss: f64,
-    /// The sample, for the stages every sample runs on its own (the branches, the masks, the
-    /// soft blend and the final round); `None` for those run once for every sample.
+    /// The sample, where every sample runs the stages after the inversion on its own (the
+    /// branches, the masks, the soft blend and the final round, side by side); `None` for a
+    /// stage run once for every sample.
     pub sample: Option<usize>,
 }
 

@@ -12,8 +12,8 @@ use crate::prior::Prior;
 use crate::program::ConstraintGroups;
 
 /// What every restart shares: the compiled task and its groups, the settings, the solvers of
-/// one sample (batch 1 and, for the branches, 2), the inverted noise `z_R` `[1, T, 263]` and the
-/// clean-up the generation ends with.
+/// one job (`R` rows: 1, or every sample for a counting program; `2R` for the branches), the
+/// inverted noise `z_R` `[R, T, 263]` and the clean-up the generation ends with.
 pub(super) struct Stages<'a, M: Denoiser + ?Sized> {
     pub(super) prior: &'a Prior,
     pub(super) compiled: &'a CompiledProgram,
