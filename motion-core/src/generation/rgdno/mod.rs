@@ -331,7 +331,7 @@ impl<M: Denoiser + Sync + ?Sized> Stages<'_, M> {
         let workers = workers(batch) as f64;
         for run in runs {
             let (attempt, own) = run?;
-            *seconds = seconds.plus(&own.scaled(1.0 / workers));
+            *seconds = seconds.zip_with(&own, |all, one| all + one / workers);
             attempts.push(attempt);
         }
         Ok(Attempt::concat(attempts)?)

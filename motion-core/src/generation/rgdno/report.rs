@@ -116,51 +116,42 @@ impl StageSteps {
 
     /// Stage by stage, the most steps any of `runs` ran.
     pub(super) fn longest<'a>(runs: impl IntoIterator<Item = &'a StageSteps>) -> StageSteps {
-        runs.into_iter().fold(StageSteps::default(), |a, b| StageSteps {
-            inversion: a.inversion.max(b.inversion),
-            branches: a.branches.max(b.branches),
-            masks: a.masks.max(b.masks),
-            soft_blend: a.soft_blend.max(b.soft_blend),
-            final_round: a.final_round.max(b.final_round),
-            final_round_coarse: a.final_round_coarse.max(b.final_round_coarse),
-        })
+        runs.into_iter().fold(StageSteps::default(), |a, b| a.zip_with(b, usize::max))
     }
 
     /// The steps of both runs, stage by stage.
     pub(super) fn plus(&self, other: &StageSteps) -> StageSteps {
+        self.zip_with(other, |a, b| a + b)
+    }
+
+    /// `f` of both runs' steps, stage by stage.
+    fn zip_with(&self, other: &StageSteps, f: impl Fn(usize, usize) -> usize) -> StageSteps {
         StageSteps {
-            inversion: self.inversion + other.inversion,
-            branches: self.branches + other.branches,
-            masks: self.masks + other.masks,
-            soft_blend: self.soft_blend + other.soft_blend,
-            final_round: self.final_round + other.final_round,
-            final_round_coarse: self.final_round_coarse + other.final_round_coarse,
+            inversion: f(self.inversion, other.inversion),
+            branches: f(self.branches, other.branches),
+            masks: f(self.masks, other.masks),
+            soft_blend: f(self.soft_blend, other.soft_blend),
+            final_round: f(self.final_round, other.final_round),
+            final_round_coarse: f(self.final_round_coarse, other.final_round_coarse),
         }
     }
 }
 
 impl StageSeconds {
-    /// Every stage's seconds times `factor`.
-    pub(super) fn scaled(&self, factor: f64) -> StageSeconds {
-        StageSeconds {
-            retrieval: self.retrieval * factor,
-            inversion: self.inversion * factor,
-            branches: self.branches * factor,
-            masks: self.masks * factor,
-            soft_blend: self.soft_blend * factor,
-            final_round: self.final_round * factor,
-        }
-    }
-
     /// The seconds of both runs, stage by stage.
     pub(super) fn plus(&self, other: &StageSeconds) -> StageSeconds {
+        self.zip_with(other, |a, b| a + b)
+    }
+
+    /// `f` of both runs' seconds, stage by stage.
+    pub(super) fn zip_with(&self, other: &StageSeconds, f: impl Fn(f64, f64) -> f64) -> StageSeconds {
         StageSeconds {
-            retrieval: self.retrieval + other.retrieval,
-            inversion: self.inversion + other.inversion,
-            branches: self.branches + other.branches,
-            masks: self.masks + other.masks,
-            soft_blend: self.soft_blend + other.soft_blend,
-            final_round: self.final_round + other.final_round,
+            retrieval: f(self.retrieval, other.retrieval),
+            inversion: f(self.inversion, other.inversion),
+            branches: f(self.branches, other.branches),
+            masks: f(self.masks, other.masks),
+            soft_blend: f(self.soft_blend, other.soft_blend),
+            final_round: f(self.final_round, other.final_round),
         }
     }
 }
